@@ -1,0 +1,128 @@
+use glam::Vec3;
+
+/// Axis-aligned bounding box. The empty box has `min = +inf`, `max = -inf`, so that growing it by
+/// any point gives that point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: Vec3,
+    /// Upper corner.
+    pub max: Vec3,
+}
+
+impl Default for Aabb {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+impl Aabb {
+    /// The empty box: the identity of [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    /// A box from its two corners.
+    #[must_use]
+    pub const fn new(min: Vec3, max: Vec3) -> Self {
+        Self { min, max }
+    }
+
+    /// The smallest box holding all `points`.
+    #[must_use]
+    pub fn from_points(points: &[Vec3]) -> Self {
+        points.iter().fold(Self::EMPTY, |b, &p| b.grow(p))
+    }
+
+    /// This box grown to hold `p`.
+    #[must_use]
+    #[inline]
+    pub fn grow(self, p: Vec3) -> Self {
+        Self {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    /// The smallest box holding both.
+    #[must_use]
+    #[inline]
+    pub fn union(self, o: Aabb) -> Self {
+        Self {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    /// True when the box holds no point.
+    #[must_use]
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        !(self.min.x <= self.max.x && self.min.y <= self.max.y && self.min.z <= self.max.z)
+    }
+
+    /// `max - min` (negative for the empty box).
+    #[must_use]
+    #[inline]
+    pub fn extent(&self) -> Vec3 {
+        self.max - self.min
+    }
+
+    /// The centre point.
+    #[must_use]
+    #[inline]
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Half the surface area (`xy + yz + zx`); 0 for the empty box. SAH costs only use ratios
+    /// of areas, so the factor 2 is left out.
+    #[must_use]
+    #[inline]
+    pub fn half_area(&self) -> f32 {
+        let e = (self.max - self.min).max(Vec3::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+
+    /// Index (0, 1, 2) of the longest axis.
+    #[must_use]
+    pub fn largest_axis(&self) -> usize {
+        let e = self.extent();
+        if e.x >= e.y && e.x >= e.z {
+            0
+        } else if e.y >= e.z {
+            1
+        } else {
+            2
+        }
+    }
+
+    /// True when `o` lies inside this box (boundaries included). The empty box is inside every box.
+    #[must_use]
+    pub fn contains(&self, o: &Aabb) -> bool {
+        o.is_empty() || (self.min.cmple(o.min).all() && o.max.cmple(self.max).all())
+    }
+
+    /// True when both corners are finite numbers.
+    #[must_use]
+    pub fn is_finite(&self) -> bool {
+        self.min.is_finite() && self.max.is_finite()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_is_identity_of_union() {
+        let b = Aabb::new(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 3.0, 4.0));
+        assert_eq!(Aabb::EMPTY.union(b), b);
+        assert!(Aabb::EMPTY.is_empty());
+        assert_eq!(Aabb::EMPTY.half_area(), 0.0);
+        assert!(b.contains(&Aabb::EMPTY));
+        assert_eq!(b.half_area(), 2.0 * 3.0 + 3.0 * 2.0 + 2.0 * 2.0);
+        assert_eq!(b.largest_axis(), 1);
+    }
+}

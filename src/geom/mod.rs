@@ -1,0 +1,11 @@
+//! Geometry: boxes, rays, triangles and indexed triangle meshes.
+
+mod aabb;
+mod mesh;
+mod ray;
+mod triangle;
+
+pub use aabb::Aabb;
+pub use mesh::TriMesh;
+pub use ray::{Hit, Ray};
+pub use triangle::{RayTriPrecomp, intersect_triangle};

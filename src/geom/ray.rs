@@ -1,0 +1,115 @@
+use glam::Vec3;
+
+/// A ray `origin + t * dir` for `t` in `[tmin, tmax]`, with its reciprocal direction precomputed
+/// for the slab test.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction (need not be normalised; `t` is measured in its units).
+    pub dir: Vec3,
+    /// Reciprocal direction. A zero component becomes `±f32::MAX` (never infinite), so that the
+    /// slab test never computes `0 * inf` and never produces NaN.
+    pub inv_dir: Vec3,
+    /// Start of the valid interval.
+    pub tmin: f32,
+    /// End of the valid interval.
+    pub tmax: f32,
+}
+
+/// `γ(3)` of Pharr, Jakob & Humphreys: a bound on the relative rounding error of three f32
+/// operations. The slab test's far distance is scaled by `1 + 2γ(3)` (Ize 2013) so that the box
+/// test stays conservative under rounding.
+const GAMMA3: f32 = 3.0 * (f32::EPSILON * 0.5) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
+const FAR_SCALE: f32 = 1.0 + 2.0 * GAMMA3;
+
+impl Ray {
+    /// A ray over `[0, inf)`.
+    #[must_use]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Self::with_range(origin, dir, 0.0, f32::INFINITY)
+    }
+
+    /// A ray over `[tmin, tmax]`.
+    #[must_use]
+    pub fn with_range(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        let inv = |d: f32| {
+            if d == 0.0 {
+                f32::MAX.copysign(d)
+            } else {
+                1.0 / d
+            }
+        };
+        Self {
+            origin,
+            dir,
+            inv_dir: Vec3::new(inv(dir.x), inv(dir.y), inv(dir.z)),
+            tmin,
+            tmax,
+        }
+    }
+
+    /// The point at distance `t`.
+    #[must_use]
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+
+    /// Slab test against the box `[bmin, bmax]` within `[tmin, tmax]`: the entry distance, or
+    /// `None` when the ray misses. Conservative: a ray that touches the box is never rejected
+    /// through rounding.
+    #[must_use]
+    #[inline(always)]
+    pub fn hit_box(&self, bmin: Vec3, bmax: Vec3, tmax: f32) -> Option<f32> {
+        let t0 = (bmin - self.origin) * self.inv_dir;
+        let t1 = (bmax - self.origin) * self.inv_dir;
+        let near = t0.min(t1);
+        let far = t0.max(t1);
+        let tn = near.x.max(near.y).max(near.z).max(self.tmin);
+        let tf = far.x.min(far.y).min(far.z) * FAR_SCALE;
+        let tf = tf.min(tmax);
+        if tn <= tf { Some(tn) } else { None }
+    }
+}
+
+/// A ray's hit: distance, barycentrics of the second and third vertex, and the primitive id.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray, in units of its direction.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+    /// The primitive (triangle) index in the input order.
+    pub prim: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_parallel_ray_on_box_face_has_no_nan() {
+        // Origin exactly on the box's min-y plane, direction with zero y and z components.
+        let r = Ray::new(Vec3::new(-5.0, 0.0, 0.5), Vec3::X);
+        assert!(r.inv_dir.is_finite());
+        let hit = r.hit_box(Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 1.0), f32::INFINITY);
+        assert_eq!(hit, Some(5.0));
+        // Outside the slab: a miss.
+        let r = Ray::new(Vec3::new(-5.0, -0.001, 0.5), Vec3::X);
+        assert_eq!(
+            r.hit_box(Vec3::ZERO, Vec3::ONE, f32::INFINITY),
+            None,
+            "ray below the box"
+        );
+    }
+
+    #[test]
+    fn flat_box_is_hit() {
+        let r = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+        let hit = r.hit_box(Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), f32::INFINITY);
+        assert_eq!(hit, Some(1.0));
+    }
+}
