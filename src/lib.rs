@@ -5,7 +5,7 @@
 //! when refitting no longer pays.
 //!
 //! ```
-//! use dynbvh::bvh::{Bvh, BuildParams};
+//! use dynbvh::bvh::{BuildParams, MeshBvh};
 //! use dynbvh::geom::{Ray, TriMesh};
 //! use glam::Vec3;
 //!
@@ -14,18 +14,21 @@
 //!     vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
 //!     vec![[0, 1, 2], [0, 2, 3]],
 //! );
-//! let mut bvh = Bvh::build_mesh(&mesh, &BuildParams::BINNED);
-//! bvh.validate().unwrap();
+//! let mut bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+//! bvh.validate(&mesh).unwrap();
 //! let ray = Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z);
 //! let hit = bvh.closest_hit(&ray).unwrap();
 //! assert_eq!((hit.t, hit.prim), (1.0, 1));
 //!
 //! // Move the quad and refit: same topology, new boxes.
 //! let moved = TriMesh::new(mesh.positions.iter().map(|p| *p + Vec3::Z).collect(), mesh.indices.clone());
-//! bvh.refit_mesh(&moved);
+//! bvh.refit(&moved);
+//! bvh.validate(&moved).unwrap();
 //! assert_eq!(bvh.closest_hit(&ray).unwrap().t, 0.0);
 //! ```
 
+pub mod anim;
+pub mod bvh;
 pub mod error;
 pub mod geom;
 

@@ -7,5 +7,6 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use mesh::TriMesh;
+pub(crate) use ray::FAR_SCALE;
 pub use ray::{Hit, Ray};
 pub use triangle::{RayTriPrecomp, intersect_triangle};

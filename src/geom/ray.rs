@@ -21,7 +21,7 @@ pub struct Ray {
 /// operations. The slab test's far distance is scaled by `1 + 2γ(3)` (Ize 2013) so that the box
 /// test stays conservative under rounding.
 const GAMMA3: f32 = 3.0 * (f32::EPSILON * 0.5) / (1.0 - 3.0 * (f32::EPSILON * 0.5));
-const FAR_SCALE: f32 = 1.0 + 2.0 * GAMMA3;
+pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * GAMMA3;
 
 impl Ray {
     /// A ray over `[0, inf)`.
@@ -58,7 +58,7 @@ impl Ray {
 
     /// Slab test against the box `[bmin, bmax]` within `[tmin, tmax]`: the entry distance, or
     /// `None` when the ray misses. Conservative: a ray that touches the box is never rejected
-    /// through rounding.
+    /// through rounding (the far distance, and `tmax` with it, is scaled up by `1 + 2γ(3)`).
     #[must_use]
     #[inline(always)]
     pub fn hit_box(&self, bmin: Vec3, bmax: Vec3, tmax: f32) -> Option<f32> {
@@ -67,8 +67,7 @@ impl Ray {
         let near = t0.min(t1);
         let far = t0.max(t1);
         let tn = near.x.max(near.y).max(near.z).max(self.tmin);
-        let tf = far.x.min(far.y).min(far.z) * FAR_SCALE;
-        let tf = tf.min(tmax);
+        let tf = far.x.min(far.y).min(far.z).min(tmax) * FAR_SCALE;
         if tn <= tf { Some(tn) } else { None }
     }
 }
@@ -95,7 +94,11 @@ mod tests {
         // Origin exactly on the box's min-y plane, direction with zero y and z components.
         let r = Ray::new(Vec3::new(-5.0, 0.0, 0.5), Vec3::X);
         assert!(r.inv_dir.is_finite());
-        let hit = r.hit_box(Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 1.0), f32::INFINITY);
+        let hit = r.hit_box(
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 1.0),
+            f32::INFINITY,
+        );
         assert_eq!(hit, Some(5.0));
         // Outside the slab: a miss.
         let r = Ray::new(Vec3::new(-5.0, -0.001, 0.5), Vec3::X);
@@ -109,7 +112,11 @@ mod tests {
     #[test]
     fn flat_box_is_hit() {
         let r = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
-        let hit = r.hit_box(Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), f32::INFINITY);
+        let hit = r.hit_box(
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            f32::INFINITY,
+        );
         assert_eq!(hit, Some(1.0));
     }
 }

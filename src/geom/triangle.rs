@@ -95,13 +95,8 @@ pub fn intersect_triangle(
     let bz = pre.sz * b[kz];
     let cz = pre.sz * c[kz];
     let t_scaled = u * az + v * bz + w * cz;
-    // Compare t = t_scaled / det against the range without dividing.
-    let sign = det.signum();
-    let ts = t_scaled * sign;
-    let adet = det.abs();
-    if !(ts >= ray.tmin * adet && ts < tmax * adet) {
-        return None;
-    }
+    // The range test uses the divided t, the very value reported, so that which of two nearly
+    // equal hits is the closest never depends on the order they were tested in.
     let rcp = 1.0 / det;
     let t = t_scaled * rcp;
     if !(t >= ray.tmin && t < tmax) {

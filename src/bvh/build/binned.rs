@@ -1,0 +1,203 @@
+//! Binned SAH (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", 2007).
+
+use super::{BuildParams, MAX_BINS, PrimRef, RangeBounds, Split, Splitter};
+use crate::bvh::build::Box3;
+use glam::Vec3A;
+use rayon::prelude::*;
+
+pub(crate) struct Binned {
+    bins: usize,
+    all_axes: bool,
+    traversal_cost: f32,
+    intersection_cost: f32,
+    max_leaf_size: usize,
+    parallel_threshold: usize,
+}
+
+impl Binned {
+    pub fn new(p: &BuildParams) -> Self {
+        Self {
+            bins: p.bins.clamp(2, MAX_BINS),
+            all_axes: p.all_axes,
+            traversal_cost: p.traversal_cost,
+            intersection_cost: p.intersection_cost,
+            max_leaf_size: p.max_leaf_size.max(1) as usize,
+            parallel_threshold: p.parallel_threshold.max(1),
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Bin {
+    b: Box3,
+    count: u32,
+}
+
+const EMPTY_BIN: Bin = Bin {
+    b: Box3::EMPTY,
+    count: 0,
+};
+
+type Bins = [[Bin; MAX_BINS]; 3];
+
+/// Maps doubled centroids to bin indices `0 .. bins` on each axis.
+#[derive(Clone, Copy)]
+struct BinMap {
+    origin: Vec3A,
+    scale: Vec3A,
+    last: u32,
+}
+
+impl BinMap {
+    #[inline(always)]
+    fn index(&self, c2: Vec3A) -> [usize; 3] {
+        let i = ((c2 - self.origin) * self.scale)
+            .as_uvec3()
+            .min(glam::UVec3::splat(self.last));
+        [i.x as usize, i.y as usize, i.z as usize]
+    }
+
+    #[inline(always)]
+    fn index_on(&self, c2: Vec3A, axis: usize) -> u32 {
+        (((c2[axis] - self.origin[axis]) * self.scale[axis]) as u32).min(self.last)
+    }
+}
+
+fn bin_refs(refs: &[PrimRef], map: &BinMap) -> Box<Bins> {
+    let mut bins = Box::new([[EMPTY_BIN; MAX_BINS]; 3]);
+    for r in refs {
+        let (lo, hi) = (r.lo(), r.hi());
+        let idx = map.index(lo + hi);
+        for (axis, &i) in idx.iter().enumerate() {
+            let bin = &mut bins[axis][i];
+            bin.b.grow(lo, hi);
+            bin.count += 1;
+        }
+    }
+    bins
+}
+
+fn merge_bins(mut a: Box<Bins>, b: Box<Bins>, k: usize) -> Box<Bins> {
+    for axis in 0..3 {
+        for i in 0..k {
+            let (x, y) = (&mut a[axis][i], &b[axis][i]);
+            x.b = x.b.union(y.b);
+            x.count += y.count;
+        }
+    }
+    a
+}
+
+impl Splitter for Binned {
+    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, _depth: u32) -> Option<Split> {
+        let n = refs.len();
+        let k = self.bins;
+        let origin = rb.cbounds.min;
+        let ext = rb.cbounds.max - origin;
+        let widest = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        let usable =
+            |a: usize| ext[a] > 0.0 && ext[a].is_finite() && (self.all_axes || a == widest);
+        if !(0..3).any(usable) {
+            return None;
+        }
+        let mut scale = Vec3A::ZERO;
+        for a in 0..3 {
+            if usable(a) {
+                scale[a] = k as f32 / ext[a];
+            }
+        }
+        let map = BinMap {
+            origin,
+            scale,
+            last: k as u32 - 1,
+        };
+
+        let bins = if n >= 8 * self.parallel_threshold {
+            refs.par_chunks(self.parallel_threshold)
+                .map(|c| bin_refs(c, &map))
+                .reduce(
+                    || Box::new([[EMPTY_BIN; MAX_BINS]; 3]),
+                    |a, b| merge_bins(a, b, k),
+                )
+        } else {
+            bin_refs(refs, &map)
+        };
+
+        // Compute costs for splitting after each bin: right-to-left areas and counts first,
+        // then a left-to-right sweep evaluates `A_L N_L + A_R N_R`.
+        let mut best = (f32::INFINITY, 0usize, 0usize);
+        let mut right_cost = [0f32; MAX_BINS];
+        for axis in (0..3).filter(|&a| usable(a)) {
+            let bins = &bins[axis];
+            let mut acc = Box3::EMPTY;
+            let mut count = 0u32;
+            for i in (1..k).rev() {
+                acc = acc.union(bins[i].b);
+                count += bins[i].count;
+                right_cost[i - 1] = if count > 0 {
+                    acc.half_area() * count as f32
+                } else {
+                    f32::INFINITY
+                };
+            }
+            let mut acc = Box3::EMPTY;
+            let mut count = 0u32;
+            for (i, bin) in bins[..k - 1].iter().enumerate() {
+                acc = acc.union(bin.b);
+                count += bin.count;
+                if count == 0 {
+                    continue;
+                }
+                let cost = acc.half_area() * count as f32 + right_cost[i];
+                if cost < best.0 {
+                    best = (cost, axis, i);
+                }
+            }
+        }
+        let (cost, axis, bin) = best;
+        if !cost.is_finite() {
+            return None;
+        }
+        let area = rb.bounds.half_area();
+        let split_cost = self.traversal_cost * area + self.intersection_cost * cost;
+        let leaf_cost = self.intersection_cost * area * n as f32;
+        if split_cost >= leaf_cost && n <= self.max_leaf_size {
+            return None;
+        }
+        Some(partition(refs, |r| {
+            map.index_on(r.c2(), axis) <= bin as u32
+        }))
+    }
+}
+
+/// Partitions `refs` in place by `goes_left`, gathering both sides' bounds on the way.
+pub(crate) fn partition(refs: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> Split {
+    let mut left = RangeBounds::EMPTY;
+    let mut right = RangeBounds::EMPTY;
+    let (mut i, mut j) = (0, refs.len());
+    loop {
+        while i < j && goes_left(&refs[i]) {
+            left.add(&refs[i]);
+            i += 1;
+        }
+        while i < j && !goes_left(&refs[j - 1]) {
+            right.add(&refs[j - 1]);
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        refs.swap(i, j - 1);
+    }
+    Split {
+        mid: i,
+        left,
+        right,
+    }
+}

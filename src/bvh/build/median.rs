@@ -1,0 +1,33 @@
+//! Median split: along the longest axis of the centroid bounds, cut at the median centroid.
+
+use super::{PrimRef, RangeBounds, Split, Splitter};
+
+/// The median splitter; its field is the largest leaf size.
+pub(crate) struct Median(pub usize);
+
+impl Splitter for Median {
+    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, _depth: u32) -> Option<Split> {
+        // When all centroids coincide the caller halves the range, which is the same cut.
+        if refs.len() <= self.0 {
+            return None;
+        }
+        let ext = rb.cbounds.max - rb.cbounds.min;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        if !(ext[axis] > 0.0) {
+            return None;
+        }
+        let mid = refs.len() / 2;
+        refs.select_nth_unstable_by(mid, |a, b| a.c2()[axis].total_cmp(&b.c2()[axis]));
+        Some(Split {
+            mid,
+            left: RangeBounds::of(&refs[..mid], usize::MAX),
+            right: RangeBounds::of(&refs[mid..], usize::MAX),
+        })
+    }
+}

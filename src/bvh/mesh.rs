@@ -1,0 +1,183 @@
+//! A BVH over a triangle mesh, with the triangles copied in leaf order so that a leaf's
+//! triangles are contiguous in memory for traversal.
+
+use super::{BuildParams, Bvh, Counters};
+use crate::geom::{Aabb, Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Triangles gathered per chunk in parallel when refitting.
+const GATHER_CHUNK: usize = 1 << 14;
+
+/// A BVH over the triangles of a [`TriMesh`], ready for ray queries.
+#[derive(Clone, Debug, Default)]
+pub struct MeshBvh {
+    pub(super) bvh: Bvh,
+    /// `tris[slot]` is the triangle `bvh.prim_indices()[slot]`.
+    pub(super) tris: Vec<[Vec3; 3]>,
+}
+
+impl MeshBvh {
+    /// Builds a BVH over `mesh`'s triangles.
+    ///
+    /// # Panics
+    /// When a triangle's vertex index is out of range (see [`TriMesh::check`]).
+    #[must_use]
+    pub fn build(mesh: &TriMesh, params: &BuildParams) -> Self {
+        let boxes: Vec<Aabb> = if mesh.len() >= GATHER_CHUNK {
+            (0..mesh.len())
+                .into_par_iter()
+                .map(|i| mesh.triangle_bounds(i))
+                .collect()
+        } else {
+            (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect()
+        };
+        let bvh = Bvh::build(&boxes, params);
+        let mut tris = vec![[Vec3::ZERO; 3]; mesh.len()];
+        gather(&bvh, mesh, &mut tris);
+        Self { bvh, tris }
+    }
+
+    /// Refits for new vertex positions of the same topology (same triangle count and indices).
+    /// No allocation.
+    ///
+    /// # Panics
+    /// When `mesh` has another triangle count than the mesh the tree was built for, or a vertex
+    /// index is out of range.
+    pub fn refit(&mut self, mesh: &TriMesh) {
+        assert_eq!(
+            mesh.len(),
+            self.tris.len(),
+            "refit needs the same triangles"
+        );
+        gather(&self.bvh, mesh, &mut self.tris);
+        let tris = &self.tris;
+        self.bvh.refit_leaves(|first, count| {
+            tris[first as usize..(first + count) as usize]
+                .iter()
+                .fold(Aabb::EMPTY, |b, t| {
+                    b.union(Aabb::new(
+                        t[0].min(t[1]).min(t[2]),
+                        t[0].max(t[1]).max(t[2]),
+                    ))
+                })
+        });
+    }
+
+    /// The underlying tree.
+    #[must_use]
+    pub fn bvh(&self) -> &Bvh {
+        &self.bvh
+    }
+
+    /// Bytes held: nodes, primitive indices and the leaf-ordered triangles.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        self.bvh.memory_bytes() + std::mem::size_of_val(self.tris.as_slice())
+    }
+
+    /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
+        self.closest_hit_counted(ray, &mut ())
+    }
+
+    /// [`MeshBvh::closest_hit`], counting nodes visited and triangles tested.
+    #[must_use]
+    #[inline]
+    pub fn closest_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> Option<Hit> {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let mut uv = (0.0, 0.0);
+        let tris = self.tris.as_slice();
+        let (slot, t) = self.bvh.closest_slot(
+            ray,
+            |slot, tmax| {
+                let [a, b, c] = tris[slot];
+                let (t, u, v) = intersect_triangle(ray, &pre, a, b, c, tmax)?;
+                uv = (u, v);
+                Some(t)
+            },
+            counters,
+        )?;
+        Some(Hit {
+            t,
+            u: uv.0,
+            v: uv.1,
+            prim: self.bvh.prim_indices()[slot],
+        })
+    }
+
+    /// True when anything is hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn any_hit(&self, ray: &Ray) -> bool {
+        self.any_hit_counted(ray, &mut ())
+    }
+
+    /// [`MeshBvh::any_hit`], counting nodes visited and triangles tested.
+    #[must_use]
+    #[inline]
+    pub fn any_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> bool {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let tris = self.tris.as_slice();
+        self.bvh
+            .any_slot(
+                ray,
+                |slot, tmax| {
+                    let [a, b, c] = tris[slot];
+                    intersect_triangle(ray, &pre, a, b, c, tmax).map(|h| h.0)
+                },
+                counters,
+            )
+            .is_some()
+    }
+}
+
+/// Copies each triangle into its leaf slot, in parallel chunks for large meshes.
+fn gather(bvh: &Bvh, mesh: &TriMesh, tris: &mut [[Vec3; 3]]) {
+    let prims = bvh.prim_indices();
+    if tris.len() >= 2 * GATHER_CHUNK {
+        tris.par_chunks_mut(GATHER_CHUNK)
+            .zip(prims.par_chunks(GATHER_CHUNK))
+            .for_each(|(t, p)| {
+                for (t, &p) in t.iter_mut().zip(p) {
+                    *t = mesh.triangle(p as usize);
+                }
+            });
+    } else {
+        for (t, &p) in tris.iter_mut().zip(prims) {
+            *t = mesh.triangle(p as usize);
+        }
+    }
+}
+
+/// Closest hit by testing every triangle: the reference traversal is checked against.
+#[must_use]
+pub fn brute_force_closest(mesh: &TriMesh, ray: &Ray) -> Option<Hit> {
+    let pre = RayTriPrecomp::new(ray.dir);
+    let mut best: Option<Hit> = None;
+    for i in 0..mesh.len() {
+        let [a, b, c] = mesh.triangle(i);
+        let tmax = best.map_or(ray.tmax, |h| h.t);
+        if let Some((t, u, v)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
+            best = Some(Hit {
+                t,
+                u,
+                v,
+                prim: i as u32,
+            });
+        }
+    }
+    best
+}
+
+/// Any hit by testing every triangle.
+#[must_use]
+pub fn brute_force_any(mesh: &TriMesh, ray: &Ray) -> bool {
+    let pre = RayTriPrecomp::new(ray.dir);
+    (0..mesh.len()).any(|i| {
+        let [a, b, c] = mesh.triangle(i);
+        intersect_triangle(ray, &pre, a, b, c, ray.tmax).is_some()
+    })
+}

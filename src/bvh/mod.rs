@@ -1,0 +1,101 @@
+//! The binary BVH: plain data (nodes + primitive indices) and the operations on it, one per file.
+//!
+//! Invariants, checked by [`Bvh::validate`] and kept by every operation:
+//! - node 0 is the root; an interior node's children are adjacent and stored after it;
+//! - every subtree occupies a contiguous range of nodes and of primitive slots;
+//! - `prim_indices` is a permutation of `0 .. n`, each slot owned by exactly one leaf;
+//! - every child's box lies inside its parent's; leaves hold `1 ..= max_leaf_size` primitives;
+//! - the depth is at most [`MAX_DEPTH`], so traversal runs on a fixed-size stack.
+//!
+//! A refit never changes the topology; a rebuild may.
+
+pub mod build;
+mod cost;
+mod mesh;
+mod node;
+mod refit;
+mod traverse;
+mod validate;
+
+pub use build::{BuildParams, MAX_BINS, Method};
+pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
+pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
+pub use node::Node;
+pub use traverse::{Counters, TraversalStats};
+
+/// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.
+pub const MAX_DEPTH: usize = 128;
+
+/// A binary BVH over primitives known by index.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    prim_indices: Vec<u32>,
+    max_leaf_size: u32,
+}
+
+impl Bvh {
+    /// The tree over no primitive: no node at all.
+    #[must_use]
+    pub fn empty(max_leaf_size: u32) -> Self {
+        Self {
+            nodes: Vec::new(),
+            prim_indices: Vec::new(),
+            max_leaf_size,
+        }
+    }
+
+    /// The nodes; node 0 is the root.
+    #[must_use]
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// The primitive in each slot; leaves own contiguous ranges of slots.
+    #[must_use]
+    pub fn prim_indices(&self) -> &[u32] {
+        &self.prim_indices
+    }
+
+    /// Number of primitives.
+    #[must_use]
+    pub fn prim_count(&self) -> usize {
+        self.prim_indices.len()
+    }
+
+    /// Largest leaf size the tree was built with.
+    #[must_use]
+    pub fn max_leaf_size(&self) -> u32 {
+        self.max_leaf_size
+    }
+
+    /// Bytes held by nodes and primitive indices.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node>() + self.prim_indices.len() * 4
+    }
+
+    /// Box of the whole tree (empty for the empty tree).
+    #[must_use]
+    pub fn bounds(&self) -> crate::geom::Aabb {
+        self.nodes
+            .first()
+            .map_or(crate::geom::Aabb::EMPTY, Node::bounds)
+    }
+
+    /// Depth of the deepest leaf (the root is at depth 0; 0 for the empty tree).
+    #[must_use]
+    pub fn depth(&self) -> usize {
+        let mut depth = vec![0u16; self.nodes.len()];
+        let mut deepest = 0;
+        for (i, n) in self.nodes.iter().enumerate() {
+            if !n.is_leaf() {
+                let d = depth[i] + 1;
+                depth[n.first as usize] = d;
+                depth[n.first as usize + 1] = d;
+                deepest = deepest.max(d as usize);
+            }
+        }
+        deepest
+    }
+}

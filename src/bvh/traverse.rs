@@ -1,0 +1,184 @@
+//! Ray traversal: closest hit and any hit, nearer child first, on a fixed-size stack.
+//!
+//! The traversal is generic over the primitive test, so the same code serves triangle meshes
+//! and instance trees; with [`Counters`] it also counts the work a ray costs.
+
+use super::{Bvh, MAX_DEPTH};
+use crate::geom::{FAR_SCALE, Ray};
+use glam::Vec3;
+
+/// Receives traversal work counts; `()` counts nothing and compiles away.
+pub trait Counters {
+    /// One interior or leaf node was visited.
+    fn node(&mut self);
+    /// One primitive was tested.
+    fn prim(&mut self);
+}
+
+impl Counters for () {
+    #[inline(always)]
+    fn node(&mut self) {}
+    #[inline(always)]
+    fn prim(&mut self) {}
+}
+
+/// Work one ray (or many) cost: nodes visited and primitives tested.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraversalStats {
+    /// Nodes whose children were tested or whose primitives were tested (the root counts).
+    pub nodes: u64,
+    /// Primitive tests.
+    pub prims: u64,
+}
+
+impl Counters for TraversalStats {
+    #[inline(always)]
+    fn node(&mut self) {
+        self.nodes += 1;
+    }
+    #[inline(always)]
+    fn prim(&mut self) {
+        self.prims += 1;
+    }
+}
+
+impl std::ops::AddAssign for TraversalStats {
+    fn add_assign(&mut self, o: Self) {
+        self.nodes += o.nodes;
+        self.prims += o.prims;
+    }
+}
+
+impl Bvh {
+    /// Finds the closest primitive along `ray` within `[ray.tmin, ray.tmax)`.
+    /// `test(slot, tmax)` intersects the primitive in `slot` and returns its distance when it is
+    /// hit closer than `tmax`. Returns the slot and distance of the closest hit.
+    #[inline]
+    pub fn closest_slot(
+        &self,
+        ray: &Ray,
+        mut test: impl FnMut(usize, f32) -> Option<f32>,
+        counters: &mut impl Counters,
+    ) -> Option<(usize, f32)> {
+        let nodes = self.nodes.as_slice();
+        let root = nodes.first()?;
+        let mut tmax = ray.tmax;
+        ray.hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)?;
+        let mut best = None;
+        let mut stack = [(0u32, 0f32); MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = root;
+        loop {
+            counters.node();
+            if node.is_leaf() {
+                for slot in node.first as usize..(node.first + node.count) as usize {
+                    counters.prim();
+                    if let Some(t) = test(slot, tmax) {
+                        tmax = t;
+                        best = Some((slot, t));
+                    }
+                }
+            } else {
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
+                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
+                match (tl, tr) {
+                    (Some(a), Some(b)) => {
+                        let (near, far, tfar) = if a <= b {
+                            (l, node.first + 1, b)
+                        } else {
+                            (r, node.first, a)
+                        };
+                        stack[sp] = (far, tfar);
+                        sp += 1;
+                        node = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = l;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = r;
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            }
+            // Pop the next subtree that may still hold a closer hit.
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let (i, tnear) = stack[sp];
+                if tnear <= tmax * FAR_SCALE {
+                    node = &nodes[i as usize];
+                    break;
+                }
+            }
+        }
+    }
+
+    /// True when some primitive is hit within `[ray.tmin, ray.tmax)`; `test(slot, tmax)` as for
+    /// [`Bvh::closest_slot`]. Stops at the first hit found (for shadow and visibility rays).
+    #[inline]
+    pub fn any_slot(
+        &self,
+        ray: &Ray,
+        mut test: impl FnMut(usize, f32) -> Option<f32>,
+        counters: &mut impl Counters,
+    ) -> Option<usize> {
+        let nodes = self.nodes.as_slice();
+        let root = nodes.first()?;
+        let tmax = ray.tmax;
+        ray.hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)?;
+        let mut stack = [0u32; MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = root;
+        loop {
+            counters.node();
+            if node.is_leaf() {
+                for slot in node.first as usize..(node.first + node.count) as usize {
+                    counters.prim();
+                    if test(slot, tmax).is_some() {
+                        return Some(slot);
+                    }
+                }
+            } else {
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
+                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
+                match (tl, tr) {
+                    (Some(a), Some(b)) => {
+                        let (near, far) = if a <= b {
+                            (l, node.first + 1)
+                        } else {
+                            (r, node.first)
+                        };
+                        stack[sp] = far;
+                        sp += 1;
+                        node = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = l;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = r;
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            }
+            if sp == 0 {
+                return None;
+            }
+            sp -= 1;
+            node = &nodes[stack[sp] as usize];
+        }
+    }
+}
