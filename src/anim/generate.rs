@@ -1,0 +1,1 @@
+//! Writing animated test scenes as `.glb` files.

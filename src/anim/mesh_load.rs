@@ -1,0 +1,262 @@
+//! One glTF mesh to a [`Mesh`]: surface primitives merged into triangles, morph target deltas
+//! and skinning attributes.
+
+use super::accessor::Reader;
+use super::scene::{Mesh, SkinAttributes, Warning};
+use crate::error::Result;
+use glam::Vec3;
+use gltf_json::accessor::{ComponentType, Type};
+use gltf_json::mesh::{Mode, Primitive, Semantic};
+use gltf_json::validation::Checked;
+
+/// A loaded mesh and what was skipped or repaired.
+pub(crate) struct LoadedMesh {
+    /// The mesh.
+    pub mesh: Mesh,
+    /// Some primitives were points or lines.
+    pub skipped_modes: bool,
+    /// Vertices whose skin weights were renormalized noticeably.
+    pub renormalized: usize,
+    /// Other warnings.
+    pub warnings: Vec<Warning>,
+}
+
+/// One primitive's data before merging.
+struct Prim {
+    positions: Vec<Vec3>,
+    indices: Vec<[u32; 3]>,
+    targets: Vec<Vec<Vec3>>,
+    joints: Vec<Vec<u32>>,
+    weights: Vec<Vec<f32>>,
+}
+
+/// Turns a vertex index list into triangles per the spec's rules for `mode`.
+fn triangulate(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    let n = idx.len();
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => (0..n.saturating_sub(2))
+            .map(|i| {
+                let odd = i % 2;
+                [idx[i], idx[i + 1 + odd], idx[i + 2 - odd]]
+            })
+            .collect(),
+        Mode::TriangleFan => (0..n.saturating_sub(2))
+            .map(|i| [idx[i + 1], idx[i + 2], idx[0]])
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Reads one surface primitive; `None` when it has no POSITION.
+fn load_primitive(rd: &Reader, obj: &str, mode: Mode, p: &Primitive) -> Result<Option<Prim>> {
+    let attr = |s: Semantic| p.attributes.get(&Checked::Valid(s)).map(|a| a.value());
+    let Some(pos) = attr(Semantic::Positions) else {
+        return Ok(None);
+    };
+    let positions: Vec<Vec3> = rd
+        .floats(pos, obj, "POSITION", &[Type::Vec3])?
+        .values
+        .chunks_exact(3)
+        .map(Vec3::from_slice)
+        .collect();
+    let n = positions.len();
+    if n >= u32::MAX as usize {
+        return Err(rd.err(obj, "fewer than 2^32 vertices"));
+    }
+    let same_count = |a: usize, role: &str, len: usize| {
+        if len == n {
+            Ok(())
+        } else {
+            Err(rd.err(
+                format!("{obj} accessor {a} ({role})"),
+                format!("{n} elements like POSITION, found {len}"),
+            ))
+        }
+    };
+    let idx: Vec<u32> = match p.indices {
+        Some(a) => {
+            let d = rd.uints(a.value(), obj, "indices", Type::Scalar)?;
+            if let Some(k) = d.values.iter().position(|&i| i as usize >= n) {
+                return Err(rd.err(
+                    format!("{obj} accessor {} (indices)", a.value()),
+                    format!(
+                        "vertex indices below the vertex count {n}, found {} at index {k}",
+                        d.values[k]
+                    ),
+                ));
+            }
+            d.values
+        }
+        None => (0..n as u32).collect(),
+    };
+    let indices = triangulate(mode, &idx);
+    let mut targets = Vec::new();
+    for (k, t) in p.targets.iter().flatten().enumerate() {
+        let deltas = match t.positions {
+            Some(a) => {
+                let tobj = format!("{obj} target {k}");
+                let d: Vec<Vec3> = rd
+                    .floats(a.value(), &tobj, "POSITION", &[Type::Vec3])?
+                    .values
+                    .chunks_exact(3)
+                    .map(Vec3::from_slice)
+                    .collect();
+                same_count(a.value(), "target POSITION", d.len())?;
+                d
+            }
+            None => vec![Vec3::ZERO; n],
+        };
+        targets.push(deltas);
+    }
+    let (mut joints, mut weights) = (Vec::new(), Vec::new());
+    for set in 0u32.. {
+        let (Some(j), Some(w)) = (attr(Semantic::Joints(set)), attr(Semantic::Weights(set))) else {
+            break;
+        };
+        let jd = rd.uints(j, obj, &format!("JOINTS_{set}"), Type::Vec4)?;
+        same_count(j, &format!("JOINTS_{set}"), jd.values.len() / 4)?;
+        let wd = rd.floats(w, obj, &format!("WEIGHTS_{set}"), &[Type::Vec4])?;
+        same_count(w, &format!("WEIGHTS_{set}"), wd.values.len() / 4)?;
+        let float_or_norm = wd.comp == ComponentType::F32
+            || rd.src.root.accessors.get(w).is_some_and(|a| a.normalized);
+        if !float_or_norm {
+            return Err(rd.err(
+                format!("{obj} accessor {w} (WEIGHTS_{set})"),
+                "float or normalized unsigned weights",
+            ));
+        }
+        joints.push(jd.values);
+        weights.push(wd.values);
+    }
+    Ok(Some(Prim {
+        positions,
+        indices,
+        targets,
+        joints,
+        weights,
+    }))
+}
+
+/// Loads glTF mesh `m` (the index must be in range).
+pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
+    let jm = &rd.src.root.meshes[m];
+    let mut warnings = Vec::new();
+    let mut skipped_modes = false;
+    let mut prims = Vec::new();
+    for (p, jp) in jm.primitives.iter().enumerate() {
+        let obj = format!("mesh {m} primitive {p}");
+        let mode = match jp.mode {
+            Checked::Valid(m @ (Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan)) => m,
+            Checked::Valid(_) => {
+                skipped_modes = true;
+                continue;
+            }
+            Checked::Invalid => return Err(rd.err(obj, "a primitive mode between 0 and 6")),
+        };
+        match load_primitive(rd, &obj, mode, jp)? {
+            Some(prim) => prims.push(prim),
+            None => warnings.push(Warning(format!(
+                "{}: {obj}: no POSITION attribute; skipped",
+                rd.path.display()
+            ))),
+        }
+    }
+    let n_targets = prims.iter().map(|p| p.targets.len()).max().unwrap_or(0);
+    let n_sets = prims.iter().map(|p| p.joints.len()).max().unwrap_or(0);
+    let total: usize = prims.iter().map(|p| p.positions.len()).sum();
+    if total >= u32::MAX as usize {
+        return Err(rd.err(format!("mesh {m}"), "fewer than 2^32 vertices"));
+    }
+    let mut mesh = Mesh {
+        name: jm.name.clone(),
+        gltf_index: m,
+        targets: vec![Vec::with_capacity(total); n_targets],
+        ..Mesh::default()
+    };
+    let influences = 4 * n_sets;
+    let mut attrs = SkinAttributes {
+        influences,
+        joints: Vec::with_capacity(total * influences),
+        weights: Vec::with_capacity(total * influences),
+    };
+    let mut renormalized = 0;
+    for p in prims {
+        let base = mesh.positions.len() as u32;
+        let t0 = mesh.indices.len();
+        mesh.indices
+            .extend(p.indices.iter().map(|t| t.map(|i| i + base)));
+        mesh.primitives.push(t0..mesh.indices.len());
+        let n = p.positions.len();
+        for (k, target) in mesh.targets.iter_mut().enumerate() {
+            match p.targets.get(k) {
+                Some(d) => target.extend_from_slice(d),
+                None => target.extend(std::iter::repeat_n(Vec3::ZERO, n)),
+            }
+        }
+        mesh.positions.extend_from_slice(&p.positions);
+        if influences == 0 {
+            continue;
+        }
+        for v in 0..n {
+            let start = attrs.weights.len();
+            for s in 0..n_sets {
+                for c in 0..4 {
+                    let j = p.joints.get(s).and_then(|js| js.get(4 * v + c)).copied();
+                    let w = p.weights.get(s).and_then(|ws| ws.get(4 * v + c)).copied();
+                    let w = w.unwrap_or(0.0).max(0.0);
+                    // A joint with zero weight never matters: park it on joint 0.
+                    let j = if w > 0.0 { j.unwrap_or(0) } else { 0 };
+                    attrs.joints.push(u16::try_from(j).unwrap_or(u16::MAX));
+                    attrs.weights.push(w);
+                }
+            }
+            let ws = &mut attrs.weights[start..];
+            let sum: f32 = ws.iter().sum();
+            if sum > 0.0 && (sum - 1.0).abs() > 1e-6 {
+                if (sum - 1.0).abs() > 1e-3 {
+                    renormalized += 1;
+                }
+                ws.iter_mut().for_each(|w| *w /= sum);
+            } else if sum == 0.0 {
+                renormalized += 1;
+            }
+        }
+    }
+    if n_targets > 0 {
+        mesh.weights = jm.weights.clone().unwrap_or_default();
+        if !mesh.weights.iter().all(|w| w.is_finite()) {
+            return Err(rd.err(format!("mesh {m}"), "finite default weights"));
+        }
+        mesh.weights.resize(n_targets, 0.0);
+    }
+    if influences > 0 {
+        mesh.skin = Some(attrs);
+    }
+    Ok(LoadedMesh {
+        mesh,
+        skipped_modes,
+        renormalized,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_keep_winding() {
+        let idx = [0, 1, 2, 3, 4];
+        assert_eq!(
+            triangulate(Mode::TriangleStrip, &idx),
+            vec![[0, 1, 2], [1, 3, 2], [2, 3, 4]]
+        );
+        assert_eq!(
+            triangulate(Mode::TriangleFan, &idx),
+            vec![[1, 2, 0], [2, 3, 0], [3, 4, 0]]
+        );
+        assert_eq!(triangulate(Mode::Triangles, &idx), vec![[0, 1, 2]]);
+        assert!(triangulate(Mode::TriangleStrip, &idx[..2]).is_empty());
+    }
+}
