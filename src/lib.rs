@@ -29,7 +29,6 @@
 
 pub mod anim;
 pub mod bvh;
-pub mod anim;
 pub mod error;
 pub mod geom;
 
