@@ -402,6 +402,18 @@ fn load_animations(
                 sampler: s,
             });
         }
+        // Rotation keys are unit quaternions by the spec; make rounding in the file harmless.
+        for ch in &channels {
+            let s = &mut samplers[ch.sampler];
+            if ch.property == Property::Rotation && s.interpolation != Interpolation::CubicSpline {
+                for q in s.values.chunks_exact_mut(4) {
+                    let len = q.iter().map(|x| x * x).sum::<f32>().sqrt();
+                    if len > 0.0 {
+                        q.iter_mut().for_each(|x| *x /= len);
+                    }
+                }
+            }
+        }
         out.push(Animation {
             name: ja.name.clone(),
             channels,
