@@ -31,5 +31,7 @@ pub mod anim;
 pub mod bvh;
 pub mod error;
 pub mod geom;
+pub mod io;
+pub mod report;
 
 pub use error::{Error, Result};

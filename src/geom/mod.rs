@@ -3,6 +3,7 @@
 mod aabb;
 mod mesh;
 mod ray;
+pub mod shapes;
 mod triangle;
 
 pub use aabb::Aabb;

@@ -27,8 +27,9 @@ impl Binned {
     }
 }
 
+/// One bin: the box and count of the primitives whose centroid falls in it.
 #[derive(Clone, Copy)]
-struct Bin {
+pub(crate) struct Bin {
     b: Box3,
     count: u32,
 }
@@ -37,8 +38,6 @@ const EMPTY_BIN: Bin = Bin {
     b: Box3::EMPTY,
     count: 0,
 };
-
-type Bins = [[Bin; MAX_BINS]; 3];
 
 /// Maps doubled centroids to bin indices `0 .. bins` on each axis.
 #[derive(Clone, Copy)]
@@ -63,35 +62,41 @@ impl BinMap {
     }
 }
 
-fn bin_refs(refs: &[PrimRef], map: &BinMap) -> Box<Bins> {
-    let mut bins = Box::new([[EMPTY_BIN; MAX_BINS]; 3]);
+/// Adds `refs` to `bins` (`k` bins per axis, axis-major).
+fn bin_refs(refs: &[PrimRef], map: &BinMap, k: usize, bins: &mut [Bin]) {
+    let (bx, rest) = bins.split_at_mut(k);
+    let (by, bz) = rest.split_at_mut(k);
     for r in refs {
         let (lo, hi) = (r.lo(), r.hi());
-        let idx = map.index(lo + hi);
-        for (axis, &i) in idx.iter().enumerate() {
-            let bin = &mut bins[axis][i];
-            bin.b.grow(lo, hi);
-            bin.count += 1;
+        let [ix, iy, iz] = map.index(lo + hi);
+        for (bin, i) in [(&mut *bx, ix), (&mut *by, iy), (&mut *bz, iz)] {
+            let b = &mut bin[i];
+            b.b.grow(lo, hi);
+            b.count += 1;
         }
     }
-    bins
 }
 
-fn merge_bins(mut a: Box<Bins>, b: Box<Bins>, k: usize) -> Box<Bins> {
-    for axis in 0..3 {
-        for i in 0..k {
-            let (x, y) = (&mut a[axis][i], &b[axis][i]);
-            x.b = x.b.union(y.b);
-            x.count += y.count;
-        }
+fn merge_bins(mut a: Vec<Bin>, b: Vec<Bin>) -> Vec<Bin> {
+    for (x, y) in a.iter_mut().zip(&b) {
+        x.b = x.b.union(y.b);
+        x.count += y.count;
     }
     a
 }
 
 impl Splitter for Binned {
-    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, _depth: u32) -> Option<Split> {
+    type Scratch = Vec<Bin>;
+
+    fn scratch(&self) -> Vec<Bin> {
+        vec![EMPTY_BIN; 3 * self.bins]
+    }
+
+    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, bins: &mut Vec<Bin>) -> Option<Split> {
         let n = refs.len();
-        let k = self.bins;
+        // Small nodes get one bin per primitive at most: more bins could not separate more
+        // centroids on average, and the per-node cost of sweeping empty bins would dominate.
+        let k = self.bins.min(n.max(2));
         let origin = rb.cbounds.min;
         let ext = rb.cbounds.max - origin;
         let widest = if ext.x >= ext.y && ext.x >= ext.z {
@@ -118,23 +123,27 @@ impl Splitter for Binned {
             last: k as u32 - 1,
         };
 
-        let bins = if n >= 8 * self.parallel_threshold {
-            refs.par_chunks(self.parallel_threshold)
-                .map(|c| bin_refs(c, &map))
-                .reduce(
-                    || Box::new([[EMPTY_BIN; MAX_BINS]; 3]),
-                    |a, b| merge_bins(a, b, k),
-                )
+        if n >= 8 * self.parallel_threshold {
+            *bins = refs
+                .par_chunks(self.parallel_threshold)
+                .map(|c| {
+                    let mut b = vec![EMPTY_BIN; 3 * k];
+                    bin_refs(c, &map, k, &mut b);
+                    b
+                })
+                .reduce(|| vec![EMPTY_BIN; 3 * k], merge_bins);
         } else {
-            bin_refs(refs, &map)
-        };
+            bins.clear();
+            bins.resize(3 * k, EMPTY_BIN);
+            bin_refs(refs, &map, k, bins);
+        }
 
         // Compute costs for splitting after each bin: right-to-left areas and counts first,
         // then a left-to-right sweep evaluates `A_L N_L + A_R N_R`.
         let mut best = (f32::INFINITY, 0usize, 0usize);
         let mut right_cost = [0f32; MAX_BINS];
         for axis in (0..3).filter(|&a| usable(a)) {
-            let bins = &bins[axis];
+            let bins = &bins[axis * k..(axis + 1) * k];
             let mut acc = Box3::EMPTY;
             let mut count = 0u32;
             for i in (1..k).rev() {

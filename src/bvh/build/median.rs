@@ -6,7 +6,11 @@ use super::{PrimRef, RangeBounds, Split, Splitter};
 pub(crate) struct Median(pub usize);
 
 impl Splitter for Median {
-    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, _depth: u32) -> Option<Split> {
+    type Scratch = ();
+
+    fn scratch(&self) {}
+
+    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, _: &mut ()) -> Option<Split> {
         // When all centroids coincide the caller halves the range, which is the same cut.
         if refs.len() <= self.0 {
             return None;

@@ -223,10 +223,19 @@ pub(crate) struct Split {
 
 /// A split strategy over references kept in one array (binned SAH, median).
 pub(crate) trait Splitter: Sync {
+    /// Working memory a task reuses from node to node.
+    type Scratch: Send;
+    /// Fresh working memory, for a new task.
+    fn scratch(&self) -> Self::Scratch;
     /// Partitions `refs` and returns the split, or `None` to make a leaf. It is called only
     /// with more than one primitive; returning `None` for more than `max_leaf_size` primitives
     /// makes the builder cut the range in the middle instead.
-    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, depth: u32) -> Option<Split>;
+    fn split(
+        &self,
+        refs: &mut [PrimRef],
+        rb: &RangeBounds,
+        scratch: &mut Self::Scratch,
+    ) -> Option<Split>;
 }
 
 /// Beyond this depth builders stop asking the strategy and halve ranges by count, so that the
@@ -257,19 +266,11 @@ impl Bvh {
         let (root, desc) = slots.split_at_mut(1);
         match params.method {
             Method::Binned => {
-                let s = binned::Binned::new(params);
-                root[0] = build_range(&s, params, &mut refs, 0, desc, 1, 0);
+                root[0] = build_range(&binned::Binned::new(params), params, &mut refs, desc);
             }
             Method::Median => {
-                root[0] = build_range(
-                    &median::Median(params.max_leaf_size as usize),
-                    params,
-                    &mut refs,
-                    0,
-                    desc,
-                    1,
-                    0,
-                );
+                let m = median::Median(params.max_leaf_size as usize);
+                root[0] = build_range(&m, params, &mut refs, desc);
             }
             Method::Sweep => {
                 root[0] = sweep::build(params, &mut refs, desc);
@@ -284,92 +285,108 @@ impl Bvh {
     }
 }
 
-/// Builds the subtree over `refs` (whose first primitive slot is `prim_offset`), writes its
-/// descendants into `desc` (global index of `desc[0]` is `desc_base`, length `2n - 2`) and
-/// returns the subtree's root node.
+/// Builds the whole tree over `refs` with one splitter: writes the root's descendants into
+/// `desc` (global indices from 1) and returns the root.
 fn build_range<S: Splitter>(
-    s: &S,
+    splitter: &S,
     params: &BuildParams,
     refs: &mut [PrimRef],
-    prim_offset: u32,
     desc: &mut [Node],
-    desc_base: u32,
-    depth: u32,
 ) -> Node {
     let rb = RangeBounds::of(refs, params.parallel_threshold);
-    build_node(s, params, refs, rb, prim_offset, desc, desc_base, depth)
+    let mut scratch = splitter.scratch();
+    let b = Recursion { splitter, params };
+    b.node(
+        refs,
+        rb,
+        Slots {
+            prim_offset: 0,
+            desc,
+            desc_base: 1,
+        },
+        0,
+        &mut scratch,
+    )
 }
 
-#[allow(clippy::too_many_arguments)]
-fn build_node<S: Splitter>(
-    s: &S,
-    params: &BuildParams,
-    refs: &mut [PrimRef],
-    rb: RangeBounds,
+/// Where a subtree goes: its first primitive slot, and the node slots reserved for its
+/// descendants (`2n - 2` of them; the global index of `desc[0]` is `desc_base`).
+struct Slots<'a> {
     prim_offset: u32,
-    desc: &mut [Node],
+    desc: &'a mut [Node],
     desc_base: u32,
-    depth: u32,
-) -> Node {
-    let n = refs.len();
-    let bounds = rb.bounds.to_aabb();
-    if n == 1 {
-        return Node::leaf(bounds, prim_offset, 1);
-    }
-    let split = if depth < SAH_DEPTH_LIMIT {
-        s.split(refs, &rb, depth)
-    } else {
-        None
-    };
-    let split = match split {
-        Some(sp) => sp,
-        None if n <= params.max_leaf_size as usize => {
-            return Node::leaf(bounds, prim_offset, n as u32);
+}
+
+struct Recursion<'a, S> {
+    splitter: &'a S,
+    params: &'a BuildParams,
+}
+
+impl<S: Splitter> Recursion<'_, S> {
+    fn node(
+        &self,
+        refs: &mut [PrimRef],
+        rb: RangeBounds,
+        out: Slots<'_>,
+        depth: u32,
+        scratch: &mut S::Scratch,
+    ) -> Node {
+        let n = refs.len();
+        let bounds = rb.bounds.to_aabb();
+        if n == 1 {
+            return Node::leaf(bounds, out.prim_offset, 1);
         }
-        None => halve(refs, params.parallel_threshold),
-    };
-    let mid = split.mid;
-    debug_assert!(mid > 0 && mid < n);
-    let (pair, rest) = desc.split_at_mut(2);
-    let (ldesc, rdesc) = rest.split_at_mut(2 * mid - 2);
-    let (lrefs, rrefs) = refs.split_at_mut(mid);
-    let lbase = desc_base + 2;
-    let rbase = lbase + ldesc.len() as u32;
-    let roff = prim_offset + mid as u32;
-    let (l, r) = if n >= params.parallel_threshold {
-        rayon::join(
-            || {
-                build_node(
-                    s,
-                    params,
-                    lrefs,
-                    split.left,
-                    prim_offset,
-                    ldesc,
-                    lbase,
-                    depth + 1,
-                )
-            },
-            || build_node(s, params, rrefs, split.right, roff, rdesc, rbase, depth + 1),
-        )
-    } else {
-        (
-            build_node(
-                s,
-                params,
-                lrefs,
-                split.left,
-                prim_offset,
-                ldesc,
-                lbase,
-                depth + 1,
-            ),
-            build_node(s, params, rrefs, split.right, roff, rdesc, rbase, depth + 1),
-        )
-    };
-    pair[0] = l;
-    pair[1] = r;
-    Node::interior(bounds, desc_base)
+        let split = if depth < SAH_DEPTH_LIMIT {
+            self.splitter.split(refs, &rb, scratch)
+        } else {
+            None
+        };
+        let split = match split {
+            Some(sp) => sp,
+            None if n <= self.params.max_leaf_size as usize => {
+                return Node::leaf(bounds, out.prim_offset, n as u32);
+            }
+            None => halve(refs, self.params.parallel_threshold),
+        };
+        let mid = split.mid;
+        debug_assert!(mid > 0 && mid < n);
+        let (pair, rest) = out.desc.split_at_mut(2);
+        let (ldesc, rdesc) = rest.split_at_mut(2 * mid - 2);
+        let (lrefs, rrefs) = refs.split_at_mut(mid);
+        let lbase = out.desc_base + 2;
+        let left = Slots {
+            prim_offset: out.prim_offset,
+            desc: ldesc,
+            desc_base: lbase,
+        };
+        let right = Slots {
+            prim_offset: out.prim_offset + mid as u32,
+            desc_base: lbase + 2 * mid as u32 - 2,
+            desc: rdesc,
+        };
+        let (l, r) = if n >= self.params.parallel_threshold {
+            rayon::join(
+                || self.node(lrefs, split.left, left, depth + 1, scratch),
+                || {
+                    self.node(
+                        rrefs,
+                        split.right,
+                        right,
+                        depth + 1,
+                        &mut self.splitter.scratch(),
+                    )
+                },
+            )
+        } else {
+            (
+                self.node(lrefs, split.left, left, depth + 1, scratch),
+                self.node(rrefs, split.right, right, depth + 1, scratch),
+            )
+        };
+        pair[0] = l;
+        pair[1] = r;
+        Node::interior(bounds, out.desc_base)
+    }
 }
 
 /// Cuts a range in the middle by count, as it is: the fallback when no split by position is

@@ -1,0 +1,183 @@
+//! `dynbvh build-bench`: every builder on one mesh, as a table or JSON.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use dynbvh::bvh::{BuildParams, Method};
+use dynbvh::geom::{TriMesh, shapes};
+use dynbvh::report::build_bench::{self, Options, Row};
+use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `build-bench`.
+#[derive(Args, Debug)]
+pub struct BuildBenchArgs {
+    /// Mesh: .glb/.gltf (default scene flattened at rest), .obj, or .tri.
+    #[arg(required_unless_present = "synthetic", conflicts_with = "synthetic")]
+    file: Option<PathBuf>,
+    /// Use a bumpy geodesic sphere of about N triangles instead of a file.
+    #[arg(long, value_name = "N")]
+    synthetic: Option<usize>,
+    /// Ray file(s) in the shared `.rays` format; without any, a 1024x1024 camera and 2^20
+    /// random rays of its own.
+    #[arg(long = "rays", value_name = "RAYFILE")]
+    rays: Vec<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<String>,
+    /// Builds per method; the median is reported.
+    #[arg(long, default_value_t = 5)]
+    runs: usize,
+    /// Print the rows as JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_method(s: &str) -> Result<BuildParams> {
+    Ok(match s {
+        "median" => BuildParams::MEDIAN,
+        "sweep" => BuildParams::SWEEP,
+        _ => {
+            let rest = s.strip_prefix("binned").with_context(|| {
+                format!("unknown method {s:?}: median, sweep, binnedK, binnedK-widest")
+            })?;
+            let (k, widest) = match rest.strip_suffix("-widest") {
+                Some(k) => (k, true),
+                None => (rest, false),
+            };
+            let bins: usize = k
+                .parse()
+                .with_context(|| format!("bad bin count in {s:?}"))?;
+            if !(2..=dynbvh::bvh::MAX_BINS).contains(&bins) {
+                bail!(
+                    "bin count {bins} out of range 2..={}",
+                    dynbvh::bvh::MAX_BINS
+                );
+            }
+            BuildParams {
+                method: Method::Binned,
+                all_axes: !widest,
+                ..BuildParams::binned(bins)
+            }
+        }
+    })
+}
+
+/// Loads a mesh by extension.
+pub fn load_mesh(path: &Path) -> Result<TriMesh> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    Ok(match ext.as_str() {
+        "tri" => dynbvh::io::read_tri(path)?,
+        "obj" => dynbvh::io::read_obj(path)?,
+        "glb" | "gltf" => crate::cli::flatten_gltf_at_rest(path)?,
+        _ => bail!(
+            "{}: unknown mesh format (expected .glb, .gltf, .obj or .tri)",
+            path.display()
+        ),
+    })
+}
+
+/// Runs `build-bench`.
+pub fn run(args: BuildBenchArgs) -> Result<()> {
+    if let Some(t) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("setting up the thread pool")?;
+    }
+    let (name, mesh) = match (&args.file, args.synthetic) {
+        (Some(f), _) => (f.display().to_string(), load_mesh(f)?),
+        (None, Some(n)) => (format!("synthetic sphere ~{n}"), shapes::bumpy_sphere(n)),
+        (None, None) => unreachable!("clap requires one"),
+    };
+    mesh.check().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    let methods = if args.methods.is_empty() {
+        build_bench::default_methods()
+    } else {
+        args.methods
+            .iter()
+            .map(|m| parse_method(m))
+            .collect::<Result<_>>()?
+    };
+    let sets = if args.rays.is_empty() {
+        let b = mesh.bounds();
+        vec![
+            RaySet {
+                name: "camera".into(),
+                rays: camera_rays(&b, 1024, 1024),
+            },
+            RaySet {
+                name: "random".into(),
+                rays: random_rays(&b, 1 << 20, 0xC0FFEE),
+            },
+        ]
+    } else {
+        args.rays
+            .iter()
+            .map(|p| {
+                Ok(RaySet {
+                    name: p
+                        .file_stem()
+                        .map_or("rays".into(), |s| s.to_string_lossy().into_owned()),
+                    rays: dynbvh::io::read_rays(p)?,
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    let threads = rayon::current_num_threads();
+    eprintln!("{name}: {} triangles, {threads} thread(s)", mesh.len());
+    let opts = Options {
+        build_runs: args.runs,
+        ..Options::default()
+    };
+    let rows = build_bench::run(&mesh, &methods, &sets, opts, |m| eprintln!("  {m} ..."));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print_table(&rows);
+    }
+    if rows.iter().any(|r| r.mismatches > 0) {
+        bail!("some rays disagree with brute force");
+    }
+    Ok(())
+}
+
+fn print_table(rows: &[Row]) {
+    println!(
+        "{:<16} {:>10} {:>9} {:>8} {:>9} {:>6} {:>9} {:<14} {:>8} {:>8} {:>9}",
+        "method",
+        "build ms",
+        "refit ms",
+        "SAH",
+        "nodes",
+        "depth",
+        "MiB",
+        "rays",
+        "Mrays/s",
+        "any Mr/s",
+        "mismatch"
+    );
+    for r in rows {
+        println!(
+            "{:<16} {:>10.1} {:>9.2} {:>8.2} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            r.method,
+            r.build_ms,
+            r.refit_ms,
+            r.sah,
+            r.nodes,
+            r.depth,
+            r.memory_bytes as f64 / (1 << 20) as f64,
+            r.rays,
+            r.mrays,
+            r.any_mrays,
+            r.mismatches,
+            r.checked
+        );
+    }
+}

@@ -1,0 +1,16 @@
+//! Subcommands of the `dynbvh` binary, one per file.
+
+pub mod build_bench;
+
+use anyhow::Result;
+use std::path::Path;
+
+/// Loads a glTF file and flattens its default scene at rest (no animation applied), printing
+/// the loader's warnings.
+pub fn flatten_gltf_at_rest(path: &Path) -> Result<dynbvh::geom::TriMesh> {
+    let (scene, warnings) = dynbvh::anim::Scene::load(path)?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(scene.flatten_rest())
+}

@@ -1,0 +1,4 @@
+//! Measurements and reports: what the CLI's benchmark commands compute and print.
+
+pub mod build_bench;
+pub mod rays;
