@@ -9,7 +9,7 @@ use gltf_json::validation::Checked;
 use std::path::Path;
 
 /// Largest number of components an accessor without a buffer view may hold (zeros plus sparse).
-const MAX_ZERO_COMPONENTS: u64 = 1 << 27;
+const MAX_ZERO_COMPONENTS: u64 = 1 << 24;
 
 /// Reads accessors of one document, naming `path` in errors.
 pub(crate) struct Reader<'a> {
