@@ -24,6 +24,17 @@ impl MeshBvh {
     /// When a triangle's vertex index is out of range (see [`TriMesh::check`]).
     #[must_use]
     pub fn build(mesh: &TriMesh, params: &BuildParams) -> Self {
+        Self::build_indexed(&mesh.positions, &mesh.indices, params)
+    }
+
+    /// [`MeshBvh::build`] from positions and triangle indices held elsewhere (e.g. a pose
+    /// buffer).
+    ///
+    /// # Panics
+    /// When a vertex index is out of range.
+    #[must_use]
+    pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
+        let mesh = Indexed { positions, indices };
         let boxes: Vec<Aabb> = if mesh.len() >= GATHER_CHUNK {
             (0..mesh.len())
                 .into_par_iter()
@@ -34,7 +45,7 @@ impl MeshBvh {
         };
         let bvh = Bvh::build(&boxes, params);
         let mut tris = vec![[Vec3::ZERO; 3]; mesh.len()];
-        gather(&bvh, mesh, &mut tris);
+        gather(&bvh, &mesh, &mut tris);
         Self { bvh, tris }
     }
 
@@ -134,8 +145,30 @@ impl MeshBvh {
     }
 }
 
+/// Borrowed positions and triangle indices.
+struct Indexed<'a> {
+    positions: &'a [Vec3],
+    indices: &'a [[u32; 3]],
+}
+
+impl Indexed<'_> {
+    fn len(&self) -> usize {
+        self.indices.len()
+    }
+
+    #[inline]
+    fn triangle(&self, i: usize) -> [Vec3; 3] {
+        self.indices[i].map(|v| self.positions[v as usize])
+    }
+
+    fn triangle_bounds(&self, i: usize) -> Aabb {
+        let [a, b, c] = self.triangle(i);
+        Aabb::new(a.min(b).min(c), a.max(b).max(c))
+    }
+}
+
 /// Copies each triangle into its leaf slot, in parallel chunks for large meshes.
-fn gather(bvh: &Bvh, mesh: &TriMesh, tris: &mut [[Vec3; 3]]) {
+fn gather(bvh: &Bvh, mesh: &Indexed<'_>, tris: &mut [[Vec3; 3]]) {
     let prims = bvh.prim_indices();
     if tris.len() >= 2 * GATHER_CHUNK {
         tris.par_chunks_mut(GATHER_CHUNK)
