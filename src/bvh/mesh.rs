@@ -56,12 +56,20 @@ impl MeshBvh {
     /// When `mesh` has another triangle count than the mesh the tree was built for, or a vertex
     /// index is out of range.
     pub fn refit(&mut self, mesh: &TriMesh) {
+        self.refit_indexed(&mesh.positions, &mesh.indices);
+    }
+
+    /// [`MeshBvh::refit`] from positions and triangle indices held elsewhere. No allocation.
+    ///
+    /// # Panics
+    /// When the triangle count differs from the built one, or a vertex index is out of range.
+    pub fn refit_indexed(&mut self, positions: &[Vec3], indices: &[[u32; 3]]) {
         assert_eq!(
-            mesh.len(),
+            indices.len(),
             self.tris.len(),
             "refit needs the same triangles"
         );
-        gather(&self.bvh, mesh, &mut self.tris);
+        gather(&self.bvh, &Indexed { positions, indices }, &mut self.tris);
         let tris = &self.tris;
         self.bvh.refit_leaves(|first, count| {
             tris[first as usize..(first + count) as usize]
