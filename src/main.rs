@@ -19,12 +19,21 @@ struct Cli {
 enum Command {
     /// Every builder on one mesh: build time, SAH cost, size, Mrays/s, agreement with brute force.
     BuildBench(cli::build_bench::BuildBenchArgs),
+    /// Summarize a glTF file: scenes, meshes, skins, morph targets, animations, instance classes.
+    Info(cli::info::InfoArgs),
+    /// Pose a glTF scene at a time and write its triangles as OBJ or PLY.
+    Pose(cli::pose::PoseArgs),
+    /// Generate an animated test scene as .glb.
+    Gen(cli::r#gen::GenArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::BuildBench(a)) => cli::build_bench::run(a),
+        Some(Command::Info(a)) => cli::info::run(a),
+        Some(Command::Pose(a)) => cli::pose::run(a),
+        Some(Command::Gen(a)) => cli::r#gen::run(a),
         None => Ok(()),
     }
 }

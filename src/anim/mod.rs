@@ -16,6 +16,7 @@
 
 mod accessor;
 pub mod generate;
+mod glb_writer;
 mod load;
 mod mesh_load;
 mod pose;

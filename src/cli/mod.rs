@@ -1,6 +1,9 @@
 //! Subcommands of the `dynbvh` binary, one per file.
 
 pub mod build_bench;
+pub mod r#gen;
+pub mod info;
+pub mod pose;
 
 use anyhow::Result;
 use std::path::Path;

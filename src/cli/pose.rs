@@ -1,0 +1,105 @@
+//! `dynbvh pose`: a scene's triangles at time `t`, written as OBJ or PLY.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use dynbvh::anim::{LoadOptions, Scene};
+use dynbvh::geom::TriMesh;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `dynbvh pose`.
+#[derive(Args)]
+pub struct PoseArgs {
+    /// The .gltf or .glb file.
+    pub file: PathBuf,
+    /// Time in seconds (wraps beyond the animation's duration).
+    #[arg(long, default_value_t = 0.0)]
+    pub time: f32,
+    /// Animation name or index (default: none, the rest pose).
+    #[arg(long)]
+    pub animation: Option<String>,
+    /// glTF scene index (default: the file's default scene).
+    #[arg(long)]
+    pub scene: Option<usize>,
+    /// Output file: .obj (text) or .ply (binary).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Poses and writes.
+pub fn run(a: PoseArgs) -> Result<()> {
+    let (scene, warnings) = Scene::load_with(&a.file, &LoadOptions { scene: a.scene })?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let anim = match &a.animation {
+        None => None,
+        Some(key) => Some(scene.find_animation(key).with_context(|| {
+            format!(
+                "no animation named or numbered {key:?} ({} animations)",
+                scene.animations.len()
+            )
+        })?),
+    };
+    let mesh = scene.flatten_at(anim, a.time)?;
+    let ext = a
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let bytes = match ext.as_str() {
+        "obj" => obj(&mesh),
+        "ply" => ply(&mesh),
+        _ => bail!("{}: output must end in .obj or .ply", a.out.display()),
+    };
+    write(&a.out, &bytes)?;
+    eprintln!(
+        "{}: {} triangles, {} vertices",
+        a.out.display(),
+        mesh.len(),
+        mesh.positions.len()
+    );
+    Ok(())
+}
+
+/// Writes `bytes` to `path`.
+fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    std::fs::write(path, bytes).map_err(|e| dynbvh::Error::io(path, e))?;
+    Ok(())
+}
+
+/// Wavefront OBJ text.
+fn obj(m: &TriMesh) -> Vec<u8> {
+    let mut out = Vec::with_capacity(m.positions.len() * 32 + m.indices.len() * 24);
+    for p in &m.positions {
+        let _ = writeln!(out, "v {} {} {}", p.x, p.y, p.z);
+    }
+    for [a, b, c] in &m.indices {
+        let _ = writeln!(out, "f {} {} {}", a + 1, b + 1, c + 1);
+    }
+    out
+}
+
+/// Binary little-endian PLY.
+fn ply(m: &TriMesh) -> Vec<u8> {
+    let mut out = Vec::with_capacity(m.positions.len() * 12 + m.indices.len() * 13 + 256);
+    let _ = write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+        m.positions.len(),
+        m.indices.len()
+    );
+    for p in &m.positions {
+        for c in p.to_array() {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for t in &m.indices {
+        out.push(3);
+        for i in t {
+            out.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    out
+}

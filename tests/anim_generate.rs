@@ -1,0 +1,85 @@
+//! Generated scenes load back with the generator's triangle counts and pose to its analytic
+//! positions; the shipped `animations/` files are exactly what their documented command writes.
+
+use dynbvh::anim::generate::{Kind, generate};
+use dynbvh::anim::{InstanceClass, LoadOptions, Scene};
+use dynbvh::geom::TriMesh;
+use std::path::Path;
+
+#[test]
+fn generated_scenes_pose_to_analytic_positions() {
+    for kind in Kind::ALL {
+        let g = generate(kind, 3000, 7);
+        assert!(
+            (2700..4000).contains(&g.triangles),
+            "{kind:?}: {}",
+            g.triangles
+        );
+        let name = format!("gen-{}.glb", kind.name());
+        let (scene, warnings) =
+            Scene::from_slice(Path::new(&name), &g.glb, &LoadOptions::default()).unwrap();
+        assert!(warnings.is_empty(), "{kind:?}: {warnings:?}");
+        assert_eq!(scene.triangle_count(), g.triangles, "{kind:?}");
+        assert_eq!(scene.animations.len(), 1);
+        assert!((scene.animations[0].duration - g.duration).abs() < 1e-6);
+        let classes = scene.classify(Some(0)).unwrap();
+        let want = if kind == Kind::Orbit {
+            InstanceClass::Rigid
+        } else {
+            InstanceClass::Deforming
+        };
+        assert!(classes.iter().all(|&c| c == want), "{kind:?}: {classes:?}");
+        let mut poser = scene.poser(Some(0)).unwrap();
+        let mut flat = TriMesh::default();
+        assert!(g.checks.len() >= 3);
+        for (t, want) in &g.checks {
+            poser.pose(*t);
+            poser.flatten_into(&mut flat);
+            assert_eq!(flat.positions.len(), want.len(), "{kind:?} t={t}");
+            for (v, (a, b)) in flat.positions.iter().zip(want).enumerate() {
+                assert!(
+                    (*a - *b).abs().max_element() < 1e-4,
+                    "{kind:?} t={t} vertex {v}: posed {a}, analytic {b}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn generation_is_deterministic_and_sized() {
+    for kind in Kind::ALL {
+        assert_eq!(generate(kind, 500, 3).glb, generate(kind, 500, 3).glb);
+        let small = generate(kind, 100, 1).triangles;
+        let big = generate(kind, 20_000, 1).triangles;
+        assert!(big > 10 * small, "{kind:?}: {small} vs {big}");
+    }
+}
+
+/// Files shipped in `animations/`, with the arguments `animations/README.md` documents.
+const SHIPPED: &[(&str, Kind, usize)] = &[
+    ("tube.glb", Kind::Tube, 2000),
+    ("wave.glb", Kind::Wave, 2000),
+    ("orbit.glb", Kind::Orbit, 2000),
+    ("explode.glb", Kind::Explode, 2000),
+    ("swap.glb", Kind::Swap, 2000),
+];
+
+#[test]
+fn shipped_files_match_the_generator() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("animations");
+    let mut total = 0;
+    for &(file, kind, n) in SHIPPED {
+        let path = dir.join(file);
+        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        total += bytes.len();
+        assert!(
+            bytes == generate(kind, n, 1).glb,
+            "{file} differs from `dynbvh gen {} --triangles {n}`",
+            kind.name()
+        );
+        let (scene, _) = Scene::load(&path).unwrap();
+        assert_eq!(scene.triangle_count(), generate(kind, n, 1).triangles);
+    }
+    assert!(total < 1_000_000, "shipped animations take {total} bytes");
+}
