@@ -61,13 +61,12 @@ fn check(path: &Path, bytes: &[u8]) {
                 p.flatten_into(&mut out);
             }
         }
+        // A file the document refers to (a buffer URI) is named by itself, beside the file.
+        Err(dynbvh::Error::Io { path: p, .. }) if p.parent() == path.parent() => {}
         Err(e) => {
             let msg = e.to_string();
             let name = path.file_name().unwrap().to_string_lossy();
-            assert!(
-                msg.contains(&*name) || msg.contains(".bin"),
-                "error does not name the file: {msg}"
-            );
+            assert!(msg.contains(&*name), "error does not name the file: {msg}");
         }
     }
 }

@@ -140,9 +140,10 @@ fn cubic_rotation() {
     let dt = ROT_TIMES[1] - ROT_TIMES[0];
     let s = t / dt;
     let (h00, h10, h01, h11) = hermite(s);
-    let tan = [-0.047_890_902f32, 0.998_852_67];
-    let z = h00 * 0.0 + h10 * dt * 0.0 + h01 * -0.382_683_46 + h11 * dt * tan[0];
-    let w = h00 * 1.0 + h10 * dt * 1.0 + h01 * 0.923_879_56 + h11 * dt * tan[1];
+    let tan = [-0.047_890_9_f32, 0.998_852_7];
+    // Key 0's value and out-tangent have z = 0 and w = 1.
+    let z = h01 * -0.382_683_46 + h11 * dt * tan[0];
+    let w = h00 + h10 * dt + h01 * 0.923_879_56 + h11 * dt * tan[1];
     let want = Quat::from_xyzw(0.0, 0.0, z, w).normalize();
     let (_, r, _) = f.trs("CubicSpline Rotation", 6, t);
     assert_quat(r, want, "cubic rotation");

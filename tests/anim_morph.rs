@@ -54,9 +54,21 @@ fn animated_morph_cube_by_hand() {
     let s = &j["animations"][0]["samplers"][0];
     let times = acc(&s["input"]);
     let w = acc(&s["output"]);
+    assert_eq!(
+        j["nodes"][0]["scale"],
+        serde_json::json!([100.0, 100.0, 100.0])
+    );
     let node = Mat4::from_scale_rotation_translation(
         Vec3::splat(100.0),
-        Quat::from_xyzw(0.0, 0.707_106_7, -0.707_106_8, 0.0).normalize(),
+        Quat::from_slice(
+            &j["nodes"][0]["rotation"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap() as f32)
+                .collect::<Vec<_>>(),
+        )
+        .normalize(),
         Vec3::ZERO,
     );
     let mut p = scene.poser(Some(0)).unwrap();

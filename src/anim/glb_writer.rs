@@ -15,7 +15,7 @@ pub(crate) struct GlbWriter {
 impl GlbWriter {
     /// Appends `bytes` as a new buffer view (4-byte aligned) and returns its index.
     fn view(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views.push(json!({
@@ -113,7 +113,7 @@ impl GlbWriter {
     /// Completes `root` (nodes, meshes, ... already set) with the buffer, views, accessors and
     /// asset, and returns the `.glb` bytes.
     pub fn finish(mut self, mut root: Value) -> Vec<u8> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         root["asset"] = json!({"version": "2.0", "generator": "dynbvh gen"});
@@ -121,7 +121,7 @@ impl GlbWriter {
         root["bufferViews"] = Value::Array(self.views);
         root["accessors"] = Value::Array(self.accessors);
         let mut text = serde_json::to_vec(&root).unwrap_or_default();
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(b' ');
         }
         let total = 12 + 8 + text.len() + 8 + self.bin.len();

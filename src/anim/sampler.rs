@@ -63,7 +63,7 @@ impl Sampler {
             return;
         }
         // Clamp outside the keys (also catches NaN t).
-        if !(t > self.times[0]) {
+        if t.is_nan() || t <= self.times[0] {
             out.copy_from_slice(self.value(0));
             return;
         }
