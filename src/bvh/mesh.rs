@@ -74,12 +74,7 @@ impl MeshBvh {
         self.bvh.refit_leaves(|first, count| {
             tris[first as usize..(first + count) as usize]
                 .iter()
-                .fold(Aabb::EMPTY, |b, t| {
-                    b.union(Aabb::new(
-                        t[0].min(t[1]).min(t[2]),
-                        t[0].max(t[1]).max(t[2]),
-                    ))
-                })
+                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
         });
     }
 
@@ -170,8 +165,7 @@ impl Indexed<'_> {
     }
 
     fn triangle_bounds(&self, i: usize) -> Aabb {
-        let [a, b, c] = self.triangle(i);
-        Aabb::new(a.min(b).min(c), a.max(b).max(c))
+        Aabb::of_triangle(&self.triangle(i))
     }
 }
 

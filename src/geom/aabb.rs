@@ -104,6 +104,48 @@ impl Aabb {
         o.is_empty() || (self.min.cmple(o.min).all() && o.max.cmple(self.max).all())
     }
 
+    /// The box of a triangle as trees store it: NaN coordinates are ignored (an axis on which
+    /// all three are NaN is empty), infinite ones clamped (see [`Aabb::sanitized`]).
+    #[must_use]
+    #[inline]
+    pub fn of_triangle(t: &[Vec3; 3]) -> Self {
+        // `f32::min`/`max` skip a NaN operand, unlike glam's vector min/max.
+        let lo = |k: usize| t[0][k].min(t[1][k]).min(t[2][k]);
+        let hi = |k: usize| t[0][k].max(t[1][k]).max(t[2][k]);
+        Self::new(
+            Vec3::new(lo(0), lo(1), lo(2)),
+            Vec3::new(hi(0), hi(1), hi(2)),
+        )
+        .sanitized()
+    }
+
+    /// This box with every bound a finite number, so that unions, areas and centroids never
+    /// produce NaN: a NaN bound makes its axis empty (`min = f32::MAX`, `max = -f32::MAX`),
+    /// infinite bounds are clamped to `±f32::MAX`.
+    #[must_use]
+    #[inline]
+    pub fn sanitized(self) -> Self {
+        let fix = |v: f32, if_nan: f32| {
+            if v.is_nan() {
+                if_nan
+            } else {
+                v.clamp(-f32::MAX, f32::MAX)
+            }
+        };
+        Self::new(
+            Vec3::new(
+                fix(self.min.x, f32::MAX),
+                fix(self.min.y, f32::MAX),
+                fix(self.min.z, f32::MAX),
+            ),
+            Vec3::new(
+                fix(self.max.x, -f32::MAX),
+                fix(self.max.y, -f32::MAX),
+                fix(self.max.z, -f32::MAX),
+            ),
+        )
+    }
+
     /// True when both corners are finite numbers.
     #[must_use]
     pub fn is_finite(&self) -> bool {

@@ -54,12 +54,11 @@ impl TriMesh {
         ]
     }
 
-    /// The bounding box of triangle `i`.
+    /// The bounding box of triangle `i`, as trees store it ([`Aabb::of_triangle`]).
     #[must_use]
     #[inline]
     pub fn triangle_bounds(&self, i: usize) -> Aabb {
-        let [a, b, c] = self.triangle(i);
-        Aabb::new(a.min(b).min(c), a.max(b).max(c))
+        Aabb::of_triangle(&self.triangle(i))
     }
 
     /// The bounding box of all vertices that triangles use.

@@ -23,7 +23,7 @@ impl Splitter for Median {
         } else {
             2
         };
-        if !(ext[axis] > 0.0) {
+        if ext[axis].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         let mid = refs.len() / 2;

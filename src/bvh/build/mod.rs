@@ -103,6 +103,7 @@ pub(crate) struct PrimRef {
 
 impl PrimRef {
     fn new(b: &Aabb, id: u32) -> Self {
+        let b = b.sanitized();
         Self {
             min: b.min.into(),
             id,
