@@ -1,0 +1,17 @@
+//! The per-frame engine: a two-level scene whose deforming meshes are refitted or rebuilt each
+//! frame as a [`Policy`] decides from the measured SAH degradation, the oracle that finds the
+//! best schedule in hindsight, and the frame sources (glTF animations, generated meshes) that
+//! drive it.
+
+pub mod gltf;
+pub mod oracle;
+pub mod policy;
+mod scene;
+pub mod source;
+pub mod stats;
+
+pub use policy::{Action, ParsePolicyError, Policy};
+pub use scene::{
+    Engine, EngineConfig, InstanceId, MeshId, SceneHit, TlasPolicy, expected_work, tree_sah,
+};
+pub use stats::{FrameStats, MeshStats};

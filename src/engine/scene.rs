@@ -1,0 +1,758 @@
+//! The two-level scene: one bottom-level tree (BLAS, a [`MeshBvh`]) per mesh, one top-level
+//! tree (TLAS, a [`Bvh`]) over the world boxes of the mesh instances.
+//!
+//! A mesh whose vertices are written ([`Engine::set_positions`], [`Engine::positions_mut`]) is
+//! refitted or rebuilt in the next [`Engine::update`] as the [`Policy`] decides, each mesh on
+//! its own; a mesh nobody writes is never touched again. An instance places a mesh with an
+//! affine transform; rays are carried into the instance's space with the inverse transform. The
+//! direction is transformed without renormalising, so a hit's `t` is the same parameter along
+//! the world ray and hits of different instances compare directly.
+//!
+//! After the first frame, [`Engine::update`] allocates nothing unless a tree is rebuilt, and
+//! ray casting never allocates.
+
+use super::policy::{Action, Policy, PolicyState};
+use super::stats::{FrameStats, MeshStats};
+use crate::bvh::{BuildParams, Bvh, Counters, MeshBvh, Node, TraversalStats};
+use crate::geom::{Aabb, Ray};
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// A mesh of an [`Engine`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MeshId(pub u32);
+
+/// An instance (a placed mesh) of an [`Engine`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct InstanceId(pub u32);
+
+/// How the top-level tree follows moving instances.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub enum TlasPolicy {
+    /// Always refit (rebuilt only when instances are added).
+    Refit,
+    /// Rebuild every frame something moved.
+    Rebuild,
+    /// Refit, and rebuild when its SAH ratio passes the value.
+    Threshold(f32),
+}
+
+/// What an [`Engine`] is built with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EngineConfig {
+    /// Builder for every tree.
+    pub build: BuildParams,
+    /// Refit-or-rebuild policy of the meshes.
+    pub policy: Policy,
+    /// Policy of the top-level tree.
+    pub tlas: TlasPolicy,
+}
+
+impl Default for EngineConfig {
+    fn default() -> Self {
+        Self {
+            build: BuildParams::BINNED,
+            policy: Policy::DEFAULT,
+            tlas: TlasPolicy::Threshold(1.5),
+        }
+    }
+}
+
+/// A ray's closest hit in the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneHit {
+    /// Distance along the world ray, in units of its direction.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+    /// Triangle index within the instance's mesh.
+    pub prim: u32,
+    /// The instance hit.
+    pub instance: InstanceId,
+}
+
+struct MeshEntry {
+    positions: Vec<Vec3>,
+    indices: Vec<[u32; 3]>,
+    bvh: MeshBvh,
+    sah: f32,
+    dirty: bool,
+    moved: bool,
+    state: PolicyState,
+    stats: MeshStats,
+    /// Sum over its instances of world box area times SAH: its share of the trace cost.
+    weight: f64,
+}
+
+#[derive(Clone, Copy)]
+struct InstanceEntry {
+    mesh: u32,
+    transform: Affine3A,
+    inverse: Affine3A,
+    identity: bool,
+    visible: bool,
+    dirty: bool,
+    /// Index among the top-level tree's primitives, if its mesh has triangles.
+    tlas_prim: Option<u32>,
+}
+
+/// The dynamic scene: add meshes and instances, write vertex positions or transforms, call
+/// [`Engine::update`], cast rays.
+///
+/// ```
+/// use dynbvh::engine::{Engine, EngineConfig};
+/// use dynbvh::geom::Ray;
+/// use glam::{Affine3A, Vec3};
+///
+/// let mut e = Engine::new(EngineConfig::default());
+/// let quad = e.add_mesh(
+///     vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+///     vec![[0, 1, 2], [0, 2, 3]],
+/// );
+/// let a = e.add_instance(quad, Affine3A::IDENTITY);
+/// let b = e.add_instance(quad, Affine3A::from_translation(Vec3::new(0.0, 0.0, -2.0)));
+/// e.update();
+/// let ray = Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z);
+/// assert_eq!(e.closest_hit(&ray).unwrap().instance, a);
+/// // Lift the second quad above the first, and move one vertex of the mesh.
+/// e.set_transform(b, Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.5)));
+/// e.positions_mut(quad)[3] = Vec3::new(0.0, 1.0, 0.1);
+/// e.update();
+/// let hit = e.closest_hit(&ray).unwrap();
+/// assert_eq!(hit.instance, b);
+/// assert!(e.any_hit(&ray));
+/// ```
+pub struct Engine {
+    config: EngineConfig,
+    meshes: Vec<MeshEntry>,
+    instances: Vec<InstanceEntry>,
+    /// Instance of each top-level primitive.
+    tlas_instances: Vec<u32>,
+    /// World box of each top-level primitive.
+    tlas_boxes: Vec<Aabb>,
+    tlas: Bvh,
+    tlas_build_sah: f32,
+    tlas_stale: bool,
+    frame: u64,
+    stats: FrameStats,
+}
+
+impl Engine {
+    /// An empty scene.
+    #[must_use]
+    pub fn new(config: EngineConfig) -> Self {
+        Self {
+            config,
+            meshes: Vec::new(),
+            instances: Vec::new(),
+            tlas_instances: Vec::new(),
+            tlas_boxes: Vec::new(),
+            tlas: Bvh::empty(config.build.max_leaf_size),
+            tlas_build_sah: 0.0,
+            tlas_stale: true,
+            frame: 0,
+            stats: FrameStats::default(),
+        }
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &EngineConfig {
+        &self.config
+    }
+
+    /// Changes the mesh policy from the next update on.
+    pub fn set_policy(&mut self, policy: Policy) {
+        self.config.policy = policy;
+    }
+
+    /// Adds a mesh and builds its tree now (the build time seeds the amortized policy's cost of
+    /// a rebuild).
+    ///
+    /// # Panics
+    /// When a vertex index is out of range.
+    pub fn add_mesh(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshId {
+        let n = positions.len();
+        assert!(
+            indices.iter().flatten().all(|&i| (i as usize) < n),
+            "vertex index out of range"
+        );
+        let t = Instant::now();
+        let bvh = MeshBvh::build_indexed(&positions, &indices, &self.config.build);
+        let sah = tree_sah(bvh.bvh());
+        let ms = ms_since(t);
+        let mut state = PolicyState::default();
+        state.rebuilt(sah, ms);
+        self.meshes.push(MeshEntry {
+            positions,
+            indices,
+            bvh,
+            sah,
+            dirty: false,
+            moved: true,
+            state,
+            stats: MeshStats {
+                action: Action::Rebuild,
+                rebuild_ms: ms,
+                sah,
+                sah_ratio: 1.0,
+                ..MeshStats::default()
+            },
+            weight: 0.0,
+        });
+        MeshId(self.meshes.len() as u32 - 1)
+    }
+
+    /// Places `mesh` with `transform` (mesh space to world space).
+    ///
+    /// # Panics
+    /// When `mesh` is not a mesh of this engine.
+    pub fn add_instance(&mut self, mesh: MeshId, transform: Affine3A) -> InstanceId {
+        assert!((mesh.0 as usize) < self.meshes.len(), "no mesh {mesh:?}");
+        let mut inst = InstanceEntry {
+            mesh: mesh.0,
+            transform: Affine3A::IDENTITY,
+            inverse: Affine3A::IDENTITY,
+            identity: true,
+            visible: true,
+            dirty: true,
+            tlas_prim: None,
+        };
+        set_transform(&mut inst, transform);
+        if !self.meshes[mesh.0 as usize].indices.is_empty() {
+            inst.tlas_prim = Some(self.tlas_boxes.len() as u32);
+            self.tlas_instances.push(self.instances.len() as u32);
+            self.tlas_boxes.push(Aabb::EMPTY);
+        }
+        self.instances.push(inst);
+        self.tlas_stale = true;
+        InstanceId(self.instances.len() as u32 - 1)
+    }
+
+    /// Number of meshes.
+    #[must_use]
+    pub fn mesh_count(&self) -> usize {
+        self.meshes.len()
+    }
+
+    /// Number of instances.
+    #[must_use]
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// The mesh an instance places.
+    #[must_use]
+    pub fn instance_mesh(&self, i: InstanceId) -> MeshId {
+        MeshId(self.instances[i.0 as usize].mesh)
+    }
+
+    /// Replaces the vertex positions of `mesh` (same count); its tree follows at the next
+    /// update.
+    ///
+    /// # Panics
+    /// When the vertex count differs.
+    pub fn set_positions(&mut self, mesh: MeshId, positions: &[Vec3]) {
+        self.positions_mut(mesh).copy_from_slice(positions);
+    }
+
+    /// The vertex positions of `mesh`, to write in place; its tree follows at the next update.
+    pub fn positions_mut(&mut self, mesh: MeshId) -> &mut [Vec3] {
+        let m = &mut self.meshes[mesh.0 as usize];
+        m.dirty = true;
+        &mut m.positions
+    }
+
+    /// The vertex positions of `mesh`.
+    #[must_use]
+    pub fn positions(&self, mesh: MeshId) -> &[Vec3] {
+        &self.meshes[mesh.0 as usize].positions
+    }
+
+    /// The triangles of `mesh`.
+    #[must_use]
+    pub fn indices(&self, mesh: MeshId) -> &[[u32; 3]] {
+        &self.meshes[mesh.0 as usize].indices
+    }
+
+    /// Moves an instance. A transform that cannot be inverted (a zero scale) hides it.
+    pub fn set_transform(&mut self, i: InstanceId, transform: Affine3A) {
+        let inst = &mut self.instances[i.0 as usize];
+        if inst.transform != transform {
+            set_transform(inst, transform);
+        }
+    }
+
+    /// Transform of an instance.
+    #[must_use]
+    pub fn transform(&self, i: InstanceId) -> Affine3A {
+        self.instances[i.0 as usize].transform
+    }
+
+    /// Tells the engine how long posing took this frame (reported in the frame's statistics).
+    pub fn record_pose(&mut self, ms: f64) {
+        self.stats.pose_ms = ms;
+        self.stats.update_ms =
+            ms + self.stats.refit_ms + self.stats.rebuild_ms + self.stats.tlas_ms;
+    }
+
+    /// Tells the engine how long this frame's rays took: the amortized policy predicts each
+    /// mesh's share of it from the SAH. [`Engine::trace_closest`] and [`Engine::trace_any`] do
+    /// not record themselves (they take `&self`); [`Engine::trace_frame`] does.
+    pub fn record_trace(&mut self, ms: f64, rays: u64) {
+        let s = &mut self.stats;
+        s.trace_ms += ms;
+        s.rays += rays;
+        s.mrays = if s.trace_ms > 0.0 {
+            s.rays as f64 / (s.trace_ms * 1e3)
+        } else {
+            0.0
+        };
+        let total: f64 = self.meshes.iter().map(|m| m.weight).sum();
+        if total > 0.0 {
+            for m in &mut self.meshes {
+                m.state.trace_share_ms = s.trace_ms * m.weight / total;
+                m.state.traced_ratio = m.stats.sah_ratio;
+            }
+        }
+    }
+
+    /// Brings every tree up to date with the positions and transforms written since the last
+    /// update, and returns the frame's statistics so far (trace figures come with
+    /// [`Engine::record_trace`]).
+    pub fn update(&mut self) -> &FrameStats {
+        let policy = self.config.policy;
+        let build = self.config.build;
+        let mut stats = FrameStats {
+            frame: self.frame,
+            sah_ratio: 1.0,
+            max_sah_ratio: 1.0,
+            tlas_sah_ratio: 1.0,
+            ..FrameStats::default()
+        };
+        for m in &mut self.meshes {
+            m.moved = std::mem::take(&mut m.dirty);
+            if !m.moved {
+                m.stats.action = Action::None;
+                m.stats.refit_ms = 0.0;
+                m.stats.rebuild_ms = 0.0;
+                continue;
+            }
+            let decided = m.state.before_refit(policy);
+            let mut refit_ms = 0.0;
+            let rebuild = if decided == Some(true) {
+                true
+            } else {
+                let t = Instant::now();
+                m.bvh.refit_indexed(&m.positions, &m.indices);
+                m.sah = tree_sah(m.bvh.bvh());
+                refit_ms = ms_since(t);
+                m.state.since_build += 1;
+                let ratio = ratio(m.sah, m.state.build_sah);
+                m.stats.sah_ratio = ratio;
+                decided.unwrap_or_else(|| m.state.after_refit(policy, ratio))
+            };
+            let mut rebuild_ms = 0.0;
+            if rebuild {
+                let t = Instant::now();
+                m.bvh = MeshBvh::build_indexed(&m.positions, &m.indices, &build);
+                m.sah = tree_sah(m.bvh.bvh());
+                rebuild_ms = ms_since(t);
+                m.state.rebuilt(m.sah, rebuild_ms);
+                m.stats.sah_ratio = 1.0;
+                stats.rebuilds += 1;
+            } else {
+                stats.refits += 1;
+            }
+            m.stats.action = if rebuild {
+                Action::Rebuild
+            } else {
+                Action::Refit
+            };
+            m.stats.refit_ms = refit_ms;
+            m.stats.rebuild_ms = rebuild_ms;
+            m.stats.sah = m.sah;
+            stats.refit_ms += refit_ms;
+            stats.rebuild_ms += rebuild_ms;
+            stats.max_sah_ratio = stats.max_sah_ratio.max(m.stats.sah_ratio);
+        }
+        stats.action = if stats.rebuilds > 0 {
+            Action::Rebuild
+        } else if stats.refits > 0 {
+            Action::Refit
+        } else {
+            Action::None
+        };
+
+        // Instance boxes and the top-level tree.
+        let t = Instant::now();
+        let mut moved = false;
+        for inst in &mut self.instances {
+            let m = &self.meshes[inst.mesh as usize];
+            if !(inst.dirty || m.moved) {
+                continue;
+            }
+            inst.dirty = false;
+            if let Some(p) = inst.tlas_prim {
+                self.tlas_boxes[p as usize] = if inst.visible {
+                    transform_box(&inst.transform, m.bvh.bvh().bounds())
+                } else {
+                    let o = inst.transform.translation.into();
+                    Aabb::new(o, o)
+                };
+                moved = true;
+            }
+        }
+        if self.tlas_stale || (moved && self.config.tlas == TlasPolicy::Rebuild) {
+            self.rebuild_tlas();
+            stats.tlas_rebuilt = true;
+        } else if moved {
+            let boxes = &self.tlas_boxes;
+            self.tlas.refit(|p| boxes[p as usize]);
+            let r = ratio(tree_sah(&self.tlas), self.tlas_build_sah);
+            stats.tlas_sah_ratio = r;
+            if matches!(self.config.tlas, TlasPolicy::Threshold(max) if r > max) {
+                self.rebuild_tlas();
+                stats.tlas_rebuilt = true;
+                stats.tlas_sah_ratio = 1.0;
+            }
+        }
+        stats.tlas_ms = ms_since(t);
+
+        // Scene cost: top-level nodes, plus each instance's tree weighted by its box's area.
+        for m in &mut self.meshes {
+            m.weight = 0.0;
+        }
+        let root_area = f64::from(self.tlas.bounds().half_area());
+        let mut top = 0.0f64;
+        for n in self.tlas.nodes() {
+            top += f64::from(n.bounds().half_area()) * f64::from(n.count.max(1));
+        }
+        let (mut weighted, mut total) = (0.0f64, 0.0f64);
+        for (&k, b) in self.tlas_instances.iter().zip(&self.tlas_boxes) {
+            let inst = &self.instances[k as usize];
+            if !inst.visible {
+                continue;
+            }
+            let m = &mut self.meshes[inst.mesh as usize];
+            let w = f64::from(b.half_area()) * f64::from(m.sah);
+            m.weight += w;
+            total += w;
+            weighted += w * f64::from(m.stats.sah_ratio);
+        }
+        if root_area > 0.0 {
+            stats.sah = ((top + total) / root_area) as f32;
+        }
+        if total > 0.0 {
+            stats.sah_ratio = (weighted / total) as f32;
+        }
+        stats.update_ms = stats.refit_ms + stats.rebuild_ms + stats.tlas_ms;
+        self.stats = stats;
+        self.frame += 1;
+        &self.stats
+    }
+
+    fn rebuild_tlas(&mut self) {
+        self.tlas = Bvh::build(&self.tlas_boxes, &self.config.build);
+        self.tlas_build_sah = tree_sah(&self.tlas);
+        self.tlas_stale = false;
+    }
+
+    /// Statistics of the last frame.
+    #[must_use]
+    pub fn frame_stats(&self) -> &FrameStats {
+        &self.stats
+    }
+
+    /// What the last update did to `mesh`.
+    #[must_use]
+    pub fn mesh_stats(&self, mesh: MeshId) -> &MeshStats {
+        &self.meshes[mesh.0 as usize].stats
+    }
+
+    /// The tree of `mesh`.
+    #[must_use]
+    pub fn mesh_bvh(&self, mesh: MeshId) -> &MeshBvh {
+        &self.meshes[mesh.0 as usize].bvh
+    }
+
+    /// The top-level tree; its primitive `p` is the `p`-th instance whose mesh has triangles.
+    #[must_use]
+    pub fn tlas(&self) -> &Bvh {
+        &self.tlas
+    }
+
+    /// Box of the whole scene after the last update.
+    #[must_use]
+    pub fn bounds(&self) -> Aabb {
+        self.tlas.bounds()
+    }
+
+    /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn closest_hit(&self, ray: &Ray) -> Option<SceneHit> {
+        self.closest_impl(ray, &mut (), &mut ())
+    }
+
+    /// [`Engine::closest_hit`], adding nodes visited (both levels) and triangles tested to
+    /// `stats`.
+    pub fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<SceneHit> {
+        let mut top = TraversalStats::default();
+        let hit = self.closest_impl(ray, stats, &mut top);
+        stats.nodes += top.nodes;
+        hit
+    }
+
+    #[inline]
+    fn closest_impl(
+        &self,
+        ray: &Ray,
+        c: &mut impl Counters,
+        top: &mut impl Counters,
+    ) -> Option<SceneHit> {
+        let prims = self.tlas.prim_indices();
+        let mut best = None;
+        self.tlas.closest_slot(
+            ray,
+            |slot, tmax| {
+                let k = self.tlas_instances[prims[slot] as usize];
+                let inst = &self.instances[k as usize];
+                if !inst.visible {
+                    return None;
+                }
+                let local = local_ray(inst, ray, tmax);
+                let h = self.meshes[inst.mesh as usize]
+                    .bvh
+                    .closest_hit_counted(&local, c)?;
+                best = Some(SceneHit {
+                    t: h.t,
+                    u: h.u,
+                    v: h.v,
+                    prim: h.prim,
+                    instance: InstanceId(k),
+                });
+                Some(h.t)
+            },
+            top,
+        )?;
+        best
+    }
+
+    /// True when anything is hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn any_hit(&self, ray: &Ray) -> bool {
+        self.any_impl(ray, &mut (), &mut ())
+    }
+
+    /// [`Engine::any_hit`], adding nodes visited and triangles tested to `stats`.
+    pub fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
+        let mut top = TraversalStats::default();
+        let hit = self.any_impl(ray, stats, &mut top);
+        stats.nodes += top.nodes;
+        hit
+    }
+
+    #[inline]
+    fn any_impl(&self, ray: &Ray, c: &mut impl Counters, top: &mut impl Counters) -> bool {
+        let prims = self.tlas.prim_indices();
+        self.tlas
+            .any_slot(
+                ray,
+                |slot, tmax| {
+                    let k = self.tlas_instances[prims[slot] as usize];
+                    let inst = &self.instances[k as usize];
+                    if !inst.visible {
+                        return None;
+                    }
+                    let local = local_ray(inst, ray, tmax);
+                    self.meshes[inst.mesh as usize]
+                        .bvh
+                        .any_hit_counted(&local, c)
+                        .then_some(0.0)
+                },
+                top,
+            )
+            .is_some()
+    }
+
+    /// Closest hits of many rays, in parallel: `out[i]` for `rays[i]`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_closest(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        out.par_chunks_mut(RAY_CHUNK)
+            .zip(rays.par_chunks(RAY_CHUNK))
+            .for_each(|(o, r)| {
+                for (o, r) in o.iter_mut().zip(r) {
+                    *o = self.closest_hit(r);
+                }
+            });
+    }
+
+    /// Any-hit answers of many rays, in parallel.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_any(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        out.par_chunks_mut(RAY_CHUNK)
+            .zip(rays.par_chunks(RAY_CHUNK))
+            .for_each(|(o, r)| {
+                for (o, r) in o.iter_mut().zip(r) {
+                    *o = self.any_hit(r);
+                }
+            });
+    }
+
+    /// [`Engine::trace_closest`], timed and recorded with [`Engine::record_trace`]; returns the
+    /// time in ms.
+    pub fn trace_frame(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        let t = Instant::now();
+        self.trace_closest(rays, out);
+        let ms = ms_since(t);
+        self.record_trace(ms, rays.len() as u64);
+        ms
+    }
+
+    /// What the SAH predicts a ray that hits the scene's box costs without early termination:
+    /// `(nodes visited, triangles tested)`, over both levels (instance boxes in world space,
+    /// instance trees by their own areas).
+    #[must_use]
+    pub fn predicted_work(&self) -> (f64, f64) {
+        let root = f64::from(self.tlas.bounds().half_area());
+        if root <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let mut nodes: f64 = self
+            .tlas
+            .nodes()
+            .iter()
+            .map(|n| f64::from(n.bounds().half_area()))
+            .sum::<f64>()
+            / root;
+        let mut tris = 0.0;
+        let mut per_mesh: Vec<Option<(f64, f64)>> = vec![None; self.meshes.len()];
+        for (&k, b) in self.tlas_instances.iter().zip(&self.tlas_boxes) {
+            let inst = &self.instances[k as usize];
+            if !inst.visible {
+                continue;
+            }
+            let (n, t) = *per_mesh[inst.mesh as usize]
+                .get_or_insert_with(|| expected_work(self.meshes[inst.mesh as usize].bvh.bvh()));
+            let p = f64::from(b.half_area()) / root;
+            nodes += p * n;
+            tris += p * t;
+        }
+        (nodes, tris)
+    }
+}
+
+/// Rays per parallel task.
+const RAY_CHUNK: usize = 256;
+
+fn set_transform(inst: &mut InstanceEntry, transform: Affine3A) {
+    inst.transform = transform;
+    inst.identity = transform == Affine3A::IDENTITY;
+    let det = transform.matrix3.determinant();
+    inst.inverse = if det != 0.0 && det.is_finite() {
+        transform.inverse()
+    } else {
+        Affine3A::IDENTITY
+    };
+    inst.visible = det != 0.0
+        && det.is_finite()
+        && inst.inverse.matrix3.is_finite()
+        && inst.inverse.translation.is_finite();
+    inst.dirty = true;
+}
+
+/// The ray in the instance's space over `[ray.tmin, tmax)`; `t` keeps its meaning.
+#[inline(always)]
+fn local_ray(inst: &InstanceEntry, ray: &Ray, tmax: f32) -> Ray {
+    if inst.identity {
+        let mut r = *ray;
+        r.tmax = tmax;
+        r
+    } else {
+        Ray::with_range(
+            inst.inverse.transform_point3(ray.origin),
+            inst.inverse.transform_vector3(ray.dir),
+            ray.tmin,
+            tmax,
+        )
+    }
+}
+
+/// The box of `b` transformed by `m` (Arvo's method: centre and absolute-matrix extent).
+fn transform_box(m: &Affine3A, b: Aabb) -> Aabb {
+    if b.is_empty() {
+        return b;
+    }
+    let c = m.transform_point3(b.center());
+    let h = b.extent() * 0.5;
+    let a = m.matrix3;
+    let e = a.x_axis.abs() * h.x + a.y_axis.abs() * h.y + a.z_axis.abs() * h.z;
+    let e = Vec3::from(e);
+    // Widen by a few ulps so that rounding never leaves a transformed vertex outside.
+    let pad = (c.abs() + e) * (4.0 * f32::EPSILON);
+    Aabb::new(c - e - pad, c + e + pad)
+}
+
+/// Expected nodes visited and triangles tested by a ray through the tree's root (no early
+/// termination).
+#[must_use]
+pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
+    let nodes = bvh.nodes();
+    let Some(root) = nodes.first() else {
+        return (0.0, 0.0);
+    };
+    let a = f64::from(root.bounds().half_area());
+    if a <= 0.0 {
+        return (1.0, f64::from(root.count));
+    }
+    let (n, t) = nodes.iter().fold((0.0, 0.0), |(n, t), x: &Node| {
+        let ar = f64::from(x.bounds().half_area());
+        (n + ar, t + ar * f64::from(x.count))
+    });
+    (n / a, t / a)
+}
+
+/// SAH cost of a tree (as [`Bvh::sah_cost`]), summed in parallel for large trees.
+#[must_use]
+pub fn tree_sah(bvh: &Bvh) -> f32 {
+    let nodes = bvh.nodes();
+    if nodes.len() < 1 << 16 {
+        return bvh.sah_cost();
+    }
+    let a = nodes[0].bounds().half_area();
+    if !(a > 0.0 && a.is_finite()) {
+        return bvh.sah_cost();
+    }
+    let sum: f64 = nodes
+        .par_chunks(1 << 14)
+        .map(|c| {
+            c.iter()
+                .map(|n| f64::from(n.bounds().half_area()) * f64::from(n.count.max(1)))
+                .sum::<f64>()
+        })
+        .sum();
+    (sum / f64::from(a)) as f32
+}
+
+fn ratio(sah: f32, base: f32) -> f32 {
+    if base > 0.0 && sah.is_finite() {
+        sah / base
+    } else {
+        1.0
+    }
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
