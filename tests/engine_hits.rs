@@ -1,0 +1,253 @@
+//! Traversal correctness of the engine after every deformation: for every shipped animation
+//! and every animated glTF sample, on every frame (capped) and under every policy, rays through
+//! the engine hit what brute force over the posed world triangles hits.
+//!
+//! Rigid and shared-mesh instances are traced in mesh space through an inverse transform, so
+//! their distances differ from world-space brute force by rounding: distances are compared with
+//! a tolerance, and a ray that one side hits and the other misses must graze a triangle's edge
+//! (a barycentric coordinate within 1e-3 of 0). Such grazing rays must stay rare.
+
+use dynbvh::anim::Scene;
+use dynbvh::bvh::{brute_force_any, brute_force_closest};
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::source::FrameSource;
+use dynbvh::engine::{Engine, EngineConfig, Policy, SceneHit, TlasPolicy};
+use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use dynbvh::report::rays::{camera_rays, random_rays};
+use std::path::{Path, PathBuf};
+
+/// Frames per file, spread over its animations.
+const FRAMES_PER_FILE: usize = 36;
+const GRAZE: f32 = 1e-3;
+
+fn policies() -> Vec<Policy> {
+    let mut p = Policy::standard_set();
+    p.push(Policy::Periodic(3));
+    p
+}
+
+fn samples_dir() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/gltf-samples");
+    if dir.is_dir() {
+        return Some(dir);
+    }
+    let msg = format!(
+        "!!!!! glTF samples folder {} is missing: sample-file engine tests SKIPPED !!!!!",
+        dir.display()
+    );
+    assert!(std::env::var_os("CI").is_none(), "{msg} (CI is set)");
+    eprintln!("{msg}");
+    None
+}
+
+fn gltf_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            if p.file_name().is_some_and(|n| n == "_meta") {
+                continue;
+            }
+            gltf_files(&p, out);
+        } else if p
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
+        {
+            out.push(p);
+        }
+    }
+}
+
+fn barycentric_min(u: f32, v: f32) -> f32 {
+    u.min(v).min(1.0 - u - v)
+}
+
+/// World-space test of one flattened triangle.
+fn world_hit(mesh: &TriMesh, tri: usize, ray: &Ray) -> Option<(f32, f32, f32)> {
+    let [a, b, c] = mesh.triangle(tri);
+    intersect_triangle(ray, &RayTriPrecomp::new(ray.dir), a, b, c, f32::INFINITY)
+}
+
+#[derive(Default)]
+struct Tally {
+    rays: usize,
+    grazing: usize,
+}
+
+fn compare(
+    src: &GltfSource<'_>,
+    mesh: &TriMesh,
+    ray: &Ray,
+    want: Option<Hit>,
+    got: Option<SceneHit>,
+    tol: f32,
+    tally: &mut Tally,
+) -> Result<(), String> {
+    tally.rays += 1;
+    // A hit on a triangle's edge, or right at the ray's origin, may go either way.
+    let engine_graze = |g: &SceneHit| barycentric_min(g.u, g.v) < GRAZE || g.t <= tol;
+    let brute_graze = |w: &Hit| barycentric_min(w.u, w.v) < GRAZE || w.t <= tol;
+    match (want, got) {
+        (None, None) => Ok(()),
+        (Some(w), Some(g)) => {
+            let flat = src.flat_triangle(&g);
+            let ok_t = (w.t - g.t).abs() <= tol * w.t.abs().max(1.0);
+            // The reported triangle must be hit there in world space too (or grazed).
+            let here = world_hit(mesh, flat, ray)
+                .is_some_and(|(t, _, _)| (t - g.t).abs() <= tol * t.abs().max(1.0));
+            if ok_t && (here || engine_graze(&g)) {
+                if !here {
+                    tally.grazing += 1;
+                }
+                return Ok(());
+            }
+            let nearer_grazes = if g.t < w.t {
+                engine_graze(&g)
+            } else {
+                brute_graze(&w)
+            };
+            if nearer_grazes {
+                tally.grazing += 1;
+                Ok(())
+            } else {
+                Err(format!(
+                    "brute force t {} tri {}, engine t {} tri {flat} (instance {:?} prim {})",
+                    w.t, w.prim, g.t, g.instance, g.prim
+                ))
+            }
+        }
+        (Some(w), None) if brute_graze(&w) => {
+            tally.grazing += 1;
+            Ok(())
+        }
+        (None, Some(g)) if engine_graze(&g) => {
+            tally.grazing += 1;
+            Ok(())
+        }
+        (w, g) => Err(format!("brute force {w:?}, engine {g:?}")),
+    }
+}
+
+/// Runs every policy in lockstep over `frames` frames of one animation and checks each frame.
+fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mut Tally) {
+    let policies = policies();
+    let mut src = GltfSource::new(scene, anim, FrameTimes::Count(frames)).unwrap();
+    let mut engines: Vec<Engine> = policies
+        .iter()
+        .map(|&policy| {
+            src.build(
+                0,
+                EngineConfig {
+                    policy,
+                    tlas: TlasPolicy::Threshold(1.2),
+                    ..EngineConfig::default()
+                },
+            )
+        })
+        .collect();
+    let mut flat = TriMesh::default();
+    for f in 1..=src.frames() {
+        for e in &mut engines {
+            src.advance(e, f);
+            e.update();
+        }
+        src.flatten_into(&mut flat);
+        let bounds = flat.bounds();
+        if bounds.is_empty() {
+            continue;
+        }
+        let diag = bounds.extent().length().max(1e-6);
+        let mut rays = camera_rays(&bounds, 20, 20);
+        // Random origins in a padded box, so that flat scenes do not start rays on a surface.
+        let pad = glam::Vec3::splat(0.1 * diag);
+        let padded = dynbvh::geom::Aabb::new(bounds.min - pad, bounds.max + pad);
+        rays.extend(random_rays(&padded, 150, f as u64));
+        let want: Vec<(Option<Hit>, bool)> = rays
+            .iter()
+            .map(|r| (brute_force_closest(&flat, r), brute_force_any(&flat, r)))
+            .collect();
+        for (e, p) in engines.iter_mut().zip(&policies) {
+            // Rays shorter than the scene test any-hit with a finite range too.
+            for (k, (ray, &(w, w_any))) in rays.iter().zip(&want).enumerate() {
+                let tol = 2e-4 * diag / ray.dir.length();
+                let got = e.closest_hit(ray);
+                compare(&src, &flat, ray, w, got, tol, tally).unwrap_or_else(|m| {
+                    panic!("{} frame {f} policy {p} ray {k} {ray:?}: {m}", src.name())
+                });
+                let any = e.any_hit(ray);
+                if any != w_any {
+                    let grazing = w.map_or(
+                        got.is_some_and(|g| barycentric_min(g.u, g.v) < GRAZE || g.t <= tol),
+                        |w| barycentric_min(w.u, w.v) < GRAZE || w.t <= tol,
+                    );
+                    assert!(
+                        grazing,
+                        "{} frame {f} policy {p} ray {k}: any hit {any}, brute force {w_any}",
+                        src.name()
+                    );
+                }
+            }
+            // The trees stay valid: every mesh's tree bounds its triangles.
+            for m in src.deforming() {
+                let mesh = TriMesh::new(e.positions(*m).to_vec(), e.indices(*m).to_vec());
+                e.mesh_bvh(*m).validate(&mesh).unwrap();
+            }
+            e.record_trace(0.01, rays.len() as u64);
+        }
+    }
+}
+
+fn check_file(path: &Path) -> Option<Tally> {
+    let (scene, _) = Scene::load(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    if scene.animations.is_empty() {
+        return None;
+    }
+    let n = scene.animations.len();
+    let per = (FRAMES_PER_FILE / n).max(4);
+    let mut tally = Tally::default();
+    for a in 0..n.min(FRAMES_PER_FILE / 4) {
+        check_animation(&scene, Some(a), per, &mut tally);
+    }
+    eprintln!(
+        "{}: {} animation(s), {} ray checks, {} grazing",
+        path.display(),
+        n,
+        tally.rays,
+        tally.grazing
+    );
+    assert!(
+        tally.grazing * 100 <= tally.rays,
+        "{}: too many grazing disagreements ({} of {})",
+        path.display(),
+        tally.grazing,
+        tally.rays
+    );
+    Some(tally)
+}
+
+#[test]
+fn shipped_animations_match_brute_force_every_frame_every_policy() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("animations");
+    let mut files = Vec::new();
+    gltf_files(&dir, &mut files);
+    assert!(
+        files.len() >= 5,
+        "expected the generated animations in {}",
+        dir.display()
+    );
+    for f in &files {
+        assert!(check_file(f).is_some(), "{} has no animation", f.display());
+    }
+}
+
+#[test]
+fn animated_samples_match_brute_force_every_frame_every_policy() {
+    let Some(dir) = samples_dir() else { return };
+    let mut files = Vec::new();
+    gltf_files(&dir, &mut files);
+    let checked = files.iter().filter_map(|f| check_file(f)).count();
+    assert!(checked >= 10, "only {checked} animated sample files found");
+}
