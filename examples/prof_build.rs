@@ -10,7 +10,9 @@ fn main() {
     let bins: usize = std::env::args().nth(2).map_or(16, |s| s.parse().unwrap());
     let mesh = dynbvh::io::read_tri(path.as_ref()).unwrap();
     let p = BuildParams::binned(bins);
-    for _ in 0..3 {
+    let iters: usize = std::env::args().nth(3).map_or(3, |s| s.parse().unwrap());
+    for _ in 0..iters {
+        let c = cpu_s();
         let t = Instant::now();
         let boxes: Vec<Aabb> = (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect();
         let t1 = t.elapsed();
@@ -19,11 +21,23 @@ fn main() {
         let m = MeshBvh::build(&mesh, &p);
         let t3 = t.elapsed();
         println!(
-            "boxes {:?} build {:?} meshbvh {:?} sah {}",
+            "boxes {:?} build {:?} meshbvh {:?} cpu total {:.1} ms sah {}",
             t1,
             t2 - t1,
             t3 - t2,
+            (cpu_s() - c) * 1e3,
             bvh.sah_cost() + m.bvh().sah_cost() * 0.0
         );
     }
+}
+
+/// CPU time of all this process's threads in seconds (robust to the machine being shared).
+fn cpu_s() -> f64 {
+    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
+        return 0.0;
+    };
+    dir.filter_map(|e| std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .sum::<u64>() as f64
+        * 1e-9
 }

@@ -39,14 +39,14 @@ fn count_misses(mesh: &TriMesh, bvh: &MeshBvh, rays: &[Ray]) -> usize {
 #[test]
 fn no_ray_slips_through_a_closed_mesh() {
     // A closed mesh, also rotated and moved off the origin so coordinates are not "nice".
-    let mut mesh = icosphere(4);
+    let mut mesh = icosphere(3);
     let rot = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.7);
     for p in &mut mesh.positions {
         *p = rot * (*p * 3.7) + Vec3::new(10.25, -3.5, 0.125);
     }
     let center = Vec3::new(10.25, -3.5, 0.125);
     let pts = targets(&mesh);
-    assert!(pts.len() > 5000);
+    assert!(pts.len() > 1900);
     let mut rng = Rng(99);
     let mut rays = Vec::new();
     for &p in &pts {

@@ -66,10 +66,22 @@ impl Ray {
         let t1 = (bmax - self.origin) * self.inv_dir;
         let near = t0.min(t1);
         let far = t0.max(t1);
-        let tn = near.x.max(near.y).max(near.z).max(self.tmin);
-        let tf = far.x.min(far.y).min(far.z).min(tmax) * FAR_SCALE;
+        // No operand can be NaN here (finite reciprocals, sanitized boxes), so plain compares
+        // do: they compile to single min/max instructions, unlike f32::min/max.
+        let tn = fmax(fmax(near.x, near.y), fmax(near.z, self.tmin));
+        let tf = fmin(fmin(far.x, far.y), fmin(far.z, tmax)) * FAR_SCALE;
         if tn <= tf { Some(tn) } else { None }
     }
+}
+
+#[inline(always)]
+fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 /// A ray's hit: distance, barycentrics of the second and third vertex, and the primitive id.

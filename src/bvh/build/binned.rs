@@ -55,20 +55,16 @@ impl BinMap {
             .min(glam::UVec3::splat(self.last));
         [i.x as usize, i.y as usize, i.z as usize]
     }
-
-    #[inline(always)]
-    fn index_on(&self, c2: Vec3A, axis: usize) -> u32 {
-        (((c2[axis] - self.origin[axis]) * self.scale[axis]) as u32).min(self.last)
-    }
 }
 
-/// Adds `refs` to `bins` (`k` bins per axis, axis-major).
-fn bin_refs(refs: &[PrimRef], map: &BinMap, k: usize, bins: &mut [Bin]) {
+/// Adds `refs` to `bins` (`k` bins per axis, axis-major) and notes each reference's bins in it.
+fn bin_refs(refs: &mut [PrimRef], map: &BinMap, k: usize, bins: &mut [Bin]) {
     let (bx, rest) = bins.split_at_mut(k);
     let (by, bz) = rest.split_at_mut(k);
     for r in refs {
         let (lo, hi) = (r.lo(), r.hi());
         let [ix, iy, iz] = map.index(lo + hi);
+        r.bins = ix as u32 | (iy as u32) << 8 | (iz as u32) << 16;
         for (bin, i) in [(&mut *bx, ix), (&mut *by, iy), (&mut *bz, iz)] {
             let b = &mut bin[i];
             b.b.grow(lo, hi);
@@ -125,7 +121,7 @@ impl Splitter for Binned {
 
         if n >= 8 * self.parallel_threshold {
             *bins = refs
-                .par_chunks(self.parallel_threshold)
+                .par_chunks_mut(self.parallel_threshold)
                 .map(|c| {
                     let mut b = vec![EMPTY_BIN; 3 * k];
                     bin_refs(c, &map, k, &mut b);
@@ -179,24 +175,33 @@ impl Splitter for Binned {
         if split_cost >= leaf_cost && n <= self.max_leaf_size {
             return None;
         }
-        Some(partition(refs, |r| {
-            map.index_on(r.c2(), axis) <= bin as u32
-        }))
+        // Both sides' boxes are the unions of their bins; centroid bounds are gathered while
+        // partitioning by the bins noted during binning.
+        let bins = &bins[axis * k..(axis + 1) * k];
+        let union = |b: &[Bin]| b.iter().fold(Box3::EMPTY, |acc, b| acc.union(b.b));
+        let (lb, rb) = (union(&bins[..=bin]), union(&bins[bin + 1..]));
+        let shift = 8 * axis as u32;
+        let bin = bin as u32;
+        let mut split = partition(refs, |r| (r.bins >> shift) & 0xff <= bin);
+        split.left.bounds = lb;
+        split.right.bounds = rb;
+        Some(split)
     }
 }
 
-/// Partitions `refs` in place by `goes_left`, gathering both sides' bounds on the way.
-pub(crate) fn partition(refs: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> Split {
+/// Partitions `refs` in place by `goes_left`, gathering both sides' centroid bounds on the way
+/// (the boxes are left empty for the caller to fill).
+fn partition(refs: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> Split {
     let mut left = RangeBounds::EMPTY;
     let mut right = RangeBounds::EMPTY;
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && goes_left(&refs[i]) {
-            left.add(&refs[i]);
+            left.add_centroid(&refs[i]);
             i += 1;
         }
         while i < j && !goes_left(&refs[j - 1]) {
-            right.add(&refs[j - 1]);
+            right.add_centroid(&refs[j - 1]);
             j -= 1;
         }
         if i >= j {

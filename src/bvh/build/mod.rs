@@ -91,14 +91,15 @@ impl BuildParams {
     }
 }
 
-/// A primitive as builders see it: its box and its id, in 32 bytes.
+/// A primitive as builders see it: its box, its id, and scratch room for the binned builder
+/// (the bin of its centroid on each axis, one byte each), in 32 bytes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 pub(crate) struct PrimRef {
     pub min: [f32; 3],
     pub id: u32,
     pub max: [f32; 3],
-    _pad: u32,
+    pub bins: u32,
 }
 
 impl PrimRef {
@@ -108,7 +109,7 @@ impl PrimRef {
             min: b.min.into(),
             id,
             max: b.max.into(),
-            _pad: 0,
+            bins: 0,
         }
     }
 
@@ -184,6 +185,11 @@ impl RangeBounds {
         bounds: Box3::EMPTY,
         cbounds: Box3::EMPTY,
     };
+
+    #[inline(always)]
+    pub fn add_centroid(&mut self, r: &PrimRef) {
+        self.cbounds.grow_point(r.c2());
+    }
 
     #[inline(always)]
     pub fn add(&mut self, r: &PrimRef) {
