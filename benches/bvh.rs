@@ -1,1 +1,340 @@
-fn main() {}
+//! Criterion benchmarks of the BVH core: build (every builder preset), refit (rest pose to a
+//! deformed pose), and closest-hit / any-hit traversal with coherent (camera) and incoherent
+//! (random) rays, on meshes of about 100k and 1M triangles.
+//!
+//! Benchmark ids are `<kind>/<input>/<variant>`, e.g. `build/sphere_1m/binned16`,
+//! `refit/gltf_spheres/binned16`, `closest/bumpy_100k/camera`, so a filter picks a subset:
+//! `cargo bench --bench bvh -- build/sphere_100k`. Inputs are loaded on first use, so a filter
+//! that skips an input never loads it. See `benches/README.md`.
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use dynbvh::anim::Scene;
+use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::geom::shapes::{bumpy_sphere, sine_deform};
+use dynbvh::geom::{Aabb, Ray, TriMesh};
+use dynbvh::io::{read_rays, read_tri};
+use dynbvh::report::rays::{camera_rays, random_rays};
+use std::cell::OnceCell;
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Rays traced per iteration of a traversal benchmark (a 256 x 256 image for camera rays).
+const RAYS_PER_ITER: usize = 1 << 16;
+/// Side of the camera image when the rays are generated here.
+const CAMERA_SIDE: usize = 256;
+/// Amplitude of the synthetic deformation (fraction of the box's largest extent), as in the
+/// shared `_def` inputs.
+const DEFORM_AMPLITUDE: f32 = 0.1;
+/// Meshes with at least this many triangles get the small sample size.
+const LARGE: usize = 500_000;
+
+/// Where an input comes from.
+enum Source {
+    /// A glTF file, flattened at rest; refit goes to a sine deformation of it.
+    Gltf(PathBuf),
+    /// `bumpy_sphere(n)`; refit goes to its sine deformation.
+    Synthetic(usize),
+    /// A shared benchmark input: `<stem>.tri`, `<stem>_def.tri`, `<stem>_primary.rays`,
+    /// `<stem>_random.rays` in `dir`.
+    Shared { dir: PathBuf, stem: String },
+}
+
+/// A mesh, its deformed pose, and the two ray subsets.
+struct Loaded {
+    rest: TriMesh,
+    deformed: TriMesh,
+    camera: Vec<Ray>,
+    random: Vec<Ray>,
+    /// Binned-16 tree over the rest pose: the one traversal and refit run on.
+    bvh: OnceCell<MeshBvh>,
+}
+
+impl Loaded {
+    fn bvh(&self) -> &MeshBvh {
+        self.bvh
+            .get_or_init(|| MeshBvh::build(&self.rest, &BuildParams::BINNED))
+    }
+}
+
+/// One benchmark input, loaded on first use.
+struct Input {
+    name: String,
+    source: Source,
+    /// Approximate triangle count, for choosing the sample size before loading.
+    approx_tris: usize,
+    loaded: OnceCell<Loaded>,
+}
+
+impl Input {
+    fn get(&self) -> &Loaded {
+        self.loaded.get_or_init(|| {
+            eprintln!("loading input {} ...", self.name);
+            let l = self.source.load();
+            eprintln!(
+                "input {}: {} triangles, {} camera and {} random rays per iteration",
+                self.name,
+                l.rest.len(),
+                l.camera.len(),
+                l.random.len()
+            );
+            l
+        })
+    }
+
+    fn large(&self) -> bool {
+        self.approx_tris >= LARGE
+    }
+}
+
+impl Source {
+    fn load(&self) -> Loaded {
+        match self {
+            Source::Gltf(path) => {
+                let (scene, _warnings) = Scene::load(path)
+                    .unwrap_or_else(|e| panic!("cannot load {}: {e}", path.display()));
+                generated(scene.flatten_rest())
+            }
+            Source::Synthetic(n) => generated(bumpy_sphere(*n)),
+            Source::Shared { dir, stem } => {
+                let tri = |s: &str| {
+                    let p = dir.join(format!("{s}.tri"));
+                    read_tri(&p).unwrap_or_else(|e| panic!("cannot read {}: {e}", p.display()))
+                };
+                let rays = |s: &str| {
+                    let p = dir.join(format!("{stem}_{s}.rays"));
+                    read_rays(&p).unwrap_or_else(|e| panic!("cannot read {}: {e}", p.display()))
+                };
+                let rest = tri(stem);
+                let deformed = tri(&format!("{stem}_def"));
+                assert_eq!(
+                    rest.len(),
+                    deformed.len(),
+                    "{stem}_def must have the triangles of {stem}"
+                );
+                Loaded {
+                    camera: exactly(image_subset(&rays("primary"), RAYS_PER_ITER)),
+                    random: exactly(rays("random")),
+                    rest,
+                    deformed,
+                    bvh: OnceCell::new(),
+                }
+            }
+        }
+    }
+}
+
+/// A mesh of our own: its sine deformation, and camera and random rays around its box.
+fn generated(rest: TriMesh) -> Loaded {
+    let mut moved = rest.positions.clone();
+    sine_deform(&rest.positions, &mut moved, DEFORM_AMPLITUDE, 0.0);
+    let deformed = TriMesh::new(moved, rest.indices.clone());
+    let bounds: Aabb = rest.bounds();
+    Loaded {
+        camera: camera_rays(&bounds, CAMERA_SIDE, CAMERA_SIDE),
+        random: random_rays(&bounds, RAYS_PER_ITER, 0x5eed),
+        rest,
+        deformed,
+        bvh: OnceCell::new(),
+    }
+}
+
+/// Exactly [`RAYS_PER_ITER`] rays: the first ones, repeated if there are fewer.
+fn exactly(rays: Vec<Ray>) -> Vec<Ray> {
+    assert!(!rays.is_empty(), "empty ray set");
+    rays.iter().cycle().take(RAYS_PER_ITER).copied().collect()
+}
+
+/// About `n` rays of a square camera image, as a lower-resolution image of the same view
+/// (every k-th row and column) so that they stay coherent; the first `n` rays when the set is
+/// not a square image.
+fn image_subset(rays: &[Ray], n: usize) -> Vec<Ray> {
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    if side * side != rays.len() || rays.len() <= n {
+        return rays.iter().take(n).copied().collect();
+    }
+    let step = ((rays.len() as f64 / n as f64).sqrt().round() as usize).max(1);
+    (0..side)
+        .step_by(step)
+        .flat_map(|y| (0..side).step_by(step).map(move |x| rays[y * side + x]))
+        .collect()
+}
+
+/// The inputs that exist on this machine; a message for each one that does not.
+fn inputs() -> Vec<Input> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut v = Vec::new();
+    let gltf = root.join("../shared/gltf-samples");
+    for (name, file, tris) in [
+        (
+            "gltf_transmission",
+            "TransmissionTest/TransmissionTest.glb",
+            129_000,
+        ),
+        (
+            "gltf_spheres",
+            "MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb",
+            1_040_000,
+        ),
+    ] {
+        let path = gltf.join(file);
+        if path.is_file() {
+            v.push(Input {
+                name: name.into(),
+                source: Source::Gltf(path),
+                approx_tris: tris,
+                loaded: OnceCell::new(),
+            });
+        } else {
+            eprintln!(
+                "skipping input {name}: {} not found (the glTF samples live in ../shared/gltf-samples)",
+                path.display()
+            );
+        }
+    }
+    for (name, n) in [("bumpy_100k", 100_000), ("bumpy_1m", 1_000_000)] {
+        v.push(Input {
+            name: name.into(),
+            source: Source::Synthetic(n),
+            approx_tris: n,
+            loaded: OnceCell::new(),
+        });
+    }
+    let dir = std::env::var_os("DYNBVH_BENCH_INPUTS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/bench-inputs"));
+    for (stem, tris) in [("sphere_100k", 100_820), ("sphere_1m", 1_003_520)] {
+        let files = [
+            format!("{stem}.tri"),
+            format!("{stem}_def.tri"),
+            format!("{stem}_primary.rays"),
+            format!("{stem}_random.rays"),
+        ];
+        let missing: Vec<&String> = files.iter().filter(|f| !dir.join(f).is_file()).collect();
+        if missing.is_empty() {
+            v.push(Input {
+                name: stem.into(),
+                source: Source::Shared {
+                    dir: dir.clone(),
+                    stem: stem.into(),
+                },
+                approx_tris: tris,
+                loaded: OnceCell::new(),
+            });
+        } else {
+            eprintln!(
+                "skipping input {stem}: {} missing from {} (generate them with \
+                 `rustc -O ../shared/bench-inputs/gen.rs -o gen && ./gen {} --no-obj`, \
+                 or point DYNBVH_BENCH_INPUTS at a directory holding them)",
+                missing
+                    .iter()
+                    .map(|s| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                dir.display(),
+                dir.display()
+            );
+        }
+    }
+    v
+}
+
+/// The builders measured: median, binned SAH with 4 to 32 bins, 16 bins on the widest axis
+/// only, and the full sweep.
+fn builders() -> Vec<BuildParams> {
+    let mut v = vec![BuildParams::MEDIAN];
+    v.extend([4, 8, 16, 32].map(BuildParams::binned));
+    v.push(BuildParams {
+        all_axes: false,
+        ..BuildParams::BINNED
+    });
+    v.push(BuildParams::SWEEP);
+    v
+}
+
+/// Sample size and measurement time for an input: small for the 1M meshes so that the whole
+/// bench finishes in reasonable time. `--sample-size` and `--measurement-time` on the command
+/// line win over these.
+fn configure(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    i: &Input,
+) {
+    let given =
+        |flag: &str| std::env::args().any(|a| a == flag || a.starts_with(&format!("{flag}=")));
+    if !given("--sample-size") {
+        group.sample_size(if i.large() { 10 } else { 20 });
+    }
+    if i.large() && !given("--measurement-time") {
+        group.measurement_time(Duration::from_secs(5));
+    }
+}
+
+fn bench_build(c: &mut Criterion, input: &Input) {
+    let mut g = c.benchmark_group(format!("build/{}", input.name));
+    configure(&mut g, input);
+    for params in builders() {
+        g.bench_function(BenchmarkId::from_parameter(params.name()), |b| {
+            let mesh = &input.get().rest;
+            b.iter(|| MeshBvh::build(black_box(mesh), &params));
+        });
+    }
+    g.finish();
+}
+
+fn bench_refit(c: &mut Criterion, input: &Input) {
+    let mut g = c.benchmark_group(format!("refit/{}", input.name));
+    configure(&mut g, input);
+    g.bench_function(BenchmarkId::from_parameter("binned16"), |b| {
+        let l = input.get();
+        let mut bvh = l.bvh().clone();
+        // Every iteration refits between the two poses, alternately rest -> deformed and
+        // deformed -> rest: each is one full refit to moved vertices.
+        let mut to_deformed = false;
+        b.iter(|| {
+            to_deformed = !to_deformed;
+            bvh.refit(if to_deformed { &l.deformed } else { &l.rest });
+            black_box(bvh.bvh().nodes().first().copied())
+        });
+    });
+    g.finish();
+}
+
+fn bench_traversal(c: &mut Criterion, input: &Input) {
+    for (kind, any) in [("closest", false), ("any", true)] {
+        let mut g = c.benchmark_group(format!("{kind}/{}", input.name));
+        configure(&mut g, input);
+        g.throughput(Throughput::Elements(RAYS_PER_ITER as u64));
+        for set in ["camera", "random"] {
+            g.bench_function(BenchmarkId::from_parameter(set), |b| {
+                let l = input.get();
+                let bvh = l.bvh();
+                let rays = if set == "camera" {
+                    &l.camera
+                } else {
+                    &l.random
+                };
+                if any {
+                    b.iter(|| rays.iter().filter(|r| bvh.any_hit(black_box(r))).count());
+                } else {
+                    b.iter(|| {
+                        rays.iter()
+                            .filter_map(|r| bvh.closest_hit(black_box(r)))
+                            .fold(0.0f32, |s, h| s + h.t)
+                    });
+                }
+            });
+        }
+        g.finish();
+    }
+}
+
+fn all(c: &mut Criterion) {
+    for input in inputs() {
+        bench_build(c, &input);
+        bench_refit(c, &input);
+        bench_traversal(c, &input);
+    }
+}
+
+criterion_group!(benches, all);
+criterion_main!(benches);

@@ -1,1 +1,1004 @@
-fn main() {}
+//! dynbvh side by side with the Rust BVH libraries obvhs, bvh and parry3d on the shared
+//! benchmark inputs: build time, refit time, SAH of the binary tree (computed the same way for
+//! every library, from its own node boxes), closest-hit Mrays/s on the primary and random ray
+//! sets, and agreement of every library's hits with brute force. Everything runs on one thread
+//! (inside a one-thread rayon pool). See `benches/README.md`.
+//!
+//! Build with the `peers` feature (and a separate target dir, so that the shared one is not
+//! rebuilt):
+//! `CARGO_TARGET_DIR=target/peers cargo bench --features peers --bench peers [-- FILTER...]`.
+
+use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_closest};
+use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use dynbvh::io::{read_rays, read_tri};
+use glam::{Vec3, Vec3A};
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+// ---------------------------------------------------------------------------------------------
+// Settings
+// ---------------------------------------------------------------------------------------------
+
+/// Rays traced per set and pass unless `DYNBVH_PEERS_RAYS` says otherwise (`all` for the
+/// whole file). Camera rays are subsampled as a lower-resolution image of the same view.
+const DEFAULT_RAYS: usize = 1 << 18;
+/// Builds per variant (3 when a build takes more than a second).
+const BUILD_RUNS: usize = 5;
+/// Timed passes over each ray set.
+const TRACE_RUNS: usize = 3;
+/// Timed refits per variant.
+const REFIT_RUNS: usize = 5;
+/// Rays per set compared with brute force.
+const CHECK_RAYS: usize = 200;
+
+// ---------------------------------------------------------------------------------------------
+// Common interface
+// ---------------------------------------------------------------------------------------------
+
+/// What the harness needs of a library. `Input` is the library's own form of the mesh, made
+/// before the clock starts (conversions at the boundary are not the library's cost); `R` is
+/// its own form of a ray, also made beforehand.
+trait Accel: Sized {
+    type Input;
+    type R;
+    fn prepare(mesh: &TriMesh) -> Self::Input;
+    fn ray(r: &Ray) -> Self::R;
+    /// Closest hit: distance and the triangle's index in the input mesh.
+    fn closest(&self, ray: &Self::R) -> Option<(f32, u32)>;
+    /// SAH of the binary tree: interior nodes (the root among them) cost their area, leaves
+    /// their primitive count times their area, all divided by the root's area.
+    fn sah(&self) -> f64;
+    /// Refits to the same triangles at new positions; `false` when the variant cannot.
+    fn refit(&mut self, input: &Self::Input) -> bool;
+}
+
+/// Accumulates an SAH sum in f64 from node boxes.
+#[derive(Default)]
+struct SahSum {
+    sum: f64,
+}
+
+impl SahSum {
+    fn half_area(min: [f32; 3], max: [f32; 3]) -> f64 {
+        let e = [0, 1, 2].map(|k| f64::from((max[k] - min[k]).max(0.0)));
+        e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+    }
+    fn interior(&mut self, min: [f32; 3], max: [f32; 3]) {
+        self.sum += Self::half_area(min, max);
+    }
+    fn leaf(&mut self, min: [f32; 3], max: [f32; 3], count: u32) {
+        self.sum += f64::from(count) * Self::half_area(min, max);
+    }
+    fn finish(&self, root_min: [f32; 3], root_max: [f32; 3]) -> f64 {
+        self.sum / Self::half_area(root_min, root_max)
+    }
+}
+
+fn soup(mesh: &TriMesh) -> Vec<[Vec3; 3]> {
+    (0..mesh.len()).map(|i| mesh.triangle(i)).collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// dynbvh
+// ---------------------------------------------------------------------------------------------
+
+struct Dyn(MeshBvh);
+
+impl Accel for Dyn {
+    type Input = TriMesh;
+    type R = Ray;
+    fn prepare(mesh: &TriMesh) -> TriMesh {
+        mesh.clone()
+    }
+    fn ray(r: &Ray) -> Ray {
+        *r
+    }
+    #[inline]
+    fn closest(&self, ray: &Ray) -> Option<(f32, u32)> {
+        self.0.closest_hit(ray).map(|h| (h.t, h.prim))
+    }
+    fn sah(&self) -> f64 {
+        let nodes = self.0.bvh().nodes();
+        let mut s = SahSum::default();
+        for n in nodes {
+            if n.is_leaf() {
+                s.leaf(n.min, n.max, n.count);
+            } else {
+                s.interior(n.min, n.max);
+            }
+        }
+        let sah = s.finish(nodes[0].min, nodes[0].max);
+        // The harness's SAH and the library's own must agree.
+        let own = f64::from(self.0.bvh().sah_cost());
+        assert!(
+            (sah - own).abs() <= 1e-4 * own,
+            "SAH walk {sah} differs from MeshBvh's {own}"
+        );
+        sah
+    }
+    fn refit(&mut self, input: &TriMesh) -> bool {
+        self.0.refit(input);
+        true
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// obvhs (Bvh2: binary, PLOC builder)
+// ---------------------------------------------------------------------------------------------
+
+mod ob {
+    use super::*;
+    use obvhs::aabb::Aabb;
+    use obvhs::bvh2::Bvh2;
+    use obvhs::bvh2::builder::build_bvh2_from_tris;
+    use obvhs::ray::RayHit;
+    use obvhs::triangle::Triangle;
+
+    /// An obvhs Bvh2 with its triangles copied in leaf order (as its examples advise).
+    pub struct Obvhs {
+        bvh: Bvh2,
+        tris: Vec<Triangle>,
+        pre_split: bool,
+    }
+
+    fn tri(t: &[Vec3; 3]) -> Triangle {
+        Triangle {
+            v0: t[0].into(),
+            v1: t[1].into(),
+            v2: t[2].into(),
+        }
+    }
+
+    pub fn input(mesh: &TriMesh) -> Vec<Triangle> {
+        soup(mesh).iter().map(tri).collect()
+    }
+
+    pub fn build(tris: Vec<Triangle>, params: obvhs::BvhBuildParams) -> Obvhs {
+        let bvh = build_bvh2_from_tris(&tris, params, &mut Duration::default());
+        let ordered = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| tris[i as usize])
+            .collect();
+        Obvhs {
+            bvh,
+            tris: ordered,
+            pre_split: params.pre_split,
+        }
+    }
+
+    impl Obvhs {
+        pub fn closest(&self, ray: &obvhs::ray::Ray) -> Option<(f32, u32)> {
+            let mut hit = RayHit::none();
+            let tris = &self.tris;
+            self.bvh
+                .ray_traverse(*ray, &mut hit, |r, id| tris[id].intersect(r))
+                .then(|| (hit.t, self.bvh.primitive_indices[hit.primitive_id as usize]))
+        }
+
+        pub fn sah(&self) -> f64 {
+            let nodes = &self.bvh.nodes;
+            let mut s = SahSum::default();
+            let mut stack = vec![0usize];
+            while let Some(i) = stack.pop() {
+                let n = &nodes[i];
+                let (min, max) = (n.aabb().min.to_array(), n.aabb().max.to_array());
+                if n.is_leaf() {
+                    s.leaf(min, max, n.prim_count);
+                } else {
+                    s.interior(min, max);
+                    stack.push(n.first_index as usize);
+                    stack.push(n.first_index as usize + 1);
+                }
+            }
+            let r = nodes[0].aabb();
+            s.finish(r.min.to_array(), r.max.to_array())
+        }
+
+        /// New leaf boxes from the moved triangles, then obvhs's `refit_all` for the interior
+        /// nodes. Not with spatial pre-splits (a split reference's box is a clipped part of its
+        /// triangle).
+        pub fn refit(&mut self, tris: &[Triangle]) -> bool {
+            if self.pre_split {
+                return false;
+            }
+            for (o, &i) in self.tris.iter_mut().zip(&self.bvh.primitive_indices) {
+                *o = tris[i as usize];
+            }
+            for n in &mut self.bvh.nodes {
+                if n.is_leaf() {
+                    let first = n.first_index as usize;
+                    let b = self.tris[first..first + n.prim_count as usize]
+                        .iter()
+                        .fold(Aabb::empty(), |b, t| b.union(&t.aabb()));
+                    n.set_aabb(b);
+                }
+            }
+            self.bvh.refit_all();
+            true
+        }
+    }
+
+    pub fn ray(r: &Ray) -> obvhs::ray::Ray {
+        obvhs::ray::Ray::new_inf(Vec3A::from(r.origin), Vec3A::from(r.dir))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// bvh crate (one primitive per leaf, SAH with buckets)
+// ---------------------------------------------------------------------------------------------
+
+mod bv {
+    use super::*;
+    use bvh::aabb::{Aabb, Bounded};
+    use bvh::bounding_hierarchy::BHShape;
+    use bvh::bvh::{Bvh, BvhNode};
+    use nalgebra::{Point3, Vector3};
+
+    /// A triangle as the bvh crate wants it: its box on demand and the index of its leaf.
+    #[derive(Clone, Copy)]
+    pub struct Shape {
+        pub t: [Vec3; 3],
+        /// Index in the input mesh.
+        index: u32,
+        node: usize,
+    }
+
+    fn p(v: Vec3) -> Point3<f32> {
+        Point3::new(v.x, v.y, v.z)
+    }
+
+    impl Bounded<f32, 3> for Shape {
+        fn aabb(&self) -> Aabb<f32, 3> {
+            let [a, b, c] = self.t;
+            Aabb::with_bounds(p(a.min(b).min(c)), p(a.max(b).max(c)))
+        }
+    }
+
+    impl BHShape<f32, 3> for Shape {
+        fn set_bh_node_index(&mut self, i: usize) {
+            self.node = i;
+        }
+        fn bh_node_index(&self) -> usize {
+            self.node
+        }
+    }
+
+    pub struct BvhCrate {
+        bvh: Bvh<f32, 3>,
+        shapes: Vec<Shape>,
+        /// Every interior node's children come after it (checked at build), so a reverse sweep
+        /// refits bottom-up.
+        children_after_parents: bool,
+    }
+
+    pub fn input(mesh: &TriMesh) -> Vec<Shape> {
+        soup(mesh)
+            .into_iter()
+            .enumerate()
+            .map(|(i, t)| Shape {
+                t,
+                index: i as u32,
+                node: 0,
+            })
+            .collect()
+    }
+
+    pub fn build(mut shapes: Vec<Shape>) -> BvhCrate {
+        let bvh = Bvh::build(&mut shapes);
+        let children_after_parents = bvh.nodes.iter().enumerate().all(|(i, n)| match n {
+            BvhNode::Node {
+                child_l_index,
+                child_r_index,
+                ..
+            } => *child_l_index > i && *child_r_index > i,
+            BvhNode::Leaf { .. } => true,
+        });
+        BvhCrate {
+            bvh,
+            shapes,
+            children_after_parents,
+        }
+    }
+
+    /// The crate's ray (nalgebra) and ours (for the triangle test).
+    pub type R = (bvh::ray::Ray<f32, 3>, Ray);
+
+    pub fn ray(r: &Ray) -> R {
+        (
+            bvh::ray::Ray::new(p(r.origin), Vector3::new(r.dir.x, r.dir.y, r.dir.z)),
+            *r,
+        )
+    }
+
+    fn area(b: &Aabb<f32, 3>) -> ([f32; 3], [f32; 3]) {
+        (b.min.coords.into(), b.max.coords.into())
+    }
+
+    impl BvhCrate {
+        /// The crate's nearest-first iterator yields candidate triangles in the order of their
+        /// boxes' entry distances; the search stops once a box starts beyond the closest hit.
+        /// The triangle test is dynbvh's watertight one: the crate's own culls back faces, and
+        /// the rays from inside the meshes need both sides.
+        pub fn closest(&self, (bray, ray): &R) -> Option<(f32, u32)> {
+            let pre = RayTriPrecomp::new(ray.dir);
+            let mut best: Option<(f32, u32)> = None;
+            for s in self.bvh.nearest_traverse_iterator(bray, &self.shapes) {
+                let tmax = best.map_or(f32::INFINITY, |b| b.0);
+                if best.is_some() {
+                    let entry = bray
+                        .intersection_slice_for_aabb(&s.aabb())
+                        .map_or(f32::INFINITY, |e| e.0);
+                    if entry > tmax {
+                        break;
+                    }
+                }
+                let [a, b, c] = s.t;
+                if let Some((t, _, _)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
+                    best = Some((t, s.index));
+                }
+            }
+            best
+        }
+
+        pub fn sah(&self) -> f64 {
+            let mut s = SahSum::default();
+            let mut root = None;
+            for n in &self.bvh.nodes {
+                if let BvhNode::Node {
+                    child_l_aabb,
+                    child_r_aabb,
+                    ..
+                } = n
+                {
+                    // Each child's box sits in its parent; a leaf holds one triangle.
+                    for b in [child_l_aabb, child_r_aabb] {
+                        let (lo, hi) = area(b);
+                        s.leaf(lo, hi, 1);
+                    }
+                    if root.is_none() {
+                        root = Some(child_l_aabb.join(child_r_aabb));
+                    }
+                }
+            }
+            // Children were all counted as cost-1 nodes, which is also what an interior node
+            // costs; add the root.
+            let (lo, hi) = area(&root.expect("a tree with at least two triangles"));
+            s.interior(lo, hi);
+            s.finish(lo, hi)
+        }
+
+        /// New triangle positions, then every interior node's two child boxes recomputed
+        /// bottom-up (the crate has no refit of its own: `update_shapes` removes and reinserts).
+        pub fn refit(&mut self, shapes: &[Shape]) -> bool {
+            assert!(self.children_after_parents, "bvh crate node order changed");
+            for (s, n) in self.shapes.iter_mut().zip(shapes) {
+                s.t = n.t;
+            }
+            let nodes = &mut self.bvh.nodes;
+            for i in (0..nodes.len()).rev() {
+                if let BvhNode::Node {
+                    child_l_index,
+                    child_r_index,
+                    ..
+                } = nodes[i]
+                {
+                    let boxes = [child_l_index, child_r_index].map(|c| match &nodes[c] {
+                        BvhNode::Leaf { shape_index, .. } => self.shapes[*shape_index].aabb(),
+                        BvhNode::Node {
+                            child_l_aabb,
+                            child_r_aabb,
+                            ..
+                        } => child_l_aabb.join(child_r_aabb),
+                    });
+                    if let BvhNode::Node {
+                        child_l_aabb,
+                        child_r_aabb,
+                        ..
+                    } = &mut nodes[i]
+                    {
+                        *child_l_aabb = boxes[0];
+                        *child_r_aabb = boxes[1];
+                    }
+                }
+            }
+            true
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// parry3d (Bvh over triangle boxes, binned or PLOC)
+// ---------------------------------------------------------------------------------------------
+
+mod pa {
+    use super::*;
+    use parry3d::bounding_volume::Aabb;
+    use parry3d::math::Vector;
+    use parry3d::partitioning::{Bvh, BvhBuildStrategy, BvhWorkspace, TraversalAction};
+    use parry3d::query::RayCast;
+    use parry3d::shape::Triangle;
+
+    pub struct Parry {
+        bvh: Bvh,
+        tris: Vec<Triangle>,
+        workspace: BvhWorkspace,
+    }
+
+    fn v(x: Vec3) -> Vector {
+        Vector::new(x.x, x.y, x.z)
+    }
+
+    pub fn input(mesh: &TriMesh) -> Vec<Triangle> {
+        soup(mesh)
+            .iter()
+            .map(|t| Triangle::new(v(t[0]), v(t[1]), v(t[2])))
+            .collect()
+    }
+
+    pub fn build(tris: Vec<Triangle>, strategy: BvhBuildStrategy) -> Parry {
+        let boxes: Vec<Aabb> = tris.iter().map(Triangle::local_aabb).collect();
+        Parry {
+            bvh: Bvh::from_leaves(strategy, &boxes),
+            tris,
+            workspace: BvhWorkspace::default(),
+        }
+    }
+
+    pub fn ray(r: &Ray) -> parry3d::query::Ray {
+        parry3d::query::Ray::new(v(r.origin), v(r.dir))
+    }
+
+    fn arr(x: Vector) -> [f32; 3] {
+        [x.x, x.y, x.z]
+    }
+
+    impl Parry {
+        /// parry's best-first `Bvh::cast_ray` with its own ray-triangle test.
+        pub fn closest(&self, ray: &parry3d::query::Ray) -> Option<(f32, u32)> {
+            self.bvh
+                .cast_ray(ray, f32::MAX, |leaf, best| {
+                    self.tris[leaf as usize].cast_local_ray(ray, best, true)
+                })
+                .map(|(leaf, t)| (t, leaf))
+        }
+
+        pub fn sah(&self) -> f64 {
+            let mut s = SahSum::default();
+            // One triangle per leaf: every node below the root costs 1 x its area.
+            self.bvh.traverse(|n| {
+                let b = n.aabb();
+                s.leaf(arr(b.mins), arr(b.maxs), 1);
+                TraversalAction::Continue
+            });
+            let r = self.bvh.root_aabb();
+            s.interior(arr(r.mins), arr(r.maxs));
+            s.finish(arr(r.mins), arr(r.maxs))
+        }
+
+        /// New leaf boxes (`update_partially_if_present`, no margin), then `Bvh::refit`.
+        pub fn refit(&mut self, tris: &[Triangle]) -> bool {
+            self.tris.copy_from_slice(tris);
+            for (i, t) in self.tris.iter().enumerate() {
+                self.bvh
+                    .update_partially_if_present(t.local_aabb(), i as u32, 0.0);
+            }
+            self.bvh.refit(&mut self.workspace);
+            true
+        }
+    }
+}
+
+// Adapters from the library modules to the harness interface, one type per library; the
+// build settings are chosen by the variant's build closure.
+macro_rules! accel {
+    ($name:ident, $inner:ty, $input:ty, $r:ty, $prep:path, $ray:path) => {
+        struct $name($inner);
+        impl Accel for $name {
+            type Input = $input;
+            type R = $r;
+            fn prepare(mesh: &TriMesh) -> Self::Input {
+                $prep(mesh)
+            }
+            fn ray(r: &Ray) -> Self::R {
+                $ray(r)
+            }
+            #[inline]
+            fn closest(&self, ray: &Self::R) -> Option<(f32, u32)> {
+                self.0.closest(ray)
+            }
+            fn sah(&self) -> f64 {
+                self.0.sah()
+            }
+            fn refit(&mut self, input: &Self::Input) -> bool {
+                self.0.refit(input)
+            }
+        }
+    };
+}
+
+accel!(
+    ObvhsA,
+    ob::Obvhs,
+    Vec<obvhs::triangle::Triangle>,
+    obvhs::ray::Ray,
+    ob::input,
+    ob::ray
+);
+accel!(
+    BvhA,
+    bv::BvhCrate,
+    Vec<bv::Shape>,
+    bv::R,
+    bv::input,
+    bv::ray
+);
+accel!(
+    ParryA,
+    pa::Parry,
+    Vec<parry3d::shape::Triangle>,
+    parry3d::query::Ray,
+    pa::input,
+    pa::ray
+);
+
+// ---------------------------------------------------------------------------------------------
+// Inputs
+// ---------------------------------------------------------------------------------------------
+
+struct Input {
+    name: String,
+    rest: TriMesh,
+    deformed: Option<TriMesh>,
+    /// (set name, rays traced for speed, sample checked against brute force on `rest`).
+    sets: Vec<RaySet>,
+    /// Samples of the `_def` ray sets, checked against brute force on `deformed` after a refit.
+    def_checks: Vec<Checked>,
+}
+
+struct RaySet {
+    name: &'static str,
+    rays: Vec<Ray>,
+    check: Checked,
+}
+
+/// Sample rays and their brute-force closest hits.
+struct Checked {
+    rays: Vec<Ray>,
+    hits: Vec<Option<(f32, u32)>>,
+}
+
+impl Checked {
+    fn new(mesh: &TriMesh, all: &[Ray]) -> Self {
+        let step = (all.len() / CHECK_RAYS).max(1);
+        let rays: Vec<Ray> = all.iter().step_by(step).take(CHECK_RAYS).copied().collect();
+        let hits = rays
+            .iter()
+            .map(|r| brute_force_closest(mesh, r).map(|h| (h.t, h.prim)))
+            .collect();
+        Self { rays, hits }
+    }
+}
+
+fn ray_budget() -> Option<usize> {
+    match std::env::var("DYNBVH_PEERS_RAYS") {
+        Ok(s) if s == "all" || s == "0" => None,
+        Ok(s) => Some(s.parse().expect("DYNBVH_PEERS_RAYS: a ray count or `all`")),
+        Err(_) => Some(DEFAULT_RAYS),
+    }
+}
+
+/// About `n` rays of a square camera image, as a lower-resolution image of the same view
+/// (every k-th row and column), so that they stay as coherent as the full image.
+fn image_subset(rays: &[Ray], n: Option<usize>) -> Vec<Ray> {
+    let Some(n) = n else {
+        return rays.to_vec();
+    };
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    if side * side != rays.len() || rays.len() <= n {
+        return rays.iter().take(n).copied().collect();
+    }
+    let step = ((rays.len() as f64 / n as f64).sqrt().round() as usize).max(1);
+    (0..side)
+        .step_by(step)
+        .flat_map(|y| (0..side).step_by(step).map(move |x| rays[y * side + x]))
+        .collect()
+}
+
+fn load(dir: &Path, stem: &str) -> Option<Input> {
+    let path = |s: String| dir.join(s);
+    let needed = [
+        format!("{stem}.tri"),
+        format!("{stem}_primary.rays"),
+        format!("{stem}_random.rays"),
+    ];
+    let missing: Vec<&String> = needed
+        .iter()
+        .filter(|f| !path((*f).clone()).is_file())
+        .collect();
+    if !missing.is_empty() {
+        eprintln!(
+            "skipping {stem}: {missing:?} not in {} (generate with `rustc -O \
+             ../shared/bench-inputs/gen.rs -o gen && ./gen DIR --no-obj`, or set DYNBVH_BENCH_INPUTS)",
+            dir.display()
+        );
+        return None;
+    }
+    let t = Instant::now();
+    let rest = read_tri(&path(format!("{stem}.tri"))).expect("read .tri");
+    let def_path = path(format!("{stem}_def.tri"));
+    let deformed = def_path
+        .is_file()
+        .then(|| read_tri(&def_path).expect("read _def.tri"));
+    if deformed.is_none() {
+        eprintln!("{stem}: no {stem}_def.tri, so no refit");
+    }
+    let budget = ray_budget();
+    let mut sets = Vec::new();
+    for name in ["primary", "random"] {
+        let all = read_rays(&path(format!("{stem}_{name}.rays"))).expect("read .rays");
+        let rays = if name == "primary" {
+            image_subset(&all, budget)
+        } else {
+            all.iter()
+                .take(budget.unwrap_or(usize::MAX))
+                .copied()
+                .collect()
+        };
+        let check = Checked::new(&rest, &all);
+        sets.push(RaySet { name, rays, check });
+    }
+    let mut def_checks = Vec::new();
+    if let Some(def) = &deformed {
+        for name in ["primary", "random"] {
+            let p = path(format!("{stem}_def_{name}.rays"));
+            if p.is_file() {
+                def_checks.push(Checked::new(def, &read_rays(&p).expect("read .rays")));
+            }
+        }
+    }
+    eprintln!(
+        "{stem}: {} triangles, {} + {} rays per pass, loaded and brute-forced in {:.1} s",
+        rest.len(),
+        sets[0].rays.len(),
+        sets[1].rays.len(),
+        t.elapsed().as_secs_f64()
+    );
+    Some(Input {
+        name: stem.into(),
+        rest,
+        deformed,
+        sets,
+        def_checks,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Measuring
+// ---------------------------------------------------------------------------------------------
+
+/// A library with one build setting.
+struct Variant {
+    name: &'static str,
+    /// Runs the whole measurement of this variant on an input.
+    run: fn(&Input) -> Row,
+}
+
+/// Hits that disagree with brute force on a sample.
+#[derive(Clone, Copy, Default)]
+struct Mismatch {
+    /// Brute force hits, the library misses.
+    missed: usize,
+    /// The library hits, brute force does not.
+    extra: usize,
+    /// Both hit, at distances that differ by more than 1e-4 relative.
+    other_t: usize,
+    checked: usize,
+}
+
+impl Mismatch {
+    fn total(&self) -> usize {
+        self.missed + self.extra + self.other_t
+    }
+    fn add(&mut self, o: Mismatch) {
+        self.missed += o.missed;
+        self.extra += o.extra;
+        self.other_t += o.other_t;
+        self.checked += o.checked;
+    }
+    fn describe(&self) -> String {
+        if self.total() == 0 {
+            format!("0/{}", self.checked)
+        } else {
+            format!(
+                "{}/{} ({} missed, {} extra, {} other t)",
+                self.total(),
+                self.checked,
+                self.missed,
+                self.extra,
+                self.other_t
+            )
+        }
+    }
+}
+
+struct Row {
+    build_ms: f64,
+    sah: f64,
+    mrays: Vec<f64>,
+    refit_ms: Option<f64>,
+    sah_refit: Option<f64>,
+    check: Mismatch,
+    check_refit: Option<Mismatch>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn check<A: Accel>(a: &A, c: &Checked) -> Mismatch {
+    let mut m = Mismatch {
+        checked: c.rays.len(),
+        ..Mismatch::default()
+    };
+    for (r, want) in c.rays.iter().zip(&c.hits) {
+        match (a.closest(&A::ray(r)), want) {
+            (None, Some(_)) => m.missed += 1,
+            (Some(_), None) => m.extra += 1,
+            (Some((t, _)), Some((tw, _))) if (t - tw).abs() > 1e-4 * tw.abs().max(1.0) => {
+                m.other_t += 1;
+            }
+            _ => {}
+        }
+    }
+    m
+}
+
+/// Builds (several times, keeping the last tree), traces, refits and checks one variant.
+fn measure<A: Accel>(input: &Input, build: impl Fn(A::Input) -> A) -> Row {
+    let mut times = Vec::new();
+    let mut accel = None;
+    while times.len() < BUILD_RUNS {
+        let prepared = A::prepare(&input.rest);
+        drop(accel.take());
+        let t = Instant::now();
+        let a = build(prepared);
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        accel = Some(a);
+        if times.len() == 3 && median(times.clone()) > 1000.0 {
+            break;
+        }
+    }
+    let mut accel = accel.expect("built");
+    let build_ms = median(times);
+    let sah = accel.sah();
+
+    let mut mrays = Vec::new();
+    for set in &input.sets {
+        let rays: Vec<A::R> = set.rays.iter().map(A::ray).collect();
+        let mut runs = Vec::new();
+        for _ in 0..TRACE_RUNS {
+            let t = Instant::now();
+            let mut sum = 0.0f32;
+            for r in &rays {
+                if let Some((t, _)) = accel.closest(black_box(r)) {
+                    sum += t;
+                }
+            }
+            black_box(sum);
+            runs.push(rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
+        }
+        mrays.push(median(runs));
+    }
+    let mut m = Mismatch::default();
+    for set in &input.sets {
+        m.add(check(&accel, &set.check));
+    }
+
+    let (mut refit_ms, mut sah_refit, mut check_refit) = (None, None, None);
+    if let Some(def) = &input.deformed {
+        let rest = A::prepare(&input.rest);
+        let moved = A::prepare(def);
+        let mut runs = Vec::new();
+        for _ in 0..REFIT_RUNS {
+            let t = Instant::now();
+            if !accel.refit(&moved) {
+                break;
+            }
+            runs.push(t.elapsed().as_secs_f64() * 1e3);
+            if sah_refit.is_none() {
+                sah_refit = Some(accel.sah());
+                let mut m = Mismatch::default();
+                for c in &input.def_checks {
+                    m.add(check(&accel, c));
+                }
+                check_refit = Some(m);
+            }
+            accel.refit(&rest);
+        }
+        if !runs.is_empty() {
+            refit_ms = Some(median(runs));
+        }
+    }
+    Row {
+        build_ms,
+        sah,
+        mrays,
+        refit_ms,
+        sah_refit,
+        check: m,
+        check_refit,
+    }
+}
+
+fn variants() -> Vec<Variant> {
+    use obvhs::BvhBuildParams as P;
+    use parry3d::partitioning::BvhBuildStrategy as S;
+    vec![
+        Variant {
+            name: "dynbvh binned16",
+            run: |i| {
+                measure(i, |m: TriMesh| {
+                    Dyn(MeshBvh::build(&m, &BuildParams::BINNED))
+                })
+            },
+        },
+        Variant {
+            name: "dynbvh median",
+            run: |i| {
+                measure(i, |m: TriMesh| {
+                    Dyn(MeshBvh::build(&m, &BuildParams::MEDIAN))
+                })
+            },
+        },
+        Variant {
+            name: "dynbvh sweep",
+            run: |i| measure(i, |m: TriMesh| Dyn(MeshBvh::build(&m, &BuildParams::SWEEP))),
+        },
+        Variant {
+            name: "obvhs fastest",
+            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::fastest_build()))),
+        },
+        Variant {
+            name: "obvhs medium",
+            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::medium_build()))),
+        },
+        Variant {
+            name: "obvhs very_slow",
+            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::very_slow_build()))),
+        },
+        Variant {
+            name: "bvh (SAH)",
+            run: |i| measure(i, |s| BvhA(bv::build(s))),
+        },
+        Variant {
+            name: "parry3d binned",
+            run: |i| measure(i, |t| ParryA(pa::build(t, S::Binned))),
+        },
+        Variant {
+            name: "parry3d ploc",
+            run: |i| measure(i, |t| ParryA(pa::build(t, S::Ploc))),
+        },
+    ]
+}
+
+// ---------------------------------------------------------------------------------------------
+// Report
+// ---------------------------------------------------------------------------------------------
+
+fn ratio(x: f64, base: f64) -> String {
+    format!("{:.2}x", x / base)
+}
+
+fn print_table(input: &Input, rows: &[(&str, Row)]) {
+    let base = &rows[0].1;
+    println!(
+        "\n## {} ({} triangles), 1 thread; ratios are to {}\n",
+        input.name,
+        input.rest.len(),
+        rows[0].0
+    );
+    let set_names: Vec<&str> = input.sets.iter().map(|s| s.name).collect();
+    println!(
+        "| variant | build ms | build ratio | SAH | SAH ratio | {} | refit ms | refit ratio | SAH after refit | hits vs brute force | after refit |",
+        set_names
+            .iter()
+            .map(|s| format!("{s} Mrays/s | {s} ratio"))
+            .collect::<Vec<_>>()
+            .join(" | ")
+    );
+    println!(
+        "|---|---:|---:|---:|---:|{}---:|---:|---:|---|---|",
+        "---:|---:|".repeat(set_names.len())
+    );
+    for (name, r) in rows {
+        let speeds: Vec<String> = r
+            .mrays
+            .iter()
+            .zip(&base.mrays)
+            .map(|(m, b)| format!("{m:.2} | {}", ratio(*m, *b)))
+            .collect();
+        let (refit, refit_ratio) = match (r.refit_ms, base.refit_ms) {
+            (Some(x), Some(b)) => (format!("{x:.2}"), ratio(x, b)),
+            (Some(x), None) => (format!("{x:.2}"), "-".into()),
+            _ => ("-".into(), "-".into()),
+        };
+        println!(
+            "| {name} | {:.1} | {} | {:.2} | {} | {} | {refit} | {refit_ratio} | {} | {} | {} |",
+            r.build_ms,
+            ratio(r.build_ms, base.build_ms),
+            r.sah,
+            ratio(r.sah, base.sah),
+            speeds.join(" | "),
+            r.sah_refit
+                .map_or("-".into(), |s| format!("{s:.2} ({:.2}x build)", s / r.sah)),
+            r.check.describe(),
+            r.check_refit.map_or("-".into(), |m| m.describe()),
+        );
+    }
+}
+
+fn threads_in_process() -> Option<usize> {
+    std::fs::read_dir("/proc/self/task").ok().map(|d| d.count())
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; other words filter inputs and variants by substring.
+    let filters: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let wanted =
+        |name: &str| filters.is_empty() || filters.iter().any(|f| name.contains(f.as_str()));
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::var_os("DYNBVH_BENCH_INPUTS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/bench-inputs"));
+    let stems = ["sphere_100k", "sphere_1m", "soup_1m"];
+    let stem_filtered = filters
+        .iter()
+        .any(|f| stems.iter().any(|s| s.contains(f.as_str())));
+    let variants = variants();
+    let variant_filtered = filters
+        .iter()
+        .any(|f| variants.iter().any(|v| v.name.contains(f.as_str())));
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a one-thread pool");
+    let threads_before = threads_in_process();
+    pool.install(|| {
+        for stem in stems {
+            if stem_filtered && !wanted(stem) {
+                continue;
+            }
+            let Some(input) = load(&dir, stem) else {
+                continue;
+            };
+            let mut rows = Vec::new();
+            for v in &variants {
+                // The first variant is the reference for the ratios: always run it.
+                if variant_filtered && !wanted(v.name) && !rows.is_empty() {
+                    continue;
+                }
+                let t = Instant::now();
+                let row = (v.run)(&input);
+                eprintln!(
+                    "  {stem} / {}: measured in {:.1} s",
+                    v.name,
+                    t.elapsed().as_secs_f64()
+                );
+                rows.push((v.name, row));
+            }
+            print_table(&input, &rows);
+        }
+    });
+    let threads_after = threads_in_process();
+    println!(
+        "\nThreads in the process: {threads_before:?} before and {threads_after:?} after the run \
+         (main + the one-thread pool; the global rayon pool was never started)."
+    );
+}
