@@ -17,6 +17,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Every refit-or-rebuild policy on the same frames and rays of an animation: summary
+    /// table, per-frame CSV and JSON, charts, and the ratio of each to the best schedule.
+    Bench(cli::bench::BenchArgs),
     /// Every builder on one mesh: build time, SAH cost, size, Mrays/s, agreement with brute force.
     BuildBench(cli::build_bench::BuildBenchArgs),
     /// Summarize a glTF file: scenes, meshes, skins, morph targets, animations, instance classes.
@@ -31,6 +34,7 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::BuildBench(a)) => cli::build_bench::run(a),
+        Some(Command::Bench(a)) => cli::bench::run(a),
         Some(Command::Info(a)) => cli::info::run(a),
         Some(Command::Pose(a)) => cli::pose::run(a),
         Some(Command::Gen(a)) => cli::r#gen::run(a),

@@ -70,8 +70,8 @@ impl MeshCosts {
     pub fn cost_of(&self, rebuild: &[bool]) -> f64 {
         let mut b = 0;
         let mut total = 0.0;
-        for f in 1..=self.frames() {
-            if rebuild[f] {
+        for (f, &r) in rebuild.iter().enumerate().take(self.frames() + 1).skip(1) {
+            if r {
                 b = f;
                 total += self.rebuild_ms[f];
             } else {
@@ -117,9 +117,9 @@ pub fn best_schedule(c: &MeshCosts) -> Schedule {
             .min_by(|a, b| a.1.total_cmp(b.1))
             .map(|(b, &c)| (b, c))
             .unwrap_or((0, 0.0));
-        for b in 0..f {
-            if cost[b].is_finite() {
-                cost[b] += c.refit_ms[f] + c.extra_trace_ms(b, f);
+        for (b, cb) in cost.iter_mut().enumerate().take(f) {
+            if cb.is_finite() {
+                *cb += c.refit_ms[f] + c.extra_trace_ms(b, f);
             }
         }
         cost[f] = best + c.rebuild_ms[f];

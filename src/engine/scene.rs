@@ -475,6 +475,19 @@ impl Engine {
         &self.meshes[mesh.0 as usize].stats
     }
 
+    /// Share of the expected trace cost that falls on `mesh`'s tree (its instances' world box
+    /// areas times its SAH cost, over the sum of all): how the amortized policy splits a
+    /// frame's trace time among meshes.
+    #[must_use]
+    pub fn mesh_trace_share(&self, mesh: MeshId) -> f64 {
+        let total: f64 = self.meshes.iter().map(|m| m.weight).sum();
+        if total > 0.0 {
+            self.meshes[mesh.0 as usize].weight / total
+        } else {
+            0.0
+        }
+    }
+
     /// The tree of `mesh`.
     #[must_use]
     pub fn mesh_bvh(&self, mesh: MeshId) -> &MeshBvh {

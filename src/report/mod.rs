@@ -1,4 +1,6 @@
 //! Measurements and reports: what the CLI's benchmark commands compute and print.
 
 pub mod build_bench;
+pub mod charts;
+pub mod frame_bench;
 pub mod rays;

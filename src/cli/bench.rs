@@ -1,0 +1,162 @@
+//! `dynbvh bench`: every refit-or-rebuild policy on the same frames and rays of an animation.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use dynbvh::anim::Scene;
+use dynbvh::engine::Policy;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::source::{FrameSource, SineSphere};
+use dynbvh::report::frame_bench::{self, Options, RaySpec};
+use std::path::PathBuf;
+
+/// Arguments of `bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Animated glTF file (.glb/.gltf).
+    #[arg(required_unless_present = "synthetic", conflicts_with = "synthetic")]
+    file: Option<PathBuf>,
+    /// Instead of a file: a bumpy sphere of about N triangles deformed by a travelling wave.
+    #[arg(long, value_name = "N")]
+    synthetic: Option<usize>,
+    /// Animation name or index (default: the first).
+    #[arg(long, short)]
+    animation: Option<String>,
+    /// Frames spread over one loop of the animation (default 60).
+    #[arg(long, conflicts_with = "fps")]
+    frames: Option<usize>,
+    /// Frames per second of animation time instead of a frame count.
+    #[arg(long)]
+    fps: Option<f32>,
+    /// Rays per frame, from a camera looking at the first frame.
+    #[arg(long, conflicts_with = "size")]
+    rays: Option<usize>,
+    /// Camera image size WxH (default 256x256).
+    #[arg(long, value_name = "WxH")]
+    size: Option<String>,
+    /// Policy to run (repeatable): refit, rebuild, periodic:N, threshold:R, amortized.
+    /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized.
+    #[arg(long = "policy", short)]
+    policies: Vec<String>,
+    /// Directory for frames.csv, report.json and the charts (SVG and PNG).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the report as JSON instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Skip the oracle (it builds at every frame and refits through the later ones).
+    #[arg(long)]
+    no_oracle: bool,
+    /// Trace passes per frame, the fastest counting.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("size {s:?}: expected WxH"))?;
+    let (w, h): (usize, usize) = (w.trim().parse()?, h.trim().parse()?);
+    if w == 0 || h == 0 {
+        bail!("size {s:?}: both sides must be positive");
+    }
+    Ok((w, h))
+}
+
+/// Runs `bench`.
+pub fn run(a: BenchArgs) -> Result<()> {
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("setting up the thread pool")?;
+    }
+    let mut opts = Options {
+        trace_repeats: a.repeats.max(1),
+        oracle: !a.no_oracle,
+        ..Options::default()
+    };
+    if !a.policies.is_empty() {
+        opts.policies = a
+            .policies
+            .iter()
+            .map(|p| p.parse::<Policy>().map_err(anyhow::Error::from))
+            .collect::<Result<_>>()?;
+    }
+    opts.rays = match (a.rays, &a.size) {
+        (Some(n), _) => RaySpec::Count(n.max(1)),
+        (None, Some(s)) => {
+            let (w, h) = parse_size(s)?;
+            RaySpec::Size(w, h)
+        }
+        (None, None) => RaySpec::Size(256, 256),
+    };
+    let times = match (a.frames, a.fps) {
+        (_, Some(fps)) if fps > 0.0 && fps.is_finite() => FrameTimes::Fps(fps),
+        (_, Some(fps)) => bail!("--fps {fps}: must be positive"),
+        (Some(n), None) => FrameTimes::Count(n.max(1)),
+        (None, None) => FrameTimes::Count(60),
+    };
+    let progress = |m: &str| eprintln!("  {m} ...");
+    let report = match (&a.file, a.synthetic) {
+        (Some(path), _) => {
+            let (scene, warnings) = Scene::load(path)?;
+            for w in &warnings {
+                eprintln!("warning: {w}");
+            }
+            let anim = match &a.animation {
+                Some(k) => Some(
+                    scene
+                        .find_animation(k)
+                        .with_context(|| format!("{}: no animation {k:?}", path.display()))?,
+                ),
+                None if scene.animations.is_empty() => {
+                    eprintln!(
+                        "{}: no animation; every frame is the rest pose",
+                        path.display()
+                    );
+                    None
+                }
+                None => Some(0),
+            };
+            let mut src = GltfSource::new(&scene, anim, times)?;
+            eprintln!("{}: {} frames", src.name(), src.frames());
+            frame_bench::run(&mut src, &opts, progress)
+        }
+        (None, Some(n)) => {
+            let frames = match times {
+                FrameTimes::Count(n) => n,
+                FrameTimes::Fps(f) => f.ceil() as usize,
+            };
+            let mut src = SineSphere::new(n, frames, 0.02, 0.15);
+            eprintln!("{}: {} frames", src.name(), src.frames());
+            frame_bench::run(&mut src, &opts, progress)
+        }
+        (None, None) => unreachable!("clap requires one"),
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", frame_bench::summary_table(&report));
+    }
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::write(
+            dir.join("frames.csv"),
+            frame_bench::to_csv(&report.per_frame),
+        )?;
+        std::fs::write(
+            dir.join("report.json"),
+            serde_json::to_string_pretty(&report)?,
+        )?;
+        for (stem, chart) in frame_bench::charts(&report) {
+            chart
+                .save(&dir.join(stem), 960, 540)
+                .with_context(|| format!("writing chart {stem}"))?;
+        }
+        eprintln!("wrote {}", dir.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,671 @@
+//! `bench`: every policy on the same frames and rays, the oracle's best schedule, and the
+//! figures the charts draw.
+
+use crate::bvh::{BuildParams, TraversalStats};
+use crate::engine::oracle::{self, MeshCosts};
+use crate::engine::source::FrameSource;
+use crate::engine::{Action, EngineConfig, Policy, SceneHit, TlasPolicy};
+use crate::geom::{Aabb, Ray};
+use crate::report::rays::camera_rays;
+use serde::Serialize;
+use std::time::Instant;
+
+/// How many rays each frame casts (all from one camera looking at the scene's first frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RaySpec {
+    /// About this many rays (a square image, cut to the count).
+    Count(usize),
+    /// A `w x h` image.
+    Size(usize, usize),
+}
+
+impl RaySpec {
+    /// The camera rays for a scene box.
+    #[must_use]
+    pub fn rays(self, bounds: &Aabb) -> Vec<Ray> {
+        match self {
+            RaySpec::Size(w, h) => camera_rays(bounds, w, h),
+            RaySpec::Count(n) => {
+                let w = (n as f64).sqrt().ceil().max(1.0) as usize;
+                let h = n.div_ceil(w).max(1);
+                let mut r = camera_rays(bounds, w, h);
+                r.truncate(n.max(1));
+                r
+            }
+        }
+    }
+}
+
+/// What to run.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Policies to report (the always-refit and always-rebuild runs happen anyway: the oracle
+    /// needs their measurements).
+    pub policies: Vec<Policy>,
+    /// Rays per frame.
+    pub rays: RaySpec,
+    /// Builder of every tree.
+    pub build: BuildParams,
+    /// Top-level tree policy.
+    pub tlas: TlasPolicy,
+    /// Trace passes per frame; the fastest counts (fewer noisy frames).
+    pub trace_repeats: usize,
+    /// Rays per frame traced again with counters (nodes visited, triangles tested).
+    pub counted_rays: usize,
+    /// Builders for the speed-against-accuracy points (each rebuilding every frame).
+    pub builders: Vec<BuildParams>,
+    /// Frames each builder point runs over.
+    pub builder_frames: usize,
+    /// Compute the oracle (costs `frames` builds and `frames^2 / 2` refits).
+    pub oracle: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            policies: Policy::standard_set(),
+            rays: RaySpec::Size(256, 256),
+            build: BuildParams::BINNED,
+            tlas: EngineConfig::default().tlas,
+            trace_repeats: 3,
+            counted_rays: 1024,
+            builders: vec![
+                BuildParams::MEDIAN,
+                BuildParams::binned(4),
+                BuildParams::binned(8),
+                BuildParams::BINNED,
+                BuildParams::binned(32),
+                BuildParams::SWEEP,
+            ],
+            builder_frames: 8,
+            oracle: true,
+        }
+    }
+}
+
+/// One frame of one policy.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameRow {
+    /// Policy name.
+    pub policy: String,
+    /// Frame number (1-based; frame 0 is the pose the engine was built at).
+    pub frame: usize,
+    /// `refit`, `rebuild` (some mesh rebuilt) or `none`.
+    pub action: Action,
+    /// Pose time, ms.
+    pub pose_ms: f64,
+    /// Refit time, ms.
+    pub refit_ms: f64,
+    /// Rebuild time, ms.
+    pub rebuild_ms: f64,
+    /// Instance boxes and top-level tree, ms.
+    pub tlas_ms: f64,
+    /// Pose + refit + rebuild + TLAS, ms.
+    pub update_ms: f64,
+    /// Tracing the frame's rays, ms (fastest of the repeats).
+    pub trace_ms: f64,
+    /// Scene SAH cost.
+    pub sah: f32,
+    /// Trace-weighted SAH ratio to the last builds.
+    pub sah_ratio: f32,
+    /// Largest SAH ratio of a mesh.
+    pub max_sah_ratio: f32,
+    /// Meshes rebuilt.
+    pub rebuilds: u32,
+    /// Rays traced.
+    pub rays: u64,
+    /// Millions of rays per second.
+    pub mrays: f64,
+    /// Measured nodes visited per ray (both levels).
+    pub nodes_per_ray: f64,
+    /// Measured triangles tested per ray.
+    pub tris_per_ray: f64,
+    /// What the SAH predicts for nodes per ray (rays that miss the scene's box cost nothing).
+    pub predicted_nodes_per_ray: f64,
+    /// What the SAH predicts for triangles per ray.
+    pub predicted_tris_per_ray: f64,
+}
+
+/// Totals of one policy.
+#[derive(Clone, Debug, Serialize)]
+pub struct PolicySummary {
+    /// Policy name.
+    pub policy: String,
+    /// True for the default policy.
+    pub default: bool,
+    /// Frames run.
+    pub frames: usize,
+    /// Update plus trace time over all frames, ms.
+    pub total_ms: f64,
+    /// Update time over all frames, ms.
+    pub update_ms: f64,
+    /// Trace time over all frames, ms.
+    pub trace_ms: f64,
+    /// Update time per frame, ms.
+    pub update_ms_per_frame: f64,
+    /// Trace time per frame, ms.
+    pub trace_ms_per_frame: f64,
+    /// Trace time per ray, microseconds.
+    pub trace_us_per_ray: f64,
+    /// Mesh rebuilds.
+    pub rebuilds: u64,
+    /// Mean trace-weighted SAH ratio.
+    pub mean_sah_ratio: f64,
+    /// Largest SAH ratio of any mesh in any frame.
+    pub max_sah_ratio: f32,
+    /// `total_ms` over the oracle's total (0 when the oracle was not computed).
+    pub oracle_ratio: f64,
+}
+
+/// The best schedule in hindsight.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct OracleSummary {
+    /// Modelled total time of the best schedule, ms.
+    pub total_ms: f64,
+    /// Rebuilds over all meshes.
+    pub rebuilds: usize,
+    /// For each deforming mesh, the frames it is rebuilt at.
+    pub rebuild_frames: Vec<Vec<usize>>,
+    /// Modelled total of always refitting and always rebuilding, ms (to check the model
+    /// against the measured runs).
+    pub model_refit_ms: f64,
+    /// See `model_refit_ms`.
+    pub model_rebuild_ms: f64,
+    /// How costs were obtained.
+    pub model: String,
+}
+
+/// A point of the speed-against-accuracy chart.
+#[derive(Clone, Debug, Serialize)]
+pub struct SpeedPoint {
+    /// Builder (rebuilding every frame) or policy name.
+    pub name: String,
+    /// `builder` or `policy`.
+    pub kind: String,
+    /// Update time per frame, ms.
+    pub update_ms_per_frame: f64,
+    /// Trace time per ray, microseconds.
+    pub trace_us_per_ray: f64,
+    /// Mean SAH cost.
+    pub sah: f64,
+}
+
+/// Everything `bench` measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// What was replayed.
+    pub source: String,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Deforming meshes.
+    pub deforming_meshes: usize,
+    /// Frames run per policy.
+    pub frames: usize,
+    /// Rays per frame.
+    pub rays_per_frame: usize,
+    /// Worker threads.
+    pub threads: usize,
+    /// Per policy, in the order asked.
+    pub policies: Vec<PolicySummary>,
+    /// The oracle.
+    pub oracle: OracleSummary,
+    /// Speed against accuracy: builders and policies.
+    pub speed: Vec<SpeedPoint>,
+    /// Every frame of every reported policy.
+    pub per_frame: Vec<FrameRow>,
+}
+
+struct Run {
+    rows: Vec<FrameRow>,
+    /// `[frame][mesh]` refit and rebuild ms, and the mesh's share of the frame's trace.
+    refit: Vec<Vec<f64>>,
+    rebuild: Vec<Vec<f64>>,
+    share: Vec<Vec<f64>>,
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Runs one policy over every frame.
+fn run_policy(
+    src: &mut dyn FrameSource,
+    config: EngineConfig,
+    rays: &[Ray],
+    opts: &Options,
+    frames: usize,
+) -> Run {
+    let mut e = src.build(0, config);
+    let deforming = src.deforming().to_vec();
+    let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
+    let step = (rays.len() / opts.counted_rays.max(1)).max(1);
+    let mut run = Run {
+        rows: Vec::with_capacity(frames),
+        refit: vec![vec![0.0; deforming.len()]; frames + 1],
+        rebuild: vec![vec![0.0; deforming.len()]; frames + 1],
+        share: vec![vec![0.0; deforming.len()]; frames + 1],
+    };
+    for f in 1..=frames {
+        src.advance(&mut e, f);
+        e.update();
+        let mut best = f64::INFINITY;
+        for _ in 0..opts.trace_repeats.max(1) {
+            let t = Instant::now();
+            e.trace_closest(rays, &mut hits);
+            best = best.min(ms(t));
+        }
+        e.record_trace(best, rays.len() as u64);
+        let s = *e.frame_stats();
+        let mut counted = TraversalStats::default();
+        let mut n = 0u64;
+        let mut in_box = 0u64;
+        let root = e.bounds();
+        for r in rays.iter().step_by(step) {
+            let _ = e.closest_hit_counted(r, &mut counted);
+            n += 1;
+            if r.hit_box(root.min, root.max, r.tmax).is_some() {
+                in_box += 1;
+            }
+        }
+        let (pn, pt) = e.predicted_work();
+        let p_hit = in_box as f64 / n.max(1) as f64;
+        for (k, m) in deforming.iter().enumerate() {
+            let ms = e.mesh_stats(*m);
+            run.refit[f][k] = ms.refit_ms;
+            run.rebuild[f][k] = ms.rebuild_ms;
+            run.share[f][k] = e.mesh_trace_share(*m);
+        }
+        run.rows.push(FrameRow {
+            policy: config.policy.to_string(),
+            frame: f,
+            action: s.action,
+            pose_ms: s.pose_ms,
+            refit_ms: s.refit_ms,
+            rebuild_ms: s.rebuild_ms,
+            tlas_ms: s.tlas_ms,
+            update_ms: s.update_ms,
+            trace_ms: s.trace_ms,
+            sah: s.sah,
+            sah_ratio: s.sah_ratio,
+            max_sah_ratio: s.max_sah_ratio,
+            rebuilds: s.rebuilds,
+            rays: s.rays,
+            mrays: s.mrays,
+            nodes_per_ray: counted.nodes as f64 / n.max(1) as f64,
+            tris_per_ray: counted.prims as f64 / n.max(1) as f64,
+            predicted_nodes_per_ray: pn * p_hit,
+            predicted_tris_per_ray: pt * p_hit,
+        });
+    }
+    run
+}
+
+fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySummary {
+    let n = rows.len().max(1) as f64;
+    let update: f64 = rows.iter().map(|r| r.update_ms).sum();
+    let trace: f64 = rows.iter().map(|r| r.trace_ms).sum();
+    let rays: u64 = rows.iter().map(|r| r.rays).sum();
+    let total = update + trace;
+    PolicySummary {
+        policy: policy.to_string(),
+        default: policy == Policy::DEFAULT,
+        frames: rows.len(),
+        total_ms: total,
+        update_ms: update,
+        trace_ms: trace,
+        update_ms_per_frame: update / n,
+        trace_ms_per_frame: trace / n,
+        trace_us_per_ray: if rays > 0 {
+            trace * 1e3 / rays as f64
+        } else {
+            0.0
+        },
+        rebuilds: rows.iter().map(|r| u64::from(r.rebuilds)).sum(),
+        mean_sah_ratio: rows.iter().map(|r| f64::from(r.sah_ratio)).sum::<f64>() / n,
+        max_sah_ratio: rows.iter().map(|r| r.max_sah_ratio).fold(1.0, f32::max),
+        oracle_ratio: if oracle_total > 0.0 {
+            total / oracle_total
+        } else {
+            0.0
+        },
+    }
+}
+
+/// Runs the whole benchmark; `progress` hears what starts.
+pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&str)) -> Report {
+    let frames = src.frames();
+    let config = |policy| EngineConfig {
+        build: opts.build,
+        policy,
+        tlas: opts.tlas,
+    };
+    let rays = {
+        let e = src.build(0, config(Policy::Refit));
+        opts.rays.rays(&e.bounds())
+    };
+    let deforming = src.deforming().len();
+
+    // The measured runs: the asked policies, plus always-refit and always-rebuild.
+    let mut wanted = opts.policies.clone();
+    for p in [Policy::Refit, Policy::Rebuild] {
+        if !wanted.contains(&p) {
+            wanted.push(p);
+        }
+    }
+    let mut runs = Vec::new();
+    for &p in &wanted {
+        progress(&format!("policy {p}"));
+        runs.push(run_policy(src, config(p), &rays, opts, frames));
+    }
+    let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("always run")];
+    let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
+
+    let mut oracle = OracleSummary::default();
+    let mut oracle_total = 0.0;
+    if opts.oracle && frames > 0 {
+        progress("oracle: building at every frame, refitting through the later ones");
+        // sah[mesh][b][f - b]
+        let mut sah = vec![vec![Vec::new(); frames + 1]; deforming];
+        for b in 0..=frames {
+            let mut e = src.build(b, config(Policy::Refit));
+            let ids = src.deforming().to_vec();
+            for (row, m) in sah.iter_mut().zip(&ids) {
+                row[b].push(e.mesh_stats(*m).sah);
+            }
+            for f in b + 1..=frames {
+                src.advance(&mut e, f);
+                e.update();
+                for (row, m) in sah.iter_mut().zip(&ids) {
+                    row[b].push(e.mesh_stats(*m).sah);
+                }
+            }
+        }
+        // Costs no schedule changes: pose and top-level tree (fastest over the runs), and
+        // tracing with fresh trees.
+        let mut fixed = 0.0;
+        for f in 1..=frames {
+            let pose = runs
+                .iter()
+                .map(|r| r.rows[f - 1].pose_ms)
+                .fold(f64::INFINITY, f64::min);
+            let tlas = runs
+                .iter()
+                .map(|r| r.rows[f - 1].tlas_ms)
+                .fold(f64::INFINITY, f64::min);
+            fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
+        }
+        oracle_total = fixed;
+        oracle.model_refit_ms = fixed;
+        oracle.model_rebuild_ms = fixed;
+        for (k, sah) in sah.into_iter().enumerate() {
+            let c = MeshCosts {
+                refit_ms: (0..=frames).map(|f| refit_run.refit[f][k]).collect(),
+                rebuild_ms: (0..=frames).map(|f| rebuild_run.rebuild[f][k]).collect(),
+                fresh_trace_ms: (0..=frames)
+                    .map(|f| {
+                        if f == 0 {
+                            0.0
+                        } else {
+                            rebuild_run.rows[f - 1].trace_ms * rebuild_run.share[f][k]
+                        }
+                    })
+                    .collect(),
+                sah,
+            };
+            let s = oracle::best_schedule(&c);
+            oracle_total += s.cost_ms;
+            oracle.rebuilds += s.rebuilds();
+            oracle.model_refit_ms += c.cost_of(&vec![false; frames + 1]);
+            oracle.model_rebuild_ms += c.cost_of(&vec![true; frames + 1]);
+            oracle
+                .rebuild_frames
+                .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
+        }
+        oracle.total_ms = oracle_total;
+        oracle.model = "refit and rebuild times measured per frame (always-refit and \
+            always-rebuild runs); trace time modelled as the always-rebuild run's measured \
+            trace time times each mesh's SAH ratio (tree built at b refitted to f, over the \
+            tree built at f), weighted by the mesh's share of the SAH-expected trace cost"
+            .into();
+    }
+
+    let mut policies = Vec::new();
+    let mut per_frame = Vec::new();
+    let mut speed = Vec::new();
+    for (p, r) in wanted.iter().zip(&runs) {
+        if !opts.policies.contains(p) {
+            continue;
+        }
+        let s = summarize(*p, &r.rows, oracle_total);
+        speed.push(SpeedPoint {
+            name: p.to_string(),
+            kind: "policy".into(),
+            update_ms_per_frame: s.update_ms_per_frame,
+            trace_us_per_ray: s.trace_us_per_ray,
+            sah: r.rows.iter().map(|x| f64::from(x.sah)).sum::<f64>() / r.rows.len().max(1) as f64,
+        });
+        policies.push(s);
+        per_frame.extend(r.rows.iter().cloned());
+    }
+    let bf = opts.builder_frames.min(frames);
+    if bf > 0 {
+        for b in &opts.builders {
+            progress(&format!("builder {}", b.name()));
+            let cfg = EngineConfig {
+                build: *b,
+                policy: Policy::Rebuild,
+                tlas: opts.tlas,
+            };
+            let r = run_policy(src, cfg, &rays, opts, bf);
+            let s = summarize(Policy::Rebuild, &r.rows, 0.0);
+            speed.push(SpeedPoint {
+                name: b.name(),
+                kind: "builder".into(),
+                update_ms_per_frame: s.update_ms_per_frame,
+                trace_us_per_ray: s.trace_us_per_ray,
+                sah: r.rows.iter().map(|x| f64::from(x.sah)).sum::<f64>() / bf as f64,
+            });
+        }
+    }
+    Report {
+        source: src.name(),
+        triangles: src.triangle_count(),
+        deforming_meshes: deforming,
+        frames,
+        rays_per_frame: rays.len(),
+        threads: rayon::current_num_threads(),
+        policies,
+        oracle,
+        speed,
+        per_frame,
+    }
+}
+
+/// The per-frame rows as CSV (header first).
+#[must_use]
+pub fn to_csv(rows: &[FrameRow]) -> String {
+    let mut s = String::from(
+        "policy,frame,action,pose_ms,refit_ms,rebuild_ms,tlas_ms,update_ms,trace_ms,sah,\
+         sah_ratio,max_sah_ratio,rebuilds,rays,mrays,nodes_per_ray,tris_per_ray,\
+         predicted_nodes_per_ray,predicted_tris_per_ray\n",
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3},{:.2},{:.2},{:.2},{:.2}\n",
+            r.policy,
+            r.frame,
+            r.action.name(),
+            r.pose_ms,
+            r.refit_ms,
+            r.rebuild_ms,
+            r.tlas_ms,
+            r.update_ms,
+            r.trace_ms,
+            r.sah,
+            r.sah_ratio,
+            r.max_sah_ratio,
+            r.rebuilds,
+            r.rays,
+            r.mrays,
+            r.nodes_per_ray,
+            r.tris_per_ray,
+            r.predicted_nodes_per_ray,
+            r.predicted_tris_per_ray
+        ));
+    }
+    s
+}
+
+/// The summary table, one line per policy and one for the oracle.
+#[must_use]
+pub fn summary_table(r: &Report) -> String {
+    let mut s = format!(
+        "{}: {} triangles, {} deforming mesh(es), {} frames, {} rays/frame, {} thread(s)\n",
+        r.source, r.triangles, r.deforming_meshes, r.frames, r.rays_per_frame, r.threads
+    );
+    s.push_str(&format!(
+        "{:<14} {:>10} {:>10} {:>10} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8}\n",
+        "policy",
+        "total ms",
+        "update ms",
+        "trace ms",
+        "upd/fr",
+        "trace/fr",
+        "rebuilds",
+        "mean SAH",
+        "max SAH",
+        "/oracle"
+    ));
+    for p in &r.policies {
+        s.push_str(&format!(
+            "{:<14} {:>10.2} {:>10.2} {:>10.2} {:>9.3} {:>9.3} {:>8} {:>8.3} {:>8.3} {:>8.3}\n",
+            format!("{}{}", p.policy, if p.default { "*" } else { "" }),
+            p.total_ms,
+            p.update_ms,
+            p.trace_ms,
+            p.update_ms_per_frame,
+            p.trace_ms_per_frame,
+            p.rebuilds,
+            p.mean_sah_ratio,
+            p.max_sah_ratio,
+            p.oracle_ratio
+        ));
+    }
+    if r.oracle.total_ms > 0.0 {
+        s.push_str(&format!(
+            "{:<14} {:>10.2} {:>54} (model: refit {:.2}, rebuild {:.2})\n",
+            "oracle",
+            r.oracle.total_ms,
+            format!("{} rebuilds", r.oracle.rebuilds),
+            r.oracle.model_refit_ms,
+            r.oracle.model_rebuild_ms
+        ));
+    }
+    s.push_str("* default policy\n");
+    s
+}
+
+/// The four charts of a report: `(file stem, chart)`.
+#[must_use]
+pub fn charts(r: &Report) -> Vec<(&'static str, crate::report::charts::Chart)> {
+    use crate::report::charts::{Chart, Series};
+    let by_policy = |f: &dyn Fn(&FrameRow) -> f64, marks: bool| -> Vec<Series> {
+        r.policies
+            .iter()
+            .map(|p| {
+                let rows: Vec<&FrameRow> = r
+                    .per_frame
+                    .iter()
+                    .filter(|x| x.policy == p.policy)
+                    .collect();
+                Series {
+                    name: format!("{}{}", p.policy, if p.default { " *" } else { "" }),
+                    points: rows.iter().map(|x| (x.frame as f64, f(x))).collect(),
+                    line: true,
+                    marks: if marks {
+                        rows.iter()
+                            .filter(|x| x.rebuilds > 0)
+                            .map(|x| (x.frame as f64, f(x)))
+                            .collect()
+                    } else {
+                        Vec::new()
+                    },
+                }
+            })
+            .collect()
+    };
+    let sah = Chart {
+        title: format!("SAH ratio to last build: {}", short(&r.source)),
+        x_label: "frame".into(),
+        y_label: "max SAH ratio".into(),
+        series: by_policy(&|x| f64::from(x.max_sah_ratio), true),
+        note: "rings: rebuilds".into(),
+        ..Chart::default()
+    };
+    let time = Chart {
+        title: format!("time per frame (update + trace): {}", short(&r.source)),
+        x_label: "frame".into(),
+        y_label: "ms".into(),
+        series: by_policy(&|x| x.update_ms + x.trace_ms, true),
+        log_y: true,
+        note: "rings: rebuilds".into(),
+        ..Chart::default()
+    };
+    let mut speed_series: Vec<Series> = Vec::new();
+    for p in &r.speed {
+        speed_series.push(Series {
+            name: format!("{} {}", p.kind, p.name),
+            points: vec![(p.update_ms_per_frame, p.trace_us_per_ray)],
+            line: false,
+            marks: Vec::new(),
+        });
+    }
+    let speed = Chart {
+        title: "speed against accuracy".into(),
+        x_label: "update ms per frame".into(),
+        y_label: "trace us per ray".into(),
+        series: speed_series,
+        log_x: true,
+        ..Chart::default()
+    };
+    let predicted = Chart {
+        title: "SAH-predicted against measured traversal cost".into(),
+        x_label: "predicted nodes + triangles per ray".into(),
+        y_label: "measured per ray".into(),
+        series: r
+            .policies
+            .iter()
+            .map(|p| Series {
+                name: p.policy.clone(),
+                points: r
+                    .per_frame
+                    .iter()
+                    .filter(|x| x.policy == p.policy)
+                    .map(|x| {
+                        (
+                            x.predicted_nodes_per_ray + x.predicted_tris_per_ray,
+                            x.nodes_per_ray + x.tris_per_ray,
+                        )
+                    })
+                    .collect(),
+                line: false,
+                marks: Vec::new(),
+            })
+            .collect(),
+        diagonal: true,
+        note: "grey: y = x".into(),
+        ..Chart::default()
+    };
+    vec![
+        ("sah_ratio", sah),
+        ("frame_time", time),
+        ("speed_accuracy", speed),
+        ("predicted_vs_measured", predicted),
+    ]
+}
+
+fn short(s: &str) -> String {
+    std::path::Path::new(s)
+        .file_name()
+        .map_or_else(|| s.to_string(), |n| n.to_string_lossy().into_owned())
+}
