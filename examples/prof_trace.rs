@@ -6,7 +6,18 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
     let rays = dynbvh::io::read_rays(args.next().expect("rays").as_ref()).unwrap();
-    let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let ci: f32 = std::env::var("CI_COST")
+        .ok()
+        .map_or(1.0, |s| s.parse().unwrap());
+    let leaf: u32 = std::env::var("MAX_LEAF")
+        .ok()
+        .map_or(8, |s| s.parse().unwrap());
+    let params = BuildParams {
+        intersection_cost: ci,
+        max_leaf_size: leaf,
+        ..BuildParams::BINNED
+    };
+    let bvh = MeshBvh::build(&mesh, &params);
     let mut st = TraversalStats::default();
     for r in &rays {
         let _ = bvh.closest_hit_counted(r, &mut st);

@@ -244,3 +244,40 @@ fn exponentially_spaced_boxes_stay_within_the_depth_limit() {
         assert!(bvh.depth() <= MAX_DEPTH);
     }
 }
+
+/// Quality, not only correctness: binned SAH stays within 2% of the full sweep's SAH cost, and
+/// the median split is worse than both, on a smooth mesh and on a random soup.
+#[test]
+fn binned_sah_is_within_two_percent_of_full_sweep() {
+    let mut rng = Rng(21);
+    let soup: Vec<[Vec3; 3]> = (0..20_000)
+        .map(|_| {
+            let c = Vec3::new(rng.f(), rng.f(), rng.f());
+            [
+                c,
+                c + rng.unit_vector() * 0.01,
+                c + rng.unit_vector() * 0.01,
+            ]
+        })
+        .collect();
+    let meshes = [
+        ("sphere", dynbvh::geom::shapes::bumpy_sphere(30_000)),
+        ("soup", TriMesh::from_soup(&soup)),
+    ];
+    for (name, mesh) in &meshes {
+        let sah = |p: &BuildParams| MeshBvh::build(mesh, p).bvh().sah_cost();
+        let sweep = sah(&BuildParams::SWEEP);
+        let median = sah(&BuildParams::MEDIAN);
+        for k in [8, 16, 32] {
+            let binned = sah(&BuildParams::binned(k));
+            assert!(
+                binned <= sweep * 1.02,
+                "{name}: binned{k} {binned} vs sweep {sweep}"
+            );
+            assert!(
+                binned < median,
+                "{name}: binned{k} {binned} vs median {median}"
+            );
+        }
+    }
+}

@@ -39,6 +39,9 @@ const EMPTY_BIN: Bin = Bin {
     count: 0,
 };
 
+/// Bins on the three axes; only the first `k` of each axis are in use.
+pub(crate) type Bins = [[Bin; MAX_BINS]; 3];
+
 /// Maps doubled centroids to bin indices `0 .. bins` on each axis.
 #[derive(Clone, Copy)]
 struct BinMap {
@@ -47,48 +50,60 @@ struct BinMap {
     last: u32,
 }
 
+/// 1.5 * 2^23: adding it to a float in `[-0.5, 2^22)` leaves `2^22` plus the nearest integer
+/// in the mantissa.
+const ROUNDING_MAGIC: f32 = 12_582_912.0;
+
 impl BinMap {
+    /// Bin indices of a doubled centroid on each axis. Rounding `x - 0.5` to the nearest integer
+    /// through the mantissa is monotone and branch-free (unlike a saturating float-to-int cast);
+    /// any monotone map gives valid bins, and partitioning reads back the same indices.
     #[inline(always)]
     fn index(&self, c2: Vec3A) -> [usize; 3] {
-        let i = ((c2 - self.origin) * self.scale)
-            .as_uvec3()
-            .min(glam::UVec3::splat(self.last));
-        [i.x as usize, i.y as usize, i.z as usize]
+        let x = (c2 - self.origin) * self.scale + Vec3A::splat(ROUNDING_MAGIC - 0.5);
+        x.to_array().map(|f| {
+            let i = (f.to_bits() & 0x7f_ffff).wrapping_sub(1 << 22);
+            (i.min(self.last) as usize) & (MAX_BINS - 1)
+        })
     }
 }
 
-/// Adds `refs` to `bins` (`k` bins per axis, axis-major) and notes each reference's bins in it.
-fn bin_refs(refs: &mut [PrimRef], map: &BinMap, k: usize, bins: &mut [Bin]) {
-    let (bx, rest) = bins.split_at_mut(k);
-    let (by, bz) = rest.split_at_mut(k);
+/// Adds `refs` to `bins` and notes each reference's bins in it.
+fn bin_refs(refs: &mut [PrimRef], map: &BinMap, bins: &mut Bins) {
+    let [bx, by, bz] = bins;
     for r in refs {
         let (lo, hi) = (r.lo(), r.hi());
         let [ix, iy, iz] = map.index(lo + hi);
         r.bins = ix as u32 | (iy as u32) << 8 | (iz as u32) << 16;
-        for (bin, i) in [(&mut *bx, ix), (&mut *by, iy), (&mut *bz, iz)] {
-            let b = &mut bin[i];
+        for b in [&mut bx[ix], &mut by[iy], &mut bz[iz]] {
             b.b.grow(lo, hi);
             b.count += 1;
         }
     }
 }
 
-fn merge_bins(mut a: Vec<Bin>, b: Vec<Bin>) -> Vec<Bin> {
-    for (x, y) in a.iter_mut().zip(&b) {
-        x.b = x.b.union(y.b);
-        x.count += y.count;
+fn empty_bins() -> Box<Bins> {
+    Box::new([[EMPTY_BIN; MAX_BINS]; 3])
+}
+
+fn merge_bins(mut a: Box<Bins>, b: Box<Bins>, k: usize) -> Box<Bins> {
+    for (xa, xb) in a.iter_mut().zip(b.iter()) {
+        for (x, y) in xa[..k].iter_mut().zip(&xb[..k]) {
+            x.b = x.b.union(y.b);
+            x.count += y.count;
+        }
     }
     a
 }
 
 impl Splitter for Binned {
-    type Scratch = Vec<Bin>;
+    type Scratch = Box<Bins>;
 
-    fn scratch(&self) -> Vec<Bin> {
-        vec![EMPTY_BIN; 3 * self.bins]
+    fn scratch(&self) -> Box<Bins> {
+        empty_bins()
     }
 
-    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, bins: &mut Vec<Bin>) -> Option<Split> {
+    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, bins: &mut Box<Bins>) -> Option<Split> {
         let n = refs.len();
         // Small nodes get one bin per primitive at most: more bins could not separate more
         // centroids on average, and the per-node cost of sweeping empty bins would dominate.
@@ -102,8 +117,9 @@ impl Splitter for Binned {
         } else {
             2
         };
-        let usable =
-            |a: usize| ext[a] > 0.0 && ext[a].is_finite() && (self.all_axes || a == widest);
+        let usable = |a: usize| {
+            ext[a] > 0.0 && (k as f32 / ext[a]).is_finite() && (self.all_axes || a == widest)
+        };
         if !(0..3).any(usable) {
             return None;
         }
@@ -123,42 +139,44 @@ impl Splitter for Binned {
             *bins = refs
                 .par_chunks_mut(self.parallel_threshold)
                 .map(|c| {
-                    let mut b = vec![EMPTY_BIN; 3 * k];
-                    bin_refs(c, &map, k, &mut b);
+                    let mut b = empty_bins();
+                    bin_refs(c, &map, &mut b);
                     b
                 })
-                .reduce(|| vec![EMPTY_BIN; 3 * k], merge_bins);
+                .reduce(empty_bins, |a, b| merge_bins(a, b, k));
         } else {
-            bins.clear();
-            bins.resize(3 * k, EMPTY_BIN);
-            bin_refs(refs, &map, k, bins);
+            for axis in bins.iter_mut() {
+                axis[..k].fill(EMPTY_BIN);
+            }
+            bin_refs(refs, &map, bins);
         }
 
         // Compute costs for splitting after each bin: right-to-left areas and counts first,
-        // then a left-to-right sweep evaluates `A_L N_L + A_R N_R`.
+        // then a left-to-right sweep evaluates `A_L N_L + A_R N_R`. Empty bins change neither
+        // side, so their candidates repeat the previous one and are skipped.
         let mut best = (f32::INFINITY, 0usize, 0usize);
         let mut right_cost = [0f32; MAX_BINS];
         for axis in (0..3).filter(|&a| usable(a)) {
-            let bins = &bins[axis * k..(axis + 1) * k];
+            let bins = &bins[axis][..k];
             let mut acc = Box3::EMPTY;
             let mut count = 0u32;
+            let mut cost = f32::INFINITY;
             for i in (1..k).rev() {
-                acc = acc.union(bins[i].b);
-                count += bins[i].count;
-                right_cost[i - 1] = if count > 0 {
-                    acc.half_area() * count as f32
-                } else {
-                    f32::INFINITY
-                };
+                if bins[i].count > 0 {
+                    acc = acc.union(bins[i].b);
+                    count += bins[i].count;
+                    cost = acc.half_area() * count as f32;
+                }
+                right_cost[i - 1] = cost;
             }
             let mut acc = Box3::EMPTY;
             let mut count = 0u32;
             for (i, bin) in bins[..k - 1].iter().enumerate() {
-                acc = acc.union(bin.b);
-                count += bin.count;
-                if count == 0 {
+                if bin.count == 0 {
                     continue;
                 }
+                acc = acc.union(bin.b);
+                count += bin.count;
                 let cost = acc.half_area() * count as f32 + right_cost[i];
                 if cost < best.0 {
                     best = (cost, axis, i);
@@ -177,7 +195,7 @@ impl Splitter for Binned {
         }
         // Both sides' boxes are the unions of their bins; centroid bounds are gathered while
         // partitioning by the bins noted during binning.
-        let bins = &bins[axis * k..(axis + 1) * k];
+        let bins = &bins[axis][..k];
         let union = |b: &[Bin]| b.iter().fold(Box3::EMPTY, |acc, b| acc.union(b.b));
         let (lb, rb) = (union(&bins[..=bin]), union(&bins[bin + 1..]));
         let shift = 8 * axis as u32;
