@@ -681,8 +681,8 @@ fn load(dir: &Path, stem: &str) -> Option<Input> {
 /// A library with one build setting.
 struct Variant {
     name: &'static str,
-    /// Runs the whole measurement of this variant on an input.
-    run: fn(&Input) -> Row,
+    /// Starts the measurement of this variant on an input.
+    make: for<'a> fn(&'a Input) -> Box<dyn Measure + 'a>,
 }
 
 /// Hits that disagree with brute force on a sample.
@@ -756,81 +756,184 @@ fn check<A: Accel>(a: &A, c: &Checked) -> Mismatch {
     m
 }
 
-/// Builds (several times, keeping the last tree), traces, refits and checks one variant.
-fn measure<A: Accel>(input: &Input, build: impl Fn(A::Input) -> A) -> Row {
-    let mut times = Vec::new();
-    let mut accel = None;
-    while times.len() < BUILD_RUNS {
-        let prepared = A::prepare(&input.rest);
-        drop(accel.take());
+/// One variant's measurement, type-erased so that the harness can interleave the runs of all
+/// variants (run 1 of every variant, then run 2, ...): on a shared machine, a neighbour's load
+/// then falls on all of them alike.
+trait Measure {
+    /// Builds a new tree (dropping the previous one first); milliseconds.
+    fn build(&mut self) -> f64;
+    fn sah(&self) -> f64;
+    /// One pass of closest-hit queries over ray set `set`; Mrays/s.
+    fn trace(&self, set: usize) -> f64;
+    /// The current tree's hits against brute force on the rest pose's samples.
+    fn check(&self) -> Mismatch;
+    /// Refits to the deformed pose (timed, milliseconds) and back (untimed); the first time,
+    /// also the SAH and the hits after the refit. `None` when the variant cannot refit or the
+    /// input has no deformed pose.
+    fn refit(&mut self) -> Option<f64>;
+    /// SAH and brute-force check after the first refit.
+    fn after_refit(&self) -> (Option<f64>, Option<Mismatch>);
+}
+
+struct Gen<'a, A: Accel, F> {
+    input: &'a Input,
+    build_fn: F,
+    accel: Option<A>,
+    rays: Vec<Vec<A::R>>,
+    /// The rest and deformed poses in the library's form, made on the first refit.
+    poses: Option<(A::Input, A::Input)>,
+    sah_refit: Option<f64>,
+    check_refit: Option<Mismatch>,
+}
+
+fn measured<'a, A: Accel + 'a>(
+    input: &'a Input,
+    build_fn: impl Fn(A::Input) -> A + 'a,
+) -> Box<dyn Measure + 'a> {
+    Box::new(Gen {
+        input,
+        build_fn,
+        accel: None,
+        rays: input
+            .sets
+            .iter()
+            .map(|s| s.rays.iter().map(A::ray).collect())
+            .collect(),
+        poses: None,
+        sah_refit: None,
+        check_refit: None,
+    })
+}
+
+impl<A: Accel, F: Fn(A::Input) -> A> Measure for Gen<'_, A, F> {
+    fn build(&mut self) -> f64 {
+        let prepared = A::prepare(&self.input.rest);
+        self.accel = None;
         let t = Instant::now();
-        let a = build(prepared);
-        times.push(t.elapsed().as_secs_f64() * 1e3);
-        accel = Some(a);
-        if times.len() == 3 && median(times.clone()) > 1000.0 {
-            break;
-        }
-    }
-    let mut accel = accel.expect("built");
-    let build_ms = median(times);
-    let sah = accel.sah();
-
-    let mut mrays = Vec::new();
-    for set in &input.sets {
-        let rays: Vec<A::R> = set.rays.iter().map(A::ray).collect();
-        let mut runs = Vec::new();
-        for _ in 0..TRACE_RUNS {
-            let t = Instant::now();
-            let mut sum = 0.0f32;
-            for r in &rays {
-                if let Some((t, _)) = accel.closest(black_box(r)) {
-                    sum += t;
-                }
-            }
-            black_box(sum);
-            runs.push(rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
-        }
-        mrays.push(median(runs));
-    }
-    let mut m = Mismatch::default();
-    for set in &input.sets {
-        m.add(check(&accel, &set.check));
+        let a = (self.build_fn)(prepared);
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        self.accel = Some(a);
+        ms
     }
 
-    let (mut refit_ms, mut sah_refit, mut check_refit) = (None, None, None);
-    if let Some(def) = &input.deformed {
-        let rest = A::prepare(&input.rest);
-        let moved = A::prepare(def);
-        let mut runs = Vec::new();
-        for _ in 0..REFIT_RUNS {
-            let t = Instant::now();
-            if !accel.refit(&moved) {
-                break;
+    fn sah(&self) -> f64 {
+        self.accel.as_ref().expect("built").sah()
+    }
+
+    fn trace(&self, set: usize) -> f64 {
+        let accel = self.accel.as_ref().expect("built");
+        let rays = &self.rays[set];
+        let t = Instant::now();
+        let mut sum = 0.0f32;
+        for r in rays {
+            if let Some((t, _)) = accel.closest(black_box(r)) {
+                sum += t;
             }
-            runs.push(t.elapsed().as_secs_f64() * 1e3);
-            if sah_refit.is_none() {
-                sah_refit = Some(accel.sah());
-                let mut m = Mismatch::default();
-                for c in &input.def_checks {
-                    m.add(check(&accel, c));
-                }
-                check_refit = Some(m);
-            }
-            accel.refit(&rest);
         }
-        if !runs.is_empty() {
-            refit_ms = Some(median(runs));
+        black_box(sum);
+        rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6
+    }
+
+    fn check(&self) -> Mismatch {
+        let accel = self.accel.as_ref().expect("built");
+        let mut m = Mismatch::default();
+        for set in &self.input.sets {
+            m.add(check(accel, &set.check));
+        }
+        m
+    }
+
+    fn refit(&mut self) -> Option<f64> {
+        let def = self.input.deformed.as_ref()?;
+        let (rest, moved) = self
+            .poses
+            .get_or_insert_with(|| (A::prepare(&self.input.rest), A::prepare(def)));
+        let accel = self.accel.as_mut().expect("built");
+        let t = Instant::now();
+        if !accel.refit(moved) {
+            return None;
+        }
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        if self.sah_refit.is_none() {
+            self.sah_refit = Some(accel.sah());
+            let mut m = Mismatch::default();
+            for c in &self.input.def_checks {
+                m.add(check(accel, c));
+            }
+            self.check_refit = Some(m);
+        }
+        accel.refit(rest);
+        Some(ms)
+    }
+
+    fn after_refit(&self) -> (Option<f64>, Option<Mismatch>) {
+        (self.sah_refit, self.check_refit)
+    }
+}
+
+/// Measures the variants on one input, their runs interleaved.
+fn measure_all(input: &Input, variants: &[&Variant]) -> Vec<Row> {
+    let mut ms: Vec<Box<dyn Measure + '_>> = variants.iter().map(|v| (v.make)(input)).collect();
+    let n = ms.len();
+    let progress = |what: &str, t: Instant| {
+        eprintln!(
+            "  {}: {what} in {:.1} s",
+            input.name,
+            t.elapsed().as_secs_f64()
+        );
+    };
+
+    let t = Instant::now();
+    let mut builds = vec![Vec::new(); n];
+    for run in 0..BUILD_RUNS {
+        for (m, times) in ms.iter_mut().zip(&mut builds) {
+            // Three builds are enough for multi-second builders.
+            if run < 3 || median(times.clone()) < 1000.0 {
+                times.push(m.build());
+            }
         }
     }
-    Row {
-        build_ms,
-        sah,
-        mrays,
-        refit_ms,
-        sah_refit,
-        check: m,
-        check_refit,
+    progress("builds", t);
+
+    let t = Instant::now();
+    let mut traces = vec![vec![Vec::new(); input.sets.len()]; n];
+    for _ in 0..TRACE_RUNS {
+        for (m, per_set) in ms.iter().zip(&mut traces) {
+            for (set, runs) in per_set.iter_mut().enumerate() {
+                runs.push(m.trace(set));
+            }
+        }
     }
+    progress("traversal", t);
+    // SAH and hits of the freshly built trees, before any refit.
+    let sahs: Vec<f64> = ms.iter().map(|m| m.sah()).collect();
+    let checks: Vec<Mismatch> = ms.iter().map(|m| m.check()).collect();
+
+    let t = Instant::now();
+    let mut refits = vec![Vec::new(); n];
+    for _ in 0..REFIT_RUNS {
+        for (m, runs) in ms.iter_mut().zip(&mut refits) {
+            if let Some(ms) = m.refit() {
+                runs.push(ms);
+            }
+        }
+    }
+    progress("refits", t);
+
+    (0..n)
+        .map(|i| {
+            let (sah_refit, check_refit) = ms[i].after_refit();
+            Row {
+                build_ms: median(builds[i].clone()),
+                sah: sahs[i],
+                mrays: traces[i].iter().map(|r| median(r.clone())).collect(),
+                refit_ms: (!refits[i].is_empty()).then(|| median(refits[i].clone())),
+                sah_refit,
+                check: checks[i],
+                check_refit,
+            }
+        })
+        .collect()
 }
 
 fn variants() -> Vec<Variant> {
@@ -839,47 +942,47 @@ fn variants() -> Vec<Variant> {
     vec![
         Variant {
             name: "dynbvh binned16",
-            run: |i| {
-                measure(i, |m: TriMesh| {
+            make: |i| {
+                measured(i, |m: TriMesh| {
                     Dyn(MeshBvh::build(&m, &BuildParams::BINNED))
                 })
             },
         },
         Variant {
             name: "dynbvh median",
-            run: |i| {
-                measure(i, |m: TriMesh| {
+            make: |i| {
+                measured(i, |m: TriMesh| {
                     Dyn(MeshBvh::build(&m, &BuildParams::MEDIAN))
                 })
             },
         },
         Variant {
             name: "dynbvh sweep",
-            run: |i| measure(i, |m: TriMesh| Dyn(MeshBvh::build(&m, &BuildParams::SWEEP))),
+            make: |i| measured(i, |m: TriMesh| Dyn(MeshBvh::build(&m, &BuildParams::SWEEP))),
         },
         Variant {
             name: "obvhs fastest",
-            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::fastest_build()))),
+            make: |i| measured(i, |t| ObvhsA(ob::build(t, P::fastest_build()))),
         },
         Variant {
             name: "obvhs medium",
-            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::medium_build()))),
+            make: |i| measured(i, |t| ObvhsA(ob::build(t, P::medium_build()))),
         },
         Variant {
             name: "obvhs very_slow",
-            run: |i| measure(i, |t| ObvhsA(ob::build(t, P::very_slow_build()))),
+            make: |i| measured(i, |t| ObvhsA(ob::build(t, P::very_slow_build()))),
         },
         Variant {
             name: "bvh (SAH)",
-            run: |i| measure(i, |s| BvhA(bv::build(s))),
+            make: |i| measured(i, |s| BvhA(bv::build(s))),
         },
         Variant {
             name: "parry3d binned",
-            run: |i| measure(i, |t| ParryA(pa::build(t, S::Binned))),
+            make: |i| measured(i, |t| ParryA(pa::build(t, S::Binned))),
         },
         Variant {
             name: "parry3d ploc",
-            run: |i| measure(i, |t| ParryA(pa::build(t, S::Ploc))),
+            make: |i| measured(i, |t| ParryA(pa::build(t, S::Ploc))),
         },
     ]
 }
@@ -978,21 +1081,18 @@ fn main() {
             let Some(input) = load(&dir, stem) else {
                 continue;
             };
-            let mut rows = Vec::new();
-            for v in &variants {
-                // The first variant is the reference for the ratios: always run it.
-                if variant_filtered && !wanted(v.name) && !rows.is_empty() {
-                    continue;
-                }
-                let t = Instant::now();
-                let row = (v.run)(&input);
-                eprintln!(
-                    "  {stem} / {}: measured in {:.1} s",
-                    v.name,
-                    t.elapsed().as_secs_f64()
-                );
-                rows.push((v.name, row));
-            }
+            // The first variant is the reference for the ratios: always run it.
+            let chosen: Vec<&Variant> = variants
+                .iter()
+                .enumerate()
+                .filter(|(k, v)| *k == 0 || !variant_filtered || wanted(v.name))
+                .map(|(_, v)| v)
+                .collect();
+            let rows: Vec<(&str, Row)> = chosen
+                .iter()
+                .map(|v| v.name)
+                .zip(measure_all(&input, &chosen))
+                .collect();
             print_table(&input, &rows);
         }
     });
