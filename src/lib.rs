@@ -33,6 +33,7 @@ pub mod engine;
 pub mod error;
 pub mod geom;
 pub mod io;
+pub mod render;
 pub mod report;
 
 pub use error::{Error, Result};

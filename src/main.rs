@@ -28,6 +28,9 @@ enum Command {
     Pose(cli::pose::PoseArgs),
     /// Generate an animated test scene as .glb.
     Gen(cli::r#gen::GenArgs),
+    /// Render an animation's frames as PNGs (and a GIF): shaded, as traversal-work heat maps,
+    /// or under two policies side by side.
+    Render(cli::render::RenderArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -38,6 +41,7 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Info(a)) => cli::info::run(a),
         Some(Command::Pose(a)) => cli::pose::run(a),
         Some(Command::Gen(a)) => cli::r#gen::run(a),
+        Some(Command::Render(a)) => cli::render::run(a),
         None => Ok(()),
     }
 }

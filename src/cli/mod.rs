@@ -5,6 +5,7 @@ pub mod build_bench;
 pub mod r#gen;
 pub mod info;
 pub mod pose;
+pub mod render;
 
 use anyhow::Result;
 use std::path::Path;

@@ -1,0 +1,605 @@
+//! `dynbvh render`: an animation's frames as numbered PNGs (and an animated GIF), shaded or as
+//! traversal-work heat maps, under one policy or two side by side.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use dynbvh::anim::Scene;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::source::FrameSource;
+use dynbvh::engine::{Action, Engine, EngineConfig, Policy};
+use dynbvh::render::{
+    Camera, EngineShading, FrameCounts, GltfCamera, Renderer, Settings, Stage, animation_bounds,
+    font, gltf_cameras,
+};
+use image::RgbImage;
+use image::codecs::gif::{GifEncoder, Repeat};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::{BufWriter, IsTerminal};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `render`.
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// Animated glTF file (.glb/.gltf).
+    pub file: PathBuf,
+    /// Animation name or index (default: the first).
+    #[arg(long, short)]
+    pub animation: Option<String>,
+    /// Frames: a count N spread over one loop of the animation, or a range A..B (B excluded)
+    /// of the frames at --fps (default 30). Each run starts with a fresh build at its first
+    /// frame, so a long sequence can be split over processes. Default: every frame at --fps.
+    #[arg(long, value_name = "N|A..B")]
+    pub frames: Option<String>,
+    /// Frames per second of animation time (default 30).
+    #[arg(long)]
+    pub fps: Option<f32>,
+    /// Image size WxH.
+    #[arg(long, value_name = "WxH", default_value = "640x480")]
+    pub size: String,
+    /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized.
+    #[arg(long, short, default_value = "amortized")]
+    pub policy: String,
+    /// Output directory.
+    #[arg(long, default_value = "out/render")]
+    pub out: PathBuf,
+    /// Also write the sequence as one animated GIF.
+    #[arg(long)]
+    pub gif: bool,
+    /// Colour pixels by traversal work (nodes visited + triangles tested) instead of shading.
+    #[arg(long)]
+    pub heatmap: bool,
+    /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
+    #[arg(long, default_value_t = 200, value_name = "WORK")]
+    pub heat_max: u32,
+    /// Cast a shadow ray toward the key light from every lit point.
+    #[arg(long)]
+    pub shadows: bool,
+    /// Flat shading with geometric normals (default: smooth, interpolated vertex normals).
+    #[arg(long)]
+    pub flat: bool,
+    /// No ground plane under the scene.
+    #[arg(long)]
+    pub no_ground: bool,
+    /// Frame the animation automatically even when the file has a camera.
+    #[arg(long)]
+    pub auto_camera: bool,
+    /// Render every frame under two policies side by side (e.g. refit,rebuild).
+    #[arg(long, value_name = "P1,P2")]
+    pub compare: Option<String>,
+    /// Measure only: render without writing images and print each frame's timings.
+    #[arg(long)]
+    pub bench: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// Timings of one rendered frame of one policy, ms.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameTiming {
+    /// Frame index.
+    pub frame: usize,
+    /// Posing (engine's record).
+    pub pose_ms: f64,
+    /// Refit, rebuild and top-level update (without posing).
+    pub update_ms: f64,
+    /// Fresh build of the engine (first frame of a run only; includes posing).
+    pub build_ms: f64,
+    /// Vertex normals and instance normal matrices.
+    pub normals_ms: f64,
+    /// Primary and shadow rays with shading.
+    pub trace_ms: f64,
+    /// Wall time of all of the above.
+    pub total_ms: f64,
+    /// Rays cast.
+    pub counts: FrameCounts,
+    /// What the policy did.
+    pub action: Action,
+    /// Trace-weighted SAH ratio after the update.
+    pub sah_ratio: f32,
+}
+
+/// What a render run did.
+#[derive(Clone, Debug)]
+pub struct RenderSummary {
+    /// Where the images went (`None` in bench mode).
+    pub out: Option<PathBuf>,
+    /// Frames written as PNG.
+    pub pngs: Vec<PathBuf>,
+    /// The GIF, when asked.
+    pub gif: Option<PathBuf>,
+    /// Frame range rendered.
+    pub range: (usize, usize),
+    /// Per policy, its name and per-frame timings.
+    pub timings: Vec<(String, Vec<FrameTiming>)>,
+    /// Triangles in the scene.
+    pub triangles: usize,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Where the camera came from.
+    pub camera: String,
+}
+
+impl RenderSummary {
+    /// Frames per second of posing, updating and tracing of policy `k` over the frames after
+    /// the first (the first one builds), or over all when there is only one.
+    #[must_use]
+    pub fn fps(&self, k: usize) -> f64 {
+        let t = &self.timings[k].1;
+        let steady = if t.len() > 1 { &t[1..] } else { t };
+        let ms: f64 = steady.iter().map(|f| f.total_ms).sum();
+        if ms > 0.0 {
+            steady.len() as f64 * 1e3 / ms
+        } else {
+            0.0
+        }
+    }
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("size {s:?}: expected WxH"))?;
+    let (w, h): (u32, u32) = (w.trim().parse()?, h.trim().parse()?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        bail!("size {s:?}: sides must be within 1..=16384");
+    }
+    Ok((w, h))
+}
+
+/// The frame timeline and the range of it to render.
+fn timeline(
+    frames: Option<&str>,
+    fps: Option<f32>,
+) -> Result<(FrameTimes, Option<(usize, usize)>)> {
+    let fps = match fps {
+        Some(f) if f > 0.0 && f.is_finite() => Some(f),
+        Some(f) => bail!("--fps {f}: must be positive"),
+        None => None,
+    };
+    match frames {
+        None => Ok((FrameTimes::Fps(fps.unwrap_or(30.0)), None)),
+        Some(s) => {
+            if let Some((a, b)) = s.split_once("..") {
+                let a: usize = a
+                    .trim()
+                    .parse()
+                    .with_context(|| format!("--frames {s:?}: expected A..B"))?;
+                let b: usize = b
+                    .trim()
+                    .parse()
+                    .with_context(|| format!("--frames {s:?}: expected A..B"))?;
+                if b <= a {
+                    bail!("--frames {s:?}: the range is empty");
+                }
+                Ok((FrameTimes::Fps(fps.unwrap_or(30.0)), Some((a, b))))
+            } else {
+                if fps.is_some() {
+                    bail!(
+                        "--frames N and --fps both set the frame count: give one (or a range A..B with --fps)"
+                    );
+                }
+                let n: usize = s
+                    .trim()
+                    .parse()
+                    .with_context(|| format!("--frames {s:?}: expected N or A..B"))?;
+                if n == 0 {
+                    bail!("--frames 0: nothing to render");
+                }
+                Ok((FrameTimes::Count(n), None))
+            }
+        }
+    }
+}
+
+/// One policy's engine following the animation.
+struct Pipeline<'s> {
+    policy: Policy,
+    src: GltfSource<'s>,
+    engine: Option<Engine>,
+    shading: EngineShading,
+    renderer: Renderer,
+    img: RgbImage,
+    timings: Vec<FrameTiming>,
+}
+
+impl<'s> Pipeline<'s> {
+    fn new(
+        scene: &'s Scene,
+        anim: Option<usize>,
+        times: FrameTimes,
+        policy: Policy,
+        settings: Settings,
+    ) -> Result<Self> {
+        Ok(Self {
+            policy,
+            src: GltfSource::new(scene, anim, times)?,
+            engine: None,
+            shading: EngineShading::new(),
+            renderer: Renderer::new(settings),
+            img: RgbImage::new(settings.width, settings.height),
+            timings: Vec::new(),
+        })
+    }
+
+    /// Brings the engine to frame `f` (a fresh build on the first call).
+    fn step(&mut self, f: usize) -> FrameTiming {
+        let t0 = Instant::now();
+        let mut timing = FrameTiming {
+            frame: f,
+            ..FrameTiming::default()
+        };
+        match &mut self.engine {
+            None => {
+                let config = EngineConfig {
+                    policy: self.policy,
+                    ..EngineConfig::default()
+                };
+                self.engine = Some(self.src.build(f, config));
+                timing.build_ms = ms(t0);
+                timing.action = Action::Rebuild;
+                timing.sah_ratio = 1.0;
+            }
+            Some(e) => {
+                self.src.advance(e, f);
+                let s = *e.update();
+                timing.pose_ms = s.pose_ms;
+                timing.update_ms = s.update_ms - s.pose_ms;
+                timing.action = s.action;
+                timing.sah_ratio = s.sah_ratio;
+            }
+        }
+        let engine = self.engine.as_ref().expect("built above");
+        let t1 = Instant::now();
+        if timing.build_ms > 0.0 {
+            self.shading.refresh_all(engine);
+        } else {
+            self.shading.refresh(engine, self.src.deforming());
+        }
+        timing.normals_ms = ms(t1);
+        timing.total_ms = ms(t0);
+        timing
+    }
+
+    fn render(&mut self, stage: &Stage, mut timing: FrameTiming) {
+        let engine = self.engine.as_ref().expect("stepped first");
+        let t = Instant::now();
+        timing.counts = self
+            .renderer
+            .render(&self.shading.tracer(engine), stage, &mut self.img);
+        timing.trace_ms = ms(t);
+        timing.total_ms += timing.trace_ms;
+        self.timings.push(timing);
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Runs `render`.
+pub fn run(a: RenderArgs) -> Result<()> {
+    let s = execute(&a)?;
+    print_summary(&s, a.bench);
+    Ok(())
+}
+
+/// Prints where the images went and the speed of each policy.
+pub fn print_summary(s: &RenderSummary, per_frame: bool) {
+    for (k, (name, t)) in s.timings.iter().enumerate() {
+        if per_frame {
+            println!(
+                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms   rays  SAH ratio"
+            );
+            for f in t {
+                println!(
+                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:6}  {:.3}",
+                    f.frame,
+                    f.action.name(),
+                    f.build_ms,
+                    f.pose_ms,
+                    f.update_ms,
+                    f.normals_ms,
+                    f.trace_ms,
+                    f.total_ms,
+                    f.counts.primary + f.counts.shadow,
+                    f.sah_ratio
+                );
+            }
+        }
+        let steady = if t.len() > 1 { &t[1..] } else { &t[..] };
+        let n = steady.len().max(1) as f64;
+        let mean = |g: fn(&FrameTiming) -> f64| steady.iter().map(g).sum::<f64>() / n;
+        let rays = mean(|f| (f.counts.primary + f.counts.shadow) as f64);
+        let trace = mean(|f| f.trace_ms);
+        println!(
+            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps (pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame over frames after the first; {:.0} rays/frame, {:.1} Mrays/s)",
+            t.len(),
+            s.range.0,
+            s.range.1,
+            s.size.0,
+            s.size.1,
+            s.triangles,
+            s.fps(k),
+            mean(|f| f.pose_ms),
+            mean(|f| f.update_ms),
+            mean(|f| f.normals_ms),
+            trace,
+            mean(|f| f.total_ms),
+            rays,
+            if trace > 0.0 {
+                rays / (trace * 1e3)
+            } else {
+                0.0
+            },
+        );
+    }
+    println!("camera: {}", s.camera);
+    if let Some(out) = &s.out {
+        println!("wrote {} PNG frame(s) to {}", s.pngs.len(), out.display());
+    }
+    if let Some(g) = &s.gif {
+        println!("wrote {}", g.display());
+    }
+}
+
+/// Renders as `a` asks and returns what was done.
+pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("setting up the thread pool")?;
+    }
+    let (w, h) = parse_size(&a.size)?;
+    let (times, range) = timeline(a.frames.as_deref(), a.fps)?;
+    let policies: Vec<Policy> = match &a.compare {
+        Some(c) => {
+            let p: Vec<Policy> = c
+                .split(',')
+                .map(|p| p.parse::<Policy>().map_err(anyhow::Error::from))
+                .collect::<Result<_>>()?;
+            if p.len() != 2 {
+                bail!("--compare {c:?}: expected two policies, e.g. refit,rebuild");
+            }
+            p
+        }
+        None => vec![a.policy.parse::<Policy>()?],
+    };
+
+    let (scene, warnings) = Scene::load(&a.file)?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let anim = match &a.animation {
+        Some(k) => Some(
+            scene
+                .find_animation(k)
+                .with_context(|| format!("{}: no animation {k:?}", a.file.display()))?,
+        ),
+        None if scene.animations.is_empty() => None,
+        None => Some(0),
+    };
+    let settings = Settings {
+        width: w,
+        height: h,
+        smooth: !a.flat,
+        shadows: a.shadows,
+        heatmap: a.heatmap.then_some(a.heat_max),
+    };
+    let mut pipes: Vec<Pipeline<'_>> = policies
+        .iter()
+        .map(|&p| Pipeline::new(&scene, anim, times, p, settings))
+        .collect::<Result<_>>()?;
+    // The last timeline entry is the animation's end: the same pose as its start when it
+    // loops, so a full run stops before it; a range may include it.
+    let last = pipes[0].src.frames();
+    let (start, end) = match range {
+        Some((s, e)) if e > last + 1 => bail!(
+            "--frames {s}..{e}: the animation has frames 0..{} at this rate",
+            last + 1
+        ),
+        Some(r) => r,
+        None => (0, last.max(1)),
+    };
+    let frame_ms = match times {
+        FrameTimes::Fps(f) => 1000.0 / f64::from(f),
+        FrameTimes::Count(n) => {
+            let d = anim.map_or(0.0, |k| scene.animations[k].duration);
+            if d > 0.0 {
+                f64::from(d) * 1000.0 / n as f64
+            } else {
+                100.0
+            }
+        }
+    };
+
+    // The camera: the file's own, else framed on the whole animation (the same for every
+    // range, so that split runs join up).
+    let bounds = animation_bounds(&scene, anim, pipes[0].src.times())?;
+    let file_camera: Option<GltfCamera> = if a.auto_camera {
+        None
+    } else {
+        match gltf_cameras(&scene) {
+            Ok(c) => c.into_iter().next(),
+            Err(e) => {
+                eprintln!("warning: reading the file's cameras: {e}; framing automatically");
+                None
+            }
+        }
+    };
+    let aspect = w as f32 / h as f32;
+    let camera_note = match &file_camera {
+        Some(c) => format!(
+            "the file's camera {} (node {})",
+            c.name.as_deref().unwrap_or("(unnamed)"),
+            c.node
+        ),
+        None => "framed on the animation's bounds".to_string(),
+    };
+    let mut stage: Option<Stage> = None;
+
+    let out = (!a.bench).then(|| a.out.clone());
+    if let Some(o) = &out {
+        std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
+    }
+    let stem = match (&a.compare, a.heatmap) {
+        (Some(_), _) => "compare",
+        (None, true) => "heatmap",
+        (None, false) => "frame",
+    };
+    let partial = range.is_some();
+    let gif_path = out.as_ref().filter(|_| a.gif).map(|o| {
+        if partial {
+            o.join(format!("{stem}_{start:04}-{end:04}.gif"))
+        } else {
+            o.join(format!("{stem}.gif"))
+        }
+    });
+    let mut gif = match &gif_path {
+        Some(p) => {
+            let f =
+                std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
+            let mut g = GifEncoder::new_with_speed(BufWriter::new(f), 20);
+            g.set_repeat(Repeat::Infinite)?;
+            Some(g)
+        }
+        None => None,
+    };
+    let delay = image::Delay::from_numer_denom_ms((frame_ms * 100.0).round() as u32, 100);
+
+    let bar = if std::io::stderr().is_terminal() && !a.bench && end - start > 1 {
+        let b = ProgressBar::new((end - start) as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{msg} {wide_bar} {pos}/{len} frames, {per_sec}, eta {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b.set_message("rendering");
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut pngs = Vec::new();
+    let mut composed = RgbImage::new(1, 1);
+    for f in start..end {
+        let mut stepped = Vec::with_capacity(pipes.len());
+        for p in &mut pipes {
+            stepped.push(p.step(f));
+        }
+        let camera = match &file_camera {
+            Some(c) => {
+                Camera::from_node(&pipes[0].src.poser().world_matrices()[c.node], c.projection)
+            }
+            None => Camera::framing(&bounds, aspect),
+        };
+        let st = stage.get_or_insert_with(|| Stage::new(camera, &bounds, !a.no_ground));
+        st.camera = camera;
+        for (p, t) in pipes.iter_mut().zip(stepped) {
+            p.render(st, t);
+        }
+        if out.is_none() {
+            bar.inc(1);
+            continue;
+        }
+        let img: &RgbImage = if pipes.len() == 1 {
+            if a.heatmap {
+                let p = &mut pipes[0];
+                let t = p.timings.last().copied().unwrap_or_default();
+                label(&mut p.img, &p.policy, &t, true);
+            }
+            &pipes[0].img
+        } else {
+            compose(&mut pipes, &mut composed, a.heatmap);
+            &composed
+        };
+        if let Some(o) = &out {
+            let path = o.join(format!("{stem}_{f:04}.png"));
+            img.save(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+            pngs.push(path);
+        }
+        if let Some(g) = &mut gif {
+            let rgba = image::DynamicImage::ImageRgb8(img.clone()).into_rgba8();
+            g.encode_frame(image::Frame::from_parts(rgba, 0, 0, delay))
+                .context("encoding the GIF")?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    drop(gif);
+    Ok(RenderSummary {
+        out,
+        pngs,
+        gif: gif_path,
+        range: (start, end),
+        timings: pipes
+            .into_iter()
+            .map(|p| (p.policy.to_string(), p.timings))
+            .collect(),
+        triangles: scene.triangle_count(),
+        size: (w, h),
+        camera: camera_note,
+    })
+}
+
+/// Writes what a frame did into its top-left corner.
+fn label(img: &mut RgbImage, policy: &Policy, t: &FrameTiming, heat: bool) {
+    let scale = (img.height() / 240).max(1);
+    let m = i64::from(4 * scale);
+    let mut text = format!(
+        "{}  FRAME {}  {}  SAH X{:.2}",
+        policy,
+        t.frame,
+        t.action.name(),
+        t.sah_ratio
+    );
+    if heat {
+        text.push_str(&format!("  WORK/PX {:.0}", t.counts.work_per_pixel()));
+    }
+    font::draw_label(img, m, m, scale, &text, [255, 255, 255]);
+}
+
+/// The pipelines' images side by side, labelled, separated by a dark gap.
+fn compose(pipes: &mut [Pipeline<'_>], out: &mut RgbImage, heat: bool) {
+    let (w, h) = pipes[0].img.dimensions();
+    let gap = 4;
+    let total_w = w * pipes.len() as u32 + gap * (pipes.len() as u32 - 1);
+    if out.dimensions() != (total_w, h) {
+        *out = RgbImage::new(total_w, h);
+    }
+    for px in out.pixels_mut() {
+        px.0 = [20, 20, 24];
+    }
+    for (k, p) in pipes.iter_mut().enumerate() {
+        let t = p.timings.last().copied().unwrap_or_default();
+        label(&mut p.img, &p.policy, &t, heat);
+        let x0 = k as u32 * (w + gap);
+        image::imageops::replace(out, &p.img, i64::from(x0), 0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_parse() {
+        assert_eq!(
+            timeline(Some("12"), None).unwrap(),
+            (FrameTimes::Count(12), None)
+        );
+        assert_eq!(
+            timeline(Some("100..200"), Some(24.0)).unwrap(),
+            (FrameTimes::Fps(24.0), Some((100, 200)))
+        );
+        assert_eq!(timeline(None, None).unwrap(), (FrameTimes::Fps(30.0), None));
+        assert!(timeline(Some("5..5"), None).is_err());
+        assert!(timeline(Some("12"), Some(10.0)).is_err());
+        assert!(timeline(Some("x"), None).is_err());
+        assert_eq!(parse_size("96x72").unwrap(), (96, 72));
+        assert!(parse_size("0x5").is_err());
+    }
+}

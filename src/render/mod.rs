@@ -1,0 +1,78 @@
+//! Rendering animated scenes: frames traced through the engine's trees (or brute force, as a
+//! reference), shaded with smooth or flat normals, a key light with shadow rays, ambient light
+//! and a ground; or coloured by the traversal work each pixel cost (heat maps), so that refitted
+//! and rebuilt trees can be compared at a glance.
+//!
+//! ```no_run
+//! use dynbvh::anim::Scene;
+//! use dynbvh::engine::EngineConfig;
+//! use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+//! use dynbvh::engine::source::FrameSource;
+//! use dynbvh::render::{Camera, EngineShading, Renderer, Settings, Stage, animation_bounds};
+//!
+//! let (scene, _) = Scene::load("animations/explode.glb")?;
+//! let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(30))?;
+//! let bounds = animation_bounds(&scene, Some(0), src.times())?;
+//! let settings = Settings::default();
+//! let camera = Camera::framing(&bounds, settings.width as f32 / settings.height as f32);
+//! let stage = Stage::new(camera, &bounds, true);
+//! let mut engine = src.build(0, EngineConfig::default());
+//! let mut shading = EngineShading::new();
+//! shading.refresh_all(&engine);
+//! let mut renderer = Renderer::new(settings);
+//! let mut img = image::RgbImage::new(1, 1);
+//! for f in 0..30 {
+//!     if f > 0 {
+//!         src.advance(&mut engine, f);
+//!         engine.update();
+//!         shading.refresh(&engine, src.deforming());
+//!     }
+//!     renderer.render(&shading.tracer(&engine), &stage, &mut img);
+//!     img.save(format!("frame_{f:04}.png")).unwrap();
+//! }
+//! # Ok::<(), dynbvh::Error>(())
+//! ```
+
+mod camera;
+pub mod font;
+mod frame;
+mod shade;
+mod trace;
+
+pub use camera::{
+    AUTO_VIEW_DIR, AUTO_YFOV_DEGREES, Camera, GltfCamera, Projection, RayGen, gltf_cameras,
+};
+pub use frame::{FrameCounts, Renderer, Settings, TILE, draw_heat_legend};
+pub use shade::{Ground, Stage, heat_color, srgb_to_linear, to_srgb};
+pub use trace::{BruteForce, EngineShading, EngineTracer, Surface, Tracer, vertex_normals};
+
+use crate::anim::Scene;
+use crate::error::Result;
+use crate::geom::Aabb;
+use glam::Affine3A;
+
+/// Box of every instance's triangles over the poses of animation `anim` at `times` (the
+/// rest pose when `times` is empty): the automatic camera frames it, so that it does not
+/// move from frame to frame, and every process rendering a part of the sequence frames the
+/// same view.
+pub fn animation_bounds(scene: &Scene, anim: Option<usize>, times: &[f32]) -> Result<Aabb> {
+    let mut poser = scene.poser(anim)?;
+    let mut b = Aabb::EMPTY;
+    let rest = [0.0];
+    let times = if times.is_empty() { &rest[..] } else { times };
+    for &t in times {
+        poser.pose(t);
+        for i in 0..scene.instances.len() {
+            let m = Affine3A::from_mat4(poser.transform(i));
+            let used = poser.indices(i).iter().flatten();
+            let pos = poser.positions(i);
+            for &v in used {
+                let p = m.transform_point3(pos[v as usize]);
+                if p.is_finite() {
+                    b = b.grow(p);
+                }
+            }
+        }
+    }
+    Ok(b)
+}

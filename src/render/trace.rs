@@ -1,0 +1,313 @@
+//! What the renderer asks of a scene: the closest surface along a ray (with its normals) and
+//! whether anything blocks a ray. Two answers: the engine's two-level trees, and brute force
+//! over a flat triangle list (the reference the engine's pictures are checked against).
+
+use crate::bvh::TraversalStats;
+use crate::engine::{Engine, MeshId};
+use crate::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use glam::{Mat3A, Vec3, Vec3A};
+use std::ops::Range;
+
+/// A ray's closest surface, as shading needs it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    /// Distance along the ray.
+    pub t: f32,
+    /// Geometric normal in world space (not normalised; either side).
+    pub geometric: Vec3,
+    /// Shading normal in world space: interpolated vertex normals, or the geometric normal
+    /// (not normalised; either side).
+    pub shading: Vec3,
+    /// Instance hit (picks the material colour).
+    pub instance: u32,
+}
+
+/// A scene rays can be cast into.
+pub trait Tracer: Sync {
+    /// The closest surface along `ray` in `[ray.tmin, ray.tmax)`; with `work`, adds the nodes
+    /// visited and triangles tested.
+    fn closest(
+        &self,
+        ray: &Ray,
+        smooth: bool,
+        work: Option<&mut TraversalStats>,
+    ) -> Option<Surface>;
+    /// True when something lies along `ray` in `[ray.tmin, ray.tmax)`.
+    fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool;
+}
+
+/// Area-weighted vertex normals of the triangles, unit length (zero for vertices of no
+/// non-degenerate triangle), written into `out` (resized; no allocation once it is large
+/// enough).
+pub fn vertex_normals(positions: &[Vec3], indices: &[[u32; 3]], out: &mut Vec<Vec3>) {
+    out.clear();
+    out.resize(positions.len(), Vec3::ZERO);
+    for t in indices {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        // The cross product's length is twice the area: the weighting comes for free.
+        let n = (b - a).cross(c - a);
+        if n.is_finite() {
+            for &i in t {
+                out[i as usize] += n;
+            }
+        }
+    }
+    for n in out.iter_mut() {
+        *n = n.normalize_or_zero();
+    }
+}
+
+/// Geometric and shading normals of triangle `tri` at barycentrics `(u, v)` in its own space.
+#[inline]
+fn local_normals(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    tri: [u32; 3],
+    u: f32,
+    v: f32,
+    smooth: bool,
+) -> (Vec3, Vec3) {
+    let [i0, i1, i2] = tri.map(|i| i as usize);
+    let (p0, p1, p2) = (positions[i0], positions[i1], positions[i2]);
+    let ng = (p1 - p0).cross(p2 - p0);
+    let ns = if smooth {
+        let n = normals[i0] * (1.0 - u - v) + normals[i1] * u + normals[i2] * v;
+        if n.length_squared() > 0.0 { n } else { ng }
+    } else {
+        ng
+    };
+    (ng, ns)
+}
+
+/// Per-mesh vertex normals and per-instance normal matrices of an [`Engine`], kept up to date
+/// frame by frame in reused buffers.
+#[derive(Default)]
+pub struct EngineShading {
+    normals: Vec<Vec<Vec3>>,
+    /// Inverse transpose of each instance's linear part; `None` for the identity.
+    normal_mats: Vec<Option<Mat3A>>,
+}
+
+impl EngineShading {
+    /// Nothing computed yet; call [`EngineShading::refresh_all`].
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Recomputes the normals of every mesh (after a build) and the instance matrices.
+    pub fn refresh_all(&mut self, engine: &Engine) {
+        self.normals.resize_with(engine.mesh_count(), Vec::new);
+        for m in 0..engine.mesh_count() {
+            let id = MeshId(m as u32);
+            vertex_normals(
+                engine.positions(id),
+                engine.indices(id),
+                &mut self.normals[m],
+            );
+        }
+        self.refresh_instances(engine);
+    }
+
+    /// Recomputes the normals of `meshes` (the ones written this frame) and the instance
+    /// matrices.
+    pub fn refresh(&mut self, engine: &Engine, meshes: &[MeshId]) {
+        if self.normals.len() != engine.mesh_count() {
+            self.refresh_all(engine);
+            return;
+        }
+        for &id in meshes {
+            vertex_normals(
+                engine.positions(id),
+                engine.indices(id),
+                &mut self.normals[id.0 as usize],
+            );
+        }
+        self.refresh_instances(engine);
+    }
+
+    fn refresh_instances(&mut self, engine: &Engine) {
+        self.normal_mats.clear();
+        for i in 0..engine.instance_count() {
+            let m = engine
+                .transform(crate::engine::InstanceId(i as u32))
+                .matrix3;
+            self.normal_mats.push(if m == Mat3A::IDENTITY {
+                None
+            } else {
+                let det = m.determinant();
+                (det != 0.0 && det.is_finite()).then(|| m.inverse().transpose())
+            });
+        }
+    }
+
+    /// A tracer over `engine` with these normals (refreshed for the engine's current pose).
+    #[must_use]
+    pub fn tracer<'a>(&'a self, engine: &'a Engine) -> EngineTracer<'a> {
+        EngineTracer {
+            engine,
+            shading: self,
+        }
+    }
+}
+
+/// [`Tracer`] over an [`Engine`]'s two-level trees.
+pub struct EngineTracer<'a> {
+    engine: &'a Engine,
+    shading: &'a EngineShading,
+}
+
+impl Tracer for EngineTracer<'_> {
+    #[inline]
+    fn closest(
+        &self,
+        ray: &Ray,
+        smooth: bool,
+        work: Option<&mut TraversalStats>,
+    ) -> Option<Surface> {
+        let e = self.engine;
+        let h = match work {
+            Some(w) => e.closest_hit_counted(ray, w),
+            None => e.closest_hit(ray),
+        }?;
+        let mesh = e.instance_mesh(h.instance);
+        let tri = e.indices(mesh)[h.prim as usize];
+        let (ng, ns) = local_normals(
+            e.positions(mesh),
+            &self.shading.normals[mesh.0 as usize],
+            tri,
+            h.u,
+            h.v,
+            smooth,
+        );
+        let (geometric, shading) = match self
+            .shading
+            .normal_mats
+            .get(h.instance.0 as usize)
+            .copied()
+            .flatten()
+        {
+            Some(m) => (
+                Vec3::from(m * Vec3A::from(ng)),
+                Vec3::from(m * Vec3A::from(ns)),
+            ),
+            None => (ng, ns),
+        };
+        Some(Surface {
+            t: h.t,
+            geometric,
+            shading,
+            instance: h.instance.0,
+        })
+    }
+
+    #[inline]
+    fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool {
+        match work {
+            Some(w) => self.engine.any_hit_counted(ray, w),
+            None => self.engine.any_hit(ray),
+        }
+    }
+}
+
+/// [`Tracer`] testing every triangle of a flat world-space mesh: slow, obviously right.
+pub struct BruteForce<'a> {
+    mesh: &'a TriMesh,
+    normals: Vec<Vec3>,
+    /// First triangle of each instance, ascending.
+    instance_starts: Vec<usize>,
+}
+
+impl<'a> BruteForce<'a> {
+    /// Over `mesh`, whose instances own the triangle ranges `instances` (as
+    /// [`crate::anim::Scene::instance_triangle_ranges`] gives; empty: one instance).
+    #[must_use]
+    pub fn new(mesh: &'a TriMesh, instances: &[Range<usize>]) -> Self {
+        let mut normals = Vec::new();
+        vertex_normals(&mesh.positions, &mesh.indices, &mut normals);
+        Self {
+            mesh,
+            normals,
+            instance_starts: instances.iter().map(|r| r.start).collect(),
+        }
+    }
+}
+
+impl Tracer for BruteForce<'_> {
+    fn closest(
+        &self,
+        ray: &Ray,
+        smooth: bool,
+        mut work: Option<&mut TraversalStats>,
+    ) -> Option<Surface> {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let mut best: Option<(f32, f32, f32, usize)> = None;
+        for (i, t) in self.mesh.indices.iter().enumerate() {
+            let [a, b, c] = t.map(|k| self.mesh.positions[k as usize]);
+            let tmax = best.map_or(ray.tmax, |h| h.0);
+            if let Some(w) = work.as_deref_mut() {
+                w.prims += 1;
+            }
+            if let Some((t, u, v)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
+                best = Some((t, u, v, i));
+            }
+        }
+        let (t, u, v, i) = best?;
+        let (geometric, shading) = local_normals(
+            &self.mesh.positions,
+            &self.normals,
+            self.mesh.indices[i],
+            u,
+            v,
+            smooth,
+        );
+        let instance = self
+            .instance_starts
+            .partition_point(|&s| s <= i)
+            .saturating_sub(1) as u32;
+        Some(Surface {
+            t,
+            geometric,
+            shading,
+            instance,
+        })
+    }
+
+    fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let mut tested = 0u64;
+        let hit = self.mesh.indices.iter().any(|t| {
+            tested += 1;
+            let [a, b, c] = t.map(|k| self.mesh.positions[k as usize]);
+            intersect_triangle(ray, &pre, a, b, c, ray.tmax).is_some()
+        });
+        if let Some(w) = work {
+            w.prims += tested;
+        }
+        hit
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normals_of_a_tent_are_area_weighted() {
+        // Two triangles sharing the edge 0-1; the bigger one dominates the shared vertices.
+        let p = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(0.0, 3.0, 0.0),
+        ];
+        let idx = vec![[0, 1, 2], [0, 1, 3]];
+        let mut n = Vec::new();
+        vertex_normals(&p, &idx, &mut n);
+        // Triangle 0: normal +y with twice-area 1; triangle 1: normal +z with twice-area 3.
+        let expect = Vec3::new(0.0, 1.0, 3.0).normalize();
+        assert!((n[0] - expect).length() < 1e-6);
+        assert!((n[2] - Vec3::Y).length() < 1e-6);
+        assert!((n[3] - Vec3::Z).length() < 1e-6);
+    }
+}
