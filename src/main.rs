@@ -42,6 +42,6 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Pose(a)) => cli::pose::run(a),
         Some(Command::Gen(a)) => cli::r#gen::run(a),
         Some(Command::Render(a)) => cli::render::run(a),
-        None => Ok(()),
+        None => cli::default_job::run(),
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod build_bench;
+pub mod default_job;
 pub mod r#gen;
 pub mod info;
 pub mod pose;

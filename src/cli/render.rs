@@ -50,7 +50,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub heatmap: bool,
     /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
-    #[arg(long, default_value_t = 200, value_name = "WORK")]
+    #[arg(long, default_value_t = 150, value_name = "WORK")]
     pub heat_max: u32,
     /// Cast a shadow ray toward the key light from every lit point.
     #[arg(long)]
@@ -242,10 +242,12 @@ impl<'s> Pipeline<'s> {
                 timing.sah_ratio = 1.0;
             }
             Some(e) => {
+                // Timed here: the engine's update starts a new record without the pose time.
                 self.src.advance(e, f);
+                timing.pose_ms = ms(t0);
+                let t = Instant::now();
                 let s = *e.update();
-                timing.pose_ms = s.pose_ms;
-                timing.update_ms = s.update_ms - s.pose_ms;
+                timing.update_ms = ms(t);
                 timing.action = s.action;
                 timing.sah_ratio = s.sah_ratio;
             }
@@ -290,11 +292,11 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
     for (k, (name, t)) in s.timings.iter().enumerate() {
         if per_frame {
             println!(
-                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms   rays  SAH ratio"
+                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms   rays  SAH ratio  work/px  max work"
             );
             for f in t {
                 println!(
-                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:6}  {:.3}",
+                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:6}  {:9.3}  {:7.1}  {:8}",
                     f.frame,
                     f.action.name(),
                     f.build_ms,
@@ -304,7 +306,9 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
                     f.trace_ms,
                     f.total_ms,
                     f.counts.primary + f.counts.shadow,
-                    f.sah_ratio
+                    f.sah_ratio,
+                    f.counts.work_per_pixel(),
+                    f.counts.max_work
                 );
             }
         }

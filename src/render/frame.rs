@@ -52,6 +52,10 @@ pub struct FrameCounts {
     pub hits: u64,
     /// Traversal work, counted in heat-map mode only.
     pub work: TraversalStats,
+    /// Pixels that cost any traversal work (heat-map mode).
+    pub worked: u64,
+    /// Most work of one pixel (heat-map mode).
+    pub max_work: u64,
 }
 
 impl FrameCounts {
@@ -60,13 +64,15 @@ impl FrameCounts {
         self.shadow += o.shadow;
         self.hits += o.hits;
         self.work += o.work;
+        self.worked += o.worked;
+        self.max_work = self.max_work.max(o.max_work);
         self
     }
 
-    /// Mean work (nodes plus triangles) per pixel, in heat-map mode.
+    /// Mean work (nodes plus triangles) over the pixels that cost any, in heat-map mode.
     #[must_use]
     pub fn work_per_pixel(&self) -> f64 {
-        (self.work.nodes + self.work.prims) as f64 / self.primary.max(1) as f64
+        (self.work.nodes + self.work.prims) as f64 / self.worked.max(1) as f64
     }
 }
 
@@ -219,7 +225,10 @@ fn pixel<T: Tracer>(
     match s.heatmap {
         Some(max) => {
             c.work += work;
-            heat_color((work.nodes + work.prims) as f32, max as f32)
+            let w = work.nodes + work.prims;
+            c.worked += u64::from(w > 0);
+            c.max_work = c.max_work.max(w);
+            heat_color(w as f32, max as f32)
         }
         None => to_srgb(color),
     }
