@@ -33,8 +33,19 @@ enum Command {
     Render(cli::render::RenderArgs),
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    // Errors are printed as one line of causes, without a backtrace: they describe bad input,
+    // not a bug.
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Some(Command::BuildBench(a)) => cli::build_bench::run(a),
         Some(Command::Bench(a)) => cli::bench::run(a),
