@@ -3,6 +3,7 @@
 //! best schedule in hindsight, and the frame sources (glTF animations, generated meshes) that
 //! drive it.
 
+pub mod estimate;
 pub mod gltf;
 pub mod oracle;
 pub mod policy;

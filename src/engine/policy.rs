@@ -1,9 +1,17 @@
 //! When to rebuild a deforming mesh's tree instead of refitting it.
 //!
-//! Every policy but `rebuild` refits first (the refitted tree's SAH cost is what the degradation
-//! is measured on), then may rebuild. The SAH ratio is the refitted tree's cost over the cost the
-//! tree had right after its last (re)build.
-
+//! Every policy but `rebuild` refits first, then may rebuild. Two ratios measure a refitted
+//! tree's degradation:
+//! - the **last-build ratio**: its SAH cost over the cost right after its last (re)build
+//!   (reported as `sah_ratio`; what `threshold:R` compares with R);
+//! - the **fresh ratio**: its SAH cost over the cost a rebuild would reach *now*, estimated by a
+//!   quick build over a subsample of the triangles calibrated at the last build
+//!   ([`super::estimate::FreshSah`]); what `amortized` decides on. The two differ when a fresh
+//!   tree's own cost moves: on `animations/explode.glb` a fresh build's SAH falls from 28 to 22
+//!   while the refitted tree's rises to 33, so the last-build ratio peaks at 1.18 while the true
+//!   degradation is 1.5 (the estimate says 1.58); on `swap.glb` the last-build ratio reaches
+//!   3.2 while a fresh tree is only 1.09 better (estimate 1.2).
+//!
 use std::fmt;
 use std::str::FromStr;
 
@@ -20,11 +28,12 @@ pub enum Policy {
     /// Refit, then rebuild when the SAH ratio exceeds `R`.
     Threshold(f32),
     /// Refit, then rebuild when the extra trace time accumulated since the last rebuild exceeds
-    /// the measured cost of a rebuild. The extra trace time of a frame is predicted from the SAH
-    /// ratio and the measured trace time of the previous frame: a fresh tree would have traced
-    /// it in `trace / ratio_then`, so the degraded tree costs `fresh * (ratio_now - 1)` more.
-    /// With degradation growing linearly over frames this rebuilds at the optimal period
-    /// (`k = sqrt(2 C / a)`); with no rays it never rebuilds.
+    /// the measured cost of a rebuild. The extra trace time of a frame is predicted from the
+    /// fresh ratio (see the module docs) and the measured trace time of the previous frame: a
+    /// fresh tree would have traced it in `trace / ratio_then`, so the degraded tree costs
+    /// `fresh * (ratio_now - 1)` more. With degradation growing linearly over frames this
+    /// rebuilds at the optimal period (`k = sqrt(2 C / a)`); with no rays or no degradation it
+    /// never rebuilds.
     Amortized,
 }
 
@@ -146,6 +155,9 @@ impl Action {
 pub struct PolicyState {
     /// SAH cost right after the last (re)build.
     pub build_sah: f32,
+    /// The fresh-build estimate ([`super::estimate::FreshSah::estimate`]) at the last
+    /// (re)build, 0 when not computed.
+    pub build_estimate: f32,
     /// Frames since the last (re)build.
     pub since_build: u32,
     /// Extra trace time (ms) predicted to have been lost to degradation since the last rebuild.
@@ -154,7 +166,7 @@ pub struct PolicyState {
     pub rebuild_ms: f64,
     /// This mesh's share of the last recorded trace time (ms).
     pub trace_share_ms: f64,
-    /// SAH ratio of the tree when that trace ran.
+    /// Fresh ratio of the tree when that trace ran.
     pub traced_ratio: f32,
 }
 
@@ -171,23 +183,31 @@ impl PolicyState {
         }
     }
 
-    /// Decides after a refit that gave SAH `ratio`: true to rebuild. Updates the accumulated
-    /// extra trace time of [`Policy::Amortized`].
-    pub fn after_refit(&mut self, policy: Policy, ratio: f32) -> bool {
+    /// True when the policy decides on the fresh ratio (so the engine must estimate it).
+    #[must_use]
+    pub fn needs_fresh_ratio(policy: Policy) -> bool {
+        matches!(policy, Policy::Amortized)
+    }
+
+    /// Decides after a refit that gave last-build SAH ratio `ratio` and fresh ratio `fresh`:
+    /// true to rebuild. Updates the accumulated extra trace time of [`Policy::Amortized`].
+    pub fn after_refit(&mut self, policy: Policy, ratio: f32, fresh: f32) -> bool {
         match policy {
             Policy::Threshold(r) => ratio > r,
             Policy::Amortized => {
-                let fresh = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
-                self.extra_ms += fresh * f64::from(ratio - 1.0).max(0.0);
+                let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
+                self.extra_ms += fresh_ms * f64::from(fresh - 1.0).max(0.0);
                 self.extra_ms > self.rebuild_ms
             }
             _ => false,
         }
     }
 
-    /// Resets after a (re)build of SAH cost `sah` that took `ms`.
-    pub fn rebuilt(&mut self, sah: f32, ms: f64) {
+    /// Resets after a (re)build of SAH cost `sah` (fresh-build estimate `estimate`, 0 when not
+    /// computed) that took `ms`.
+    pub fn rebuilt(&mut self, sah: f32, estimate: f32, ms: f64) {
         self.build_sah = sah;
+        self.build_estimate = estimate;
         self.since_build = 0;
         self.extra_ms = 0.0;
         self.rebuild_ms = ms;
@@ -230,17 +250,17 @@ mod tests {
     #[test]
     fn amortized_rebuilds_once_extra_time_passes_rebuild_cost() {
         let mut s = PolicyState::default();
-        s.rebuilt(1.0, 10.0);
+        s.rebuilt(1.0, 1.0, 10.0);
         s.trace_share_ms = 4.0;
         s.traced_ratio = 1.0;
         // Ratio 1.5: 2 ms extra per frame, so the sixth frame passes 10 ms.
         let frames = (1..=10)
-            .find(|_| s.after_refit(Policy::Amortized, 1.5))
+            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5))
             .unwrap();
         assert_eq!(frames, 6);
         // No rays, no reason to rebuild.
-        s.rebuilt(1.0, 10.0);
+        s.rebuilt(1.0, 1.0, 10.0);
         s.trace_share_ms = 0.0;
-        assert!(!(0..100).any(|_| s.after_refit(Policy::Amortized, 5.0)));
+        assert!(!(0..100).any(|_| s.after_refit(Policy::Amortized, 5.0, 5.0)));
     }
 }

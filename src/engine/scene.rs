@@ -13,6 +13,7 @@
 //! `rayon::scope`, for none at all: every parallel call made from outside the pool queues a job
 //! in rayon's global injector, which allocates a block every 63 jobs.)
 
+use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::{BuildParams, Bvh, Counters, MeshBvh, Node, TraversalStats};
@@ -84,6 +85,8 @@ struct MeshEntry {
     dirty: bool,
     moved: bool,
     state: PolicyState,
+    /// Subsample and scratch of the fresh-build estimate.
+    fresh: FreshSah,
     stats: MeshStats,
     /// Sum over its instances of world box area times SAH: its share of the trace cost.
     weight: f64,
@@ -186,8 +189,10 @@ impl Engine {
         let bvh = MeshBvh::build_indexed(&positions, &indices, &self.config.build);
         let sah = tree_sah(bvh.bvh());
         let ms = ms_since(t);
+        let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
+        let estimate = fresh.estimate(&positions, &indices);
         let mut state = PolicyState::default();
-        state.rebuilt(sah, ms);
+        state.rebuilt(sah, estimate, ms);
         self.meshes.push(MeshEntry {
             positions,
             indices,
@@ -196,11 +201,13 @@ impl Engine {
             dirty: false,
             moved: true,
             state,
+            fresh,
             stats: MeshStats {
                 action: Action::Rebuild,
                 rebuild_ms: ms,
                 sah,
                 sah_ratio: 1.0,
+                fresh_ratio: 1.0,
                 ..MeshStats::default()
             },
             weight: 0.0,
@@ -317,7 +324,11 @@ impl Engine {
         if total > 0.0 {
             for m in &mut self.meshes {
                 m.state.trace_share_ms = s.trace_ms * m.weight / total;
-                m.state.traced_ratio = m.stats.sah_ratio;
+                m.state.traced_ratio = if m.stats.fresh_ratio > 0.0 {
+                    m.stats.fresh_ratio
+                } else {
+                    m.stats.sah_ratio
+                };
             }
         }
     }
@@ -328,10 +339,12 @@ impl Engine {
     pub fn update(&mut self) -> &FrameStats {
         let policy = self.config.policy;
         let build = self.config.build;
+        let estimate = PolicyState::needs_fresh_ratio(policy);
         let mut stats = FrameStats {
             frame: self.frame,
             sah_ratio: 1.0,
             max_sah_ratio: 1.0,
+            max_fresh_ratio: if estimate { 1.0 } else { 0.0 },
             tlas_sah_ratio: 1.0,
             ..FrameStats::default()
         };
@@ -351,20 +364,40 @@ impl Engine {
                 let t = Instant::now();
                 m.bvh.refit_indexed(&m.positions, &m.indices);
                 m.sah = tree_sah(m.bvh.bvh());
-                refit_ms = ms_since(t);
                 m.state.since_build += 1;
                 let ratio = ratio(m.sah, m.state.build_sah);
                 m.stats.sah_ratio = ratio;
-                decided.unwrap_or_else(|| m.state.after_refit(policy, ratio))
+                // The fresh ratio: against `build_sah * est(now) / est(last build)`.
+                m.stats.fresh_ratio = if estimate && m.state.build_estimate > 0.0 {
+                    let est = m.fresh.estimate(&m.positions, &m.indices);
+                    if est > 0.0 {
+                        ratio * m.state.build_estimate / est
+                    } else {
+                        ratio
+                    }
+                } else if estimate {
+                    ratio
+                } else {
+                    0.0
+                };
+                let fresh = m.stats.fresh_ratio;
+                refit_ms = ms_since(t);
+                decided.unwrap_or_else(|| m.state.after_refit(policy, ratio, fresh))
             };
             let mut rebuild_ms = 0.0;
             if rebuild {
                 let t = Instant::now();
                 m.bvh = MeshBvh::build_indexed(&m.positions, &m.indices, &build);
                 m.sah = tree_sah(m.bvh.bvh());
+                let est = if estimate {
+                    m.fresh.estimate(&m.positions, &m.indices)
+                } else {
+                    0.0
+                };
                 rebuild_ms = ms_since(t);
-                m.state.rebuilt(m.sah, rebuild_ms);
+                m.state.rebuilt(m.sah, est, rebuild_ms);
                 m.stats.sah_ratio = 1.0;
+                m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
                 stats.rebuilds += 1;
             } else {
                 stats.refits += 1;
@@ -380,6 +413,7 @@ impl Engine {
             stats.refit_ms += refit_ms;
             stats.rebuild_ms += rebuild_ms;
             stats.max_sah_ratio = stats.max_sah_ratio.max(m.stats.sah_ratio);
+            stats.max_fresh_ratio = stats.max_fresh_ratio.max(m.stats.fresh_ratio);
         }
         stats.action = if stats.rebuilds > 0 {
             Action::Rebuild

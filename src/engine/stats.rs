@@ -9,7 +9,7 @@ use serde::Serialize;
 pub struct MeshStats {
     /// What was done to its tree.
     pub action: Action,
-    /// Refit time (including measuring the SAH cost), ms.
+    /// Refit time (including measuring the SAH cost and estimating a fresh build's), ms.
     pub refit_ms: f64,
     /// Rebuild time, ms.
     pub rebuild_ms: f64,
@@ -17,6 +17,9 @@ pub struct MeshStats {
     pub sah: f32,
     /// `sah` over the cost right after the last (re)build.
     pub sah_ratio: f32,
+    /// `sah` over the estimated cost of a fresh build now (see [`super::estimate`]); 0 when the
+    /// policy does not estimate it.
+    pub fresh_ratio: f32,
 }
 
 /// One frame as the engine saw it: update times, the trees' quality, and the traced rays.
@@ -57,6 +60,9 @@ pub struct FrameStats {
     pub sah_ratio: f32,
     /// Largest SAH ratio of any deforming mesh.
     pub max_sah_ratio: f32,
+    /// Largest estimated fresh ratio of any deforming mesh (0 when the policy does not
+    /// estimate it).
+    pub max_fresh_ratio: f32,
     /// SAH ratio of the top-level tree.
     pub tlas_sah_ratio: f32,
 }
