@@ -147,7 +147,13 @@ impl Source {
                 }
                 (Some(uri), _, _) => {
                     let file: PathBuf = base.join(percent_decode(uri));
-                    std::fs::read(&file).map_err(|e| Error::io(file, e))?
+                    std::fs::read(&file).map_err(|e| {
+                        Error::malformed(
+                            path,
+                            &object,
+                            format!("a readable file at {}: {e}", file.display()),
+                        )
+                    })?
                 }
             };
             if (data.len() as u64) < declared {
