@@ -33,6 +33,9 @@ pub struct BuildBenchArgs {
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// Also write `build_bench.json` and the chart `build_bench.svg`/`.png` into this folder.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
 }
 
 fn parse_method(s: &str) -> Result<BuildParams> {
@@ -93,7 +96,10 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
     }
     let (name, mesh) = match (&args.file, args.synthetic) {
         (Some(f), _) => (f.display().to_string(), load_mesh(f)?),
-        (None, Some(n)) => (format!("synthetic sphere ~{n}"), shapes::bumpy_sphere(n)),
+        (None, Some(n)) => (
+            format!("synthetic sphere of about {n} triangles"),
+            shapes::bumpy_sphere(n),
+        ),
         (None, None) => unreachable!("clap requires one"),
     };
     mesh.check().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
@@ -141,6 +147,17 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
         print_table(&rows);
+    }
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let json = dir.join("build_bench.json");
+        std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("writing {}", json.display()))?;
+        let stem = dir.join("build_bench");
+        build_bench::chart(&rows, &name)
+            .save(&stem, 900, 600)
+            .with_context(|| format!("writing {}.svg/.png", stem.display()))?;
+        eprintln!("wrote {} and {}.svg/.png", json.display(), stem.display());
     }
     if rows.iter().any(|r| r.mismatches > 0) {
         bail!("some rays disagree with brute force");

@@ -145,7 +145,7 @@ pub fn run(
                 .collect();
             let mismatches = sample
                 .iter()
-                .filter(|(i, want)| !same_hit(mesh, *want, bvh.closest_hit(&set.rays[*i])))
+                .filter(|(i, want)| !same_hit(*want, bvh.closest_hit(&set.rays[*i])))
                 .count();
             rows.push(Row {
                 method: name.clone(),
@@ -169,10 +169,36 @@ pub fn run(
 
 /// True when two closest-hit answers agree: both miss, or both hit at the same distance
 /// (which triangle wins a tie at exactly the same distance may differ).
-fn same_hit(_mesh: &TriMesh, a: Option<Hit>, b: Option<Hit>) -> bool {
+fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
     match (a, b) {
         (None, None) => true,
         (Some(a), Some(b)) => a.t == b.t,
         _ => false,
+    }
+}
+
+/// Speed against quality: build time (x, log scale) against SAH cost (y), one point per
+/// builder, so that every bin count and method can be read off as a trade-off.
+#[must_use]
+pub fn chart(rows: &[Row], title: &str) -> super::charts::Chart {
+    let mut series: Vec<super::charts::Series> = Vec::new();
+    for r in rows {
+        if series.iter().any(|s| s.name == r.method) {
+            continue;
+        }
+        series.push(super::charts::Series {
+            name: r.method.clone(),
+            points: vec![(r.build_ms, f64::from(r.sah))],
+            ..Default::default()
+        });
+    }
+    super::charts::Chart {
+        title: format!("build time against SAH cost: {title}"),
+        x_label: "build time (ms, median)".into(),
+        y_label: "SAH cost (Ct = Ci = 1)".into(),
+        series,
+        log_x: true,
+        note: "lower left is better".into(),
+        ..Default::default()
     }
 }
