@@ -7,14 +7,25 @@ use dynbvh::engine::Policy;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere};
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `bench`.
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Animated glTF file (.glb/.gltf).
-    #[arg(required_unless_present = "synthetic", conflicts_with = "synthetic")]
+    #[arg(
+        required_unless_present_any = ["synthetic", "all"],
+        conflicts_with_all = ["synthetic", "all"]
+    )]
     file: Option<PathBuf>,
+    /// The sweep: every animated .glb/.gltf under the `--dir` folders (default `animations`
+    /// and `../shared/gltf-samples`), every policy, printing total time over the oracle's per
+    /// file and policy (default 30 frames and 128x128 rays; no builder points).
+    #[arg(long, conflicts_with = "synthetic")]
+    all: bool,
+    /// Folder searched by `--all` (repeatable).
+    #[arg(long = "dir", requires = "all")]
+    dirs: Vec<PathBuf>,
     /// Instead of a file: a bumpy sphere of about N triangles deformed by a travelling wave.
     #[arg(long, value_name = "N")]
     synthetic: Option<usize>,
@@ -100,6 +111,17 @@ pub fn run(a: BenchArgs) -> Result<()> {
         (None, None) => FrameTimes::Count(60),
     };
     let progress = |m: &str| eprintln!("  {m} ...");
+    if a.all {
+        if a.rays.is_none() && a.size.is_none() {
+            opts.rays = RaySpec::Size(128, 128);
+        }
+        let times = match (a.frames, a.fps) {
+            (None, None) => FrameTimes::Count(30),
+            _ => times,
+        };
+        opts.builders.clear();
+        return sweep(&a, &opts, times);
+    }
     let report = match (&a.file, a.synthetic) {
         (Some(path), _) => {
             let (scene, warnings) = Scene::load(path)?;
@@ -156,6 +178,79 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 .save(&dir.join(stem), 960, 540)
                 .with_context(|| format!("writing chart {stem}"))?;
         }
+        eprintln!("wrote {}", dir.display());
+    }
+    Ok(())
+}
+
+/// Every animated glTF file under `dir`, sorted.
+fn gltf_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<std::io::Result<_>>()?;
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            if p.file_name().is_some_and(|n| n != "_meta") {
+                gltf_files(&p, out)?;
+            }
+        } else if p
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
+        {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// `bench --all`: the sweep over every animated file.
+fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
+    let dirs = if a.dirs.is_empty() {
+        vec![
+            PathBuf::from("animations"),
+            PathBuf::from("../shared/gltf-samples"),
+        ]
+    } else {
+        a.dirs.clone()
+    };
+    let mut files = Vec::new();
+    for d in &dirs {
+        gltf_files(d, &mut files)?;
+    }
+    let mut reports = Vec::new();
+    for path in &files {
+        let (scene, _) = match Scene::load(path) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("{}: skipped ({e})", path.display());
+                continue;
+            }
+        };
+        if scene.animations.is_empty() {
+            eprintln!("{}: no animation, skipped", path.display());
+            continue;
+        }
+        let mut src = GltfSource::new(&scene, Some(0), times)?;
+        eprintln!("{}: {} frames", src.name(), src.frames());
+        let report = frame_bench::run(&mut src, opts, |_| {});
+        eprint!("{}", frame_bench::summary_table(&report));
+        reports.push(report);
+    }
+    let table = frame_bench::sweep_table(&reports);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&reports)?);
+    } else {
+        print!("{table}");
+    }
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::write(dir.join("sweep.txt"), &table)?;
+        std::fs::write(
+            dir.join("sweep.json"),
+            serde_json::to_string_pretty(&reports)?,
+        )?;
         eprintln!("wrote {}", dir.display());
     }
     Ok(())

@@ -72,7 +72,7 @@ impl FreshSah {
     /// The largest subsample.
     pub const MAX_SAMPLE: usize = 4096;
     /// Meshes up to this many triangles are sampled whole.
-    pub const WHOLE: usize = 512;
+    pub const WHOLE: usize = 256;
 
     /// The subsample for a mesh of `triangles` triangles, leaves of at most `max_leaf`.
     #[must_use]
@@ -80,8 +80,15 @@ impl FreshSah {
         let k = if triangles <= Self::WHOLE {
             triangles
         } else {
-            (triangles / 8).clamp(Self::WHOLE, Self::MAX_SAMPLE)
+            (triangles / 16).clamp(Self::WHOLE, Self::MAX_SAMPLE)
         };
+        Self::with_sample(triangles, k, max_leaf)
+    }
+
+    /// A subsample of `k` triangles (at most all) of a mesh of `triangles`.
+    #[must_use]
+    pub fn with_sample(triangles: usize, k: usize, max_leaf: u32) -> Self {
+        let k = k.min(triangles);
         let sample = (0..k).map(|j| (j * triangles / k.max(1)) as u32).collect();
         Self {
             sample,
@@ -265,7 +272,7 @@ mod tests {
     fn spreading_triangles_apart_lowers_the_estimate() {
         let (p, t) = grid(2000, 1.0);
         let mut e = FreshSah::new(t.len(), 8);
-        assert_eq!(e.sample_len(), 512);
+        assert_eq!(e.sample_len(), 256);
         let near = e.estimate(&p, &t);
         let far_p: Vec<Vec3> = {
             let (q, _) = grid(2000, 4.0);

@@ -15,6 +15,11 @@
 use std::fmt;
 use std::str::FromStr;
 
+/// Why [`Policy::DEFAULT`] is the default (printed under `dynbvh bench --all`).
+pub const WHY_DEFAULT: &str = "\
+Why amortized is the default: see the module docs of dynbvh::engine::policy.
+";
+
 /// A refit-or-rebuild policy, selectable per run (see [`Policy::from_str`] for the syntax).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Policy {

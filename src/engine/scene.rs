@@ -87,6 +87,12 @@ struct MeshEntry {
     state: PolicyState,
     /// Subsample and scratch of the fresh-build estimate.
     fresh: FreshSah,
+    /// The latest fresh-build estimate, and what computing it took (ms).
+    last_estimate: f32,
+    estimate_ms: f64,
+    /// Time (ms) the estimate may still spend: it earns [`ESTIMATE_SHARE`] of each frame's
+    /// refit and trace time, and is re-estimated only when it has earned the estimate's cost.
+    estimate_budget: f64,
     stats: MeshStats,
     /// Sum over its instances of world box area times SAH: its share of the trace cost.
     weight: f64,
@@ -190,7 +196,9 @@ impl Engine {
         let sah = tree_sah(bvh.bvh());
         let ms = ms_since(t);
         let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
+        let t = Instant::now();
         let estimate = fresh.estimate(&positions, &indices);
+        let estimate_ms = ms_since(t);
         let mut state = PolicyState::default();
         state.rebuilt(sah, estimate, ms);
         self.meshes.push(MeshEntry {
@@ -202,6 +210,9 @@ impl Engine {
             moved: true,
             state,
             fresh,
+            last_estimate: estimate,
+            estimate_ms,
+            estimate_budget: 0.0,
             stats: MeshStats {
                 action: Action::Rebuild,
                 rebuild_ms: ms,
@@ -367,11 +378,18 @@ impl Engine {
                 m.state.since_build += 1;
                 let ratio = ratio(m.sah, m.state.build_sah);
                 m.stats.sah_ratio = ratio;
-                // The fresh ratio: against `build_sah * est(now) / est(last build)`.
+                // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the
+                // latest estimate when this frame has not earned a new one.
                 m.stats.fresh_ratio = if estimate && m.state.build_estimate > 0.0 {
-                    let est = m.fresh.estimate(&m.positions, &m.indices);
-                    if est > 0.0 {
-                        ratio * m.state.build_estimate / est
+                    m.estimate_budget += ESTIMATE_SHARE * (m.state.trace_share_ms + ms_since(t));
+                    if m.estimate_budget >= m.estimate_ms {
+                        let te = Instant::now();
+                        m.last_estimate = m.fresh.estimate(&m.positions, &m.indices);
+                        m.estimate_ms = ms_since(te);
+                        m.estimate_budget = (m.estimate_budget - m.estimate_ms).max(0.0);
+                    }
+                    if m.last_estimate > 0.0 {
+                        ratio * m.state.build_estimate / m.last_estimate
                     } else {
                         ratio
                     }
@@ -394,6 +412,8 @@ impl Engine {
                 } else {
                     0.0
                 };
+                m.last_estimate = est;
+                m.estimate_budget = 0.0;
                 rebuild_ms = ms_since(t);
                 m.state.rebuilt(m.sah, est, rebuild_ms);
                 m.stats.sah_ratio = 1.0;
@@ -701,6 +721,10 @@ impl Engine {
         (nodes, tris)
     }
 }
+
+/// Share of a mesh's refit and trace time the fresh-build estimate may spend (so that on
+/// small meshes with few rays, where a rebuild can hardly pay, it runs only every few frames).
+const ESTIMATE_SHARE: f64 = 0.05;
 
 /// Rays per parallel task.
 const RAY_CHUNK: usize = 256;

@@ -4,7 +4,7 @@
 use crate::bvh::{BuildParams, TraversalStats};
 use crate::engine::oracle::{self, MeshCosts};
 use crate::engine::source::FrameSource;
-use crate::engine::{Action, EngineConfig, Policy, SceneHit, TlasPolicy};
+use crate::engine::{Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy};
 use crate::geom::{Aabb, Ray};
 use crate::report::rays::camera_rays;
 use serde::Serialize;
@@ -58,6 +58,9 @@ pub struct Options {
     pub builder_frames: usize,
     /// Compute the oracle (costs `frames` builds and `frames^2 / 2` refits).
     pub oracle: bool,
+    /// Also run the default mesh policy under each top-level tree policy (refit, rebuild, the
+    /// configured one) and report what the top-level tree costs.
+    pub tlas_compare: bool,
 }
 
 impl Default for Options {
@@ -79,6 +82,7 @@ impl Default for Options {
             ],
             builder_frames: 8,
             oracle: true,
+            tlas_compare: true,
         }
     }
 }
@@ -110,6 +114,11 @@ pub struct FrameRow {
     pub sah_ratio: f32,
     /// Largest SAH ratio of a mesh.
     pub max_sah_ratio: f32,
+    /// Largest ratio of a mesh's SAH to a fresh build's at this frame (the oracle's builds; 0
+    /// without the oracle).
+    pub fresh_ratio: f32,
+    /// Largest fresh ratio as the engine estimated it (0 when the policy does not estimate).
+    pub est_fresh_ratio: f32,
     /// Meshes rebuilt.
     pub rebuilds: u32,
     /// Rays traced.
@@ -153,8 +162,29 @@ pub struct PolicySummary {
     pub mean_sah_ratio: f64,
     /// Largest SAH ratio of any mesh in any frame.
     pub max_sah_ratio: f32,
+    /// Largest ratio to a fresh build of any mesh in any frame (0 without the oracle).
+    pub max_fresh_ratio: f32,
     /// `total_ms` over the oracle's total (0 when the oracle was not computed).
     pub oracle_ratio: f64,
+}
+
+/// The top-level tree under one policy (mesh policy: the default).
+#[derive(Clone, Debug, Serialize)]
+pub struct TlasSummary {
+    /// `refit`, `rebuild` or `threshold:R`.
+    pub tlas: String,
+    /// True for the engine's default.
+    pub default: bool,
+    /// Top-level tree time (instance boxes plus refit or rebuild) per frame, ms.
+    pub tlas_ms_per_frame: f64,
+    /// Trace time per frame, ms.
+    pub trace_ms_per_frame: f64,
+    /// Update plus trace over all frames, ms.
+    pub total_ms: f64,
+    /// Frames whose top-level tree was rebuilt.
+    pub rebuilds: usize,
+    /// Mean SAH ratio of the top-level tree to its last build.
+    pub mean_sah_ratio: f64,
 }
 
 /// The best schedule in hindsight.
@@ -209,6 +239,8 @@ pub struct Report {
     pub policies: Vec<PolicySummary>,
     /// The oracle.
     pub oracle: OracleSummary,
+    /// The top-level tree under each of its policies (empty when not compared).
+    pub tlas: Vec<TlasSummary>,
     /// Speed against accuracy: builders and policies.
     pub speed: Vec<SpeedPoint>,
     /// Every frame of every reported policy.
@@ -216,88 +248,130 @@ pub struct Report {
 }
 
 struct Run {
+    config: EngineConfig,
     rows: Vec<FrameRow>,
-    /// `[frame][mesh]` refit and rebuild ms, and the mesh's share of the frame's trace.
+    /// `[frame][mesh]` refit and rebuild ms, the mesh's share of the frame's trace, its SAH.
     refit: Vec<Vec<f64>>,
     rebuild: Vec<Vec<f64>>,
     share: Vec<Vec<f64>>,
+    sah: Vec<Vec<f32>>,
+    /// Per frame: top-level tree rebuilt, its SAH ratio.
+    tlas: Vec<(bool, f32)>,
 }
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// Runs one policy over every frame.
-fn run_policy(
+/// Runs every configuration over every frame in lockstep: each frame is posed into every engine
+/// and updated, then the engines trace the frame's rays in turn, `trace_repeats` rounds in a
+/// rotating order, each keeping its fastest pass. Interleaving puts every configuration under
+/// the same load (this machine is shared), so differences between their times are the trees'.
+fn run_lockstep(
     src: &mut dyn FrameSource,
-    config: EngineConfig,
+    configs: &[EngineConfig],
     rays: &[Ray],
     opts: &Options,
     frames: usize,
-) -> Run {
-    let mut e = src.build(0, config);
-    let deforming = src.deforming().to_vec();
+) -> Vec<Run> {
+    let deforming = src.deforming().len();
+    let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
     let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
     let step = (rays.len() / opts.counted_rays.max(1)).max(1);
-    let mut run = Run {
-        rows: Vec::with_capacity(frames),
-        refit: vec![vec![0.0; deforming.len()]; frames + 1],
-        rebuild: vec![vec![0.0; deforming.len()]; frames + 1],
-        share: vec![vec![0.0; deforming.len()]; frames + 1],
-    };
+    let mut runs: Vec<Run> = configs
+        .iter()
+        .map(|&config| Run {
+            config,
+            rows: Vec::with_capacity(frames),
+            refit: vec![vec![0.0; deforming]; frames + 1],
+            rebuild: vec![vec![0.0; deforming]; frames + 1],
+            share: vec![vec![0.0; deforming]; frames + 1],
+            sah: vec![vec![0.0; deforming]; frames + 1],
+            tlas: Vec::with_capacity(frames),
+        })
+        .collect();
+    // Warm-up: one untimed pass each.
+    for e in &engines {
+        e.trace_closest(rays, &mut hits);
+    }
+    let n = engines.len();
+    let mut best = vec![f64::INFINITY; n];
     for f in 1..=frames {
-        src.advance(&mut e, f);
-        e.update();
-        let mut best = f64::INFINITY;
-        for _ in 0..opts.trace_repeats.max(1) {
-            let t = Instant::now();
-            e.trace_closest(rays, &mut hits);
-            best = best.min(ms(t));
+        for e in &mut engines {
+            src.advance(e, f);
+            e.update();
         }
-        e.record_trace(best, rays.len() as u64);
-        let s = *e.frame_stats();
-        let mut counted = TraversalStats::default();
-        let mut n = 0u64;
-        let mut in_box = 0u64;
-        let root = e.bounds();
-        for r in rays.iter().step_by(step) {
-            let _ = e.closest_hit_counted(r, &mut counted);
-            n += 1;
-            if r.hit_box(root.min, root.max, r.tmax).is_some() {
-                in_box += 1;
+        best.fill(f64::INFINITY);
+        for rep in 0..opts.trace_repeats.max(1) {
+            for k in 0..n {
+                let i = (k + rep + f) % n;
+                let t = Instant::now();
+                engines[i].trace_closest(rays, &mut hits);
+                best[i] = best[i].min(ms(t));
             }
         }
-        let (pn, pt) = e.predicted_work();
-        let p_hit = in_box as f64 / n.max(1) as f64;
-        for (k, m) in deforming.iter().enumerate() {
-            let ms = e.mesh_stats(*m);
-            run.refit[f][k] = ms.refit_ms;
-            run.rebuild[f][k] = ms.rebuild_ms;
-            run.share[f][k] = e.mesh_trace_share(*m);
+        for ((e, run), &best) in engines.iter_mut().zip(&mut runs).zip(&best) {
+            e.record_trace(best, rays.len() as u64);
+            record_frame(e, src.deforming(), run, rays, step, f);
         }
-        run.rows.push(FrameRow {
-            policy: config.policy.to_string(),
-            frame: f,
-            action: s.action,
-            pose_ms: s.pose_ms,
-            refit_ms: s.refit_ms,
-            rebuild_ms: s.rebuild_ms,
-            tlas_ms: s.tlas_ms,
-            update_ms: s.update_ms,
-            trace_ms: s.trace_ms,
-            sah: s.sah,
-            sah_ratio: s.sah_ratio,
-            max_sah_ratio: s.max_sah_ratio,
-            rebuilds: s.rebuilds,
-            rays: s.rays,
-            mrays: s.mrays,
-            nodes_per_ray: counted.nodes as f64 / n.max(1) as f64,
-            tris_per_ray: counted.prims as f64 / n.max(1) as f64,
-            predicted_nodes_per_ray: pn * p_hit,
-            predicted_tris_per_ray: pt * p_hit,
-        });
     }
-    run
+    runs
+}
+
+/// Appends frame `f` of engine `e` (updated and traced) to `run`.
+fn record_frame(
+    e: &Engine,
+    deforming: &[MeshId],
+    run: &mut Run,
+    rays: &[Ray],
+    step: usize,
+    f: usize,
+) {
+    let s = *e.frame_stats();
+    let mut counted = TraversalStats::default();
+    let mut n = 0u64;
+    let mut in_box = 0u64;
+    let root = e.bounds();
+    for r in rays.iter().step_by(step) {
+        let _ = e.closest_hit_counted(r, &mut counted);
+        n += 1;
+        if r.hit_box(root.min, root.max, r.tmax).is_some() {
+            in_box += 1;
+        }
+    }
+    let (pn, pt) = e.predicted_work();
+    let p_hit = in_box as f64 / n.max(1) as f64;
+    for (k, m) in deforming.iter().enumerate() {
+        let ms = e.mesh_stats(*m);
+        run.refit[f][k] = ms.refit_ms;
+        run.rebuild[f][k] = ms.rebuild_ms;
+        run.share[f][k] = e.mesh_trace_share(*m);
+        run.sah[f][k] = ms.sah;
+    }
+    run.tlas.push((s.tlas_rebuilt, s.tlas_sah_ratio));
+    run.rows.push(FrameRow {
+        policy: run.config.policy.to_string(),
+        frame: f,
+        action: s.action,
+        pose_ms: s.pose_ms,
+        refit_ms: s.refit_ms,
+        rebuild_ms: s.rebuild_ms,
+        tlas_ms: s.tlas_ms,
+        update_ms: s.update_ms,
+        trace_ms: s.trace_ms,
+        sah: s.sah,
+        sah_ratio: s.sah_ratio,
+        max_sah_ratio: s.max_sah_ratio,
+        fresh_ratio: 0.0,
+        est_fresh_ratio: s.max_fresh_ratio,
+        rebuilds: s.rebuilds,
+        rays: s.rays,
+        mrays: s.mrays,
+        nodes_per_ray: counted.nodes as f64 / n.max(1) as f64,
+        tris_per_ray: counted.prims as f64 / n.max(1) as f64,
+        predicted_nodes_per_ray: pn * p_hit,
+        predicted_tris_per_ray: pt * p_hit,
+    });
 }
 
 fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySummary {
@@ -323,6 +397,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         rebuilds: rows.iter().map(|r| u64::from(r.rebuilds)).sum(),
         mean_sah_ratio: rows.iter().map(|r| f64::from(r.sah_ratio)).sum::<f64>() / n,
         max_sah_ratio: rows.iter().map(|r| r.max_sah_ratio).fold(1.0, f32::max),
+        max_fresh_ratio: rows.iter().map(|r| r.fresh_ratio).fold(0.0, f32::max),
         oracle_ratio: if oracle_total > 0.0 {
             total / oracle_total
         } else {
@@ -352,11 +427,36 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             wanted.push(p);
         }
     }
-    let mut runs = Vec::new();
-    for &p in &wanted {
-        progress(&format!("policy {p}"));
-        runs.push(run_policy(src, config(p), &rays, opts, frames));
+    // The top-level tree comparison: the default mesh policy under each top-level policy.
+    let mut tlas_configs = Vec::new();
+    if opts.tlas_compare {
+        for t in [TlasPolicy::Refit, TlasPolicy::Rebuild, opts.tlas] {
+            let c = EngineConfig {
+                tlas: t,
+                ..config(Policy::DEFAULT)
+            };
+            if !tlas_configs.contains(&c) {
+                tlas_configs.push(c);
+            }
+        }
     }
+    let mut configs: Vec<EngineConfig> = wanted.iter().map(|&p| config(p)).collect();
+    for c in &tlas_configs {
+        if !configs.contains(c) {
+            configs.push(*c);
+        }
+    }
+    progress(&format!(
+        "{} configurations in lockstep: {}",
+        configs.len(),
+        configs
+            .iter()
+            .map(|c| format!("{}/tlas {}", c.policy, tlas_name(c.tlas)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames);
+    let runs = &mut all_runs[..wanted.len()];
     let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("always run")];
     let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
 
@@ -395,6 +495,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
         }
         oracle_total = fixed;
+        let mut fresh: Vec<Vec<f32>> = Vec::new();
         oracle.model_refit_ms = fixed;
         oracle.model_rebuild_ms = fixed;
         for (k, sah) in sah.into_iter().enumerate() {
@@ -420,6 +521,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             oracle
                 .rebuild_frames
                 .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
+            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
         }
         oracle.total_ms = oracle_total;
         oracle.model = "refit and rebuild times measured per frame (always-refit and \
@@ -427,12 +529,23 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             trace time times each mesh's SAH ratio (tree built at b refitted to f, over the \
             tree built at f), weighted by the mesh's share of the SAH-expected trace cost"
             .into();
+        // The true fresh ratio of every run's trees (same positions, same deterministic build).
+        for run in all_runs.iter_mut() {
+            for (f, row) in (1..=frames).zip(run.rows.iter_mut()) {
+                row.fresh_ratio = fresh
+                    .iter()
+                    .zip(&run.sah[f])
+                    .map(|(fr, &s)| if fr[f] > 0.0 { s / fr[f] } else { 1.0 })
+                    .fold(1.0, f32::max);
+            }
+        }
     }
+    let runs = &all_runs[..wanted.len()];
 
     let mut policies = Vec::new();
     let mut per_frame = Vec::new();
     let mut speed = Vec::new();
-    for (p, r) in wanted.iter().zip(&runs) {
+    for (p, r) in wanted.iter().zip(runs) {
         if !opts.policies.contains(p) {
             continue;
         }
@@ -456,7 +569,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 policy: Policy::Rebuild,
                 tlas: opts.tlas,
             };
-            let r = run_policy(src, cfg, &rays, opts, bf);
+            let r = run_lockstep(src, &[cfg], &rays, opts, bf).remove(0);
             let s = summarize(Policy::Rebuild, &r.rows, 0.0);
             speed.push(SpeedPoint {
                 name: b.name(),
@@ -467,6 +580,22 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             });
         }
     }
+    let tlas = tlas_configs
+        .iter()
+        .map(|c| {
+            let r = &all_runs[configs.iter().position(|x| x == c).expect("run")];
+            let n = r.rows.len().max(1) as f64;
+            TlasSummary {
+                tlas: tlas_name(c.tlas),
+                default: c.tlas == EngineConfig::default().tlas,
+                tlas_ms_per_frame: r.rows.iter().map(|x| x.tlas_ms).sum::<f64>() / n,
+                trace_ms_per_frame: r.rows.iter().map(|x| x.trace_ms).sum::<f64>() / n,
+                total_ms: r.rows.iter().map(|x| x.update_ms + x.trace_ms).sum(),
+                rebuilds: r.tlas.iter().filter(|t| t.0).count(),
+                mean_sah_ratio: r.tlas.iter().map(|t| f64::from(t.1)).sum::<f64>() / n,
+            }
+        })
+        .collect();
     Report {
         source: src.name(),
         triangles: src.triangle_count(),
@@ -476,8 +605,19 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         threads: rayon::current_num_threads(),
         policies,
         oracle,
+        tlas,
         speed,
         per_frame,
+    }
+}
+
+/// Name of a top-level tree policy as the reports print it.
+#[must_use]
+pub fn tlas_name(t: TlasPolicy) -> String {
+    match t {
+        TlasPolicy::Refit => "refit".into(),
+        TlasPolicy::Rebuild => "rebuild".into(),
+        TlasPolicy::Threshold(r) => format!("threshold:{r}"),
     }
 }
 
@@ -486,12 +626,12 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
 pub fn to_csv(rows: &[FrameRow]) -> String {
     let mut s = String::from(
         "policy,frame,action,pose_ms,refit_ms,rebuild_ms,tlas_ms,update_ms,trace_ms,sah,\
-         sah_ratio,max_sah_ratio,rebuilds,rays,mrays,nodes_per_ray,tris_per_ray,\
-         predicted_nodes_per_ray,predicted_tris_per_ray\n",
+         sah_ratio,max_sah_ratio,fresh_ratio,est_fresh_ratio,rebuilds,rays,mrays,nodes_per_ray,\
+         tris_per_ray,predicted_nodes_per_ray,predicted_tris_per_ray\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3},{:.2},{:.2},{:.2},{:.2}\n",
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3},{:.2},{:.2},{:.2},{:.2}\n",
             r.policy,
             r.frame,
             r.action.name(),
@@ -504,6 +644,8 @@ pub fn to_csv(rows: &[FrameRow]) -> String {
             r.sah,
             r.sah_ratio,
             r.max_sah_ratio,
+            r.fresh_ratio,
+            r.est_fresh_ratio,
             r.rebuilds,
             r.rays,
             r.mrays,
@@ -524,7 +666,7 @@ pub fn summary_table(r: &Report) -> String {
         r.source, r.triangles, r.deforming_meshes, r.frames, r.rays_per_frame, r.threads
     );
     s.push_str(&format!(
-        "{:<14} {:>10} {:>10} {:>10} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8}\n",
+        "{:<14} {:>10} {:>10} {:>10} {:>9} {:>9} {:>8} {:>8} {:>8} {:>9} {:>8}\n",
         "policy",
         "total ms",
         "update ms",
@@ -534,11 +676,12 @@ pub fn summary_table(r: &Report) -> String {
         "rebuilds",
         "mean SAH",
         "max SAH",
+        "max fresh",
         "/oracle"
     ));
     for p in &r.policies {
         s.push_str(&format!(
-            "{:<14} {:>10.2} {:>10.2} {:>10.2} {:>9.3} {:>9.3} {:>8} {:>8.3} {:>8.3} {:>8.3}\n",
+            "{:<14} {:>10.2} {:>10.2} {:>10.2} {:>9.3} {:>9.3} {:>8} {:>8.3} {:>8.3} {:>9.3} {:>8.3}\n",
             format!("{}{}", p.policy, if p.default { "*" } else { "" }),
             p.total_ms,
             p.update_ms,
@@ -548,6 +691,7 @@ pub fn summary_table(r: &Report) -> String {
             p.rebuilds,
             p.mean_sah_ratio,
             p.max_sah_ratio,
+            p.max_fresh_ratio,
             p.oracle_ratio
         ));
     }
@@ -561,7 +705,32 @@ pub fn summary_table(r: &Report) -> String {
             r.oracle.model_rebuild_ms
         ));
     }
-    s.push_str("* default policy\n");
+    s.push_str(
+        "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now\n",
+    );
+    if !r.tlas.is_empty() {
+        s.push_str(&format!(
+            "top-level tree ({} policy for meshes):\n{:<14} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
+            Policy::DEFAULT,
+            "tlas",
+            "total ms",
+            "tlas/fr",
+            "trace/fr",
+            "rebuilds",
+            "mean SAH"
+        ));
+        for t in &r.tlas {
+            s.push_str(&format!(
+                "{:<14} {:>10.2} {:>9.4} {:>9.3} {:>8} {:>9.3}\n",
+                format!("{}{}", t.tlas, if t.default { "*" } else { "" }),
+                t.total_ms,
+                t.tlas_ms_per_frame,
+                t.trace_ms_per_frame,
+                t.rebuilds,
+                t.mean_sah_ratio
+            ));
+        }
+    }
     s
 }
 
@@ -668,4 +837,74 @@ fn short(s: &str) -> String {
     std::path::Path::new(s)
         .file_name()
         .map_or_else(|| s.to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// The sweep table: per file, per policy, total time over the oracle's; then the worst ratio
+/// of each policy, the top-level tree comparison (total time over the best top-level policy's
+/// on that file), and why the default is the default.
+#[must_use]
+pub fn sweep_table(reports: &[Report]) -> String {
+    let Some(first) = reports.first() else {
+        return "no animated files\n".into();
+    };
+    let names: Vec<String> = first
+        .policies
+        .iter()
+        .map(|p| format!("{}{}", p.policy, if p.default { "*" } else { "" }))
+        .collect();
+    let tlas_names: Vec<String> = first
+        .tlas
+        .iter()
+        .map(|t| format!("tlas {}{}", t.tlas, if t.default { "*" } else { "" }))
+        .collect();
+    let mut s = format!(
+        "total time / oracle ({} frames, {} rays/frame, {} thread(s); * default)\n",
+        first.frames, first.rays_per_frame, first.threads
+    );
+    s.push_str(&format!(
+        "{:<44} {:>7} {:>4}",
+        "file [animation]", "tris", "dfm"
+    ));
+    for n in names.iter().chain(&tlas_names) {
+        s.push_str(&format!(" {:>w$}", n, w = n.len().max(8)));
+    }
+    s.push('\n');
+    let mut worst = vec![0.0f64; names.len()];
+    let mut worst_tlas = vec![0.0f64; tlas_names.len()];
+    for r in reports {
+        let mut name = r.source.clone();
+        if name.len() > 44 {
+            name = format!("...{}", &name[name.len() - 41..]);
+        }
+        s.push_str(&format!(
+            "{:<44} {:>7} {:>4}",
+            name, r.triangles, r.deforming_meshes
+        ));
+        for (k, n) in names.iter().enumerate() {
+            let v = r.policies.get(k).map_or(0.0, |p| p.oracle_ratio);
+            worst[k] = worst[k].max(v);
+            s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+        }
+        let best_tlas = r
+            .tlas
+            .iter()
+            .map(|t| t.total_ms)
+            .fold(f64::INFINITY, f64::min);
+        for (k, n) in tlas_names.iter().enumerate() {
+            let v = r.tlas.get(k).map_or(0.0, |t| t.total_ms / best_tlas);
+            worst_tlas[k] = worst_tlas[k].max(v);
+            s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+        }
+        s.push('\n');
+    }
+    s.push_str(&format!("{:<44} {:>7} {:>4}", "worst", "", ""));
+    for (v, n) in worst.iter().zip(&names) {
+        s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+    }
+    for (v, n) in worst_tlas.iter().zip(&tlas_names) {
+        s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+    }
+    s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n\n");
+    s.push_str(crate::engine::policy::WHY_DEFAULT);
+    s
 }
