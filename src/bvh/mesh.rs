@@ -1,7 +1,7 @@
 //! A BVH over a triangle mesh, with the triangles copied in leaf order so that a leaf's
 //! triangles are contiguous in memory for traversal.
 
-use super::{BuildParams, Bvh, Counters};
+use super::{BuildParams, BuildWorkspace, Bvh, Counters};
 use crate::geom::{Aabb, Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -34,19 +34,47 @@ impl MeshBvh {
     /// When a vertex index is out of range.
     #[must_use]
     pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
+        let mut m = Self::default();
+        m.rebuild_indexed(positions, indices, params, &mut BuildWorkspace::default());
+        m
+    }
+
+    /// Rebuilds the tree for new positions (and possibly other triangles), reusing its storage
+    /// and `ws`'s: once they have grown to the mesh's size, a binned or median rebuild allocates
+    /// nothing.
+    ///
+    /// # Panics
+    /// When a vertex index is out of range.
+    pub fn rebuild_indexed(
+        &mut self,
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) {
         let mesh = Indexed { positions, indices };
-        let boxes: Vec<Aabb> = if mesh.len() >= GATHER_CHUNK {
-            (0..mesh.len())
-                .into_par_iter()
-                .map(|i| mesh.triangle_bounds(i))
-                .collect()
+        let mut boxes = std::mem::take(&mut ws.boxes);
+        boxes.clear();
+        boxes.resize(mesh.len(), Aabb::EMPTY);
+        if mesh.len() >= 2 * GATHER_CHUNK {
+            boxes
+                .par_chunks_mut(GATHER_CHUNK)
+                .enumerate()
+                .for_each(|(c, b)| {
+                    for (i, b) in b.iter_mut().enumerate() {
+                        *b = mesh.triangle_bounds(c * GATHER_CHUNK + i);
+                    }
+                });
         } else {
-            (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect()
-        };
-        let bvh = Bvh::build(&boxes, params);
-        let mut tris = vec![[Vec3::ZERO; 3]; mesh.len()];
-        gather(&bvh, &mesh, &mut tris);
-        Self { bvh, tris }
+            for (i, b) in boxes.iter_mut().enumerate() {
+                *b = mesh.triangle_bounds(i);
+            }
+        }
+        self.bvh.rebuild(&boxes, params, ws);
+        ws.boxes = boxes;
+        self.tris.clear();
+        self.tris.resize(mesh.len(), [Vec3::ZERO; 3]);
+        gather(&self.bvh, &mesh, &mut self.tris);
     }
 
     /// Refits for new vertex positions of the same topology (same triangle count and indices).

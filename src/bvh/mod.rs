@@ -17,7 +17,7 @@ mod refit;
 mod traverse;
 mod validate;
 
-pub use build::{BuildParams, MAX_BINS, Method};
+pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;

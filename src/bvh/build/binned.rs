@@ -82,11 +82,9 @@ fn bin_refs(refs: &mut [PrimRef], map: &BinMap, bins: &mut Bins) {
     }
 }
 
-fn empty_bins() -> Box<Bins> {
-    Box::new([[EMPTY_BIN; MAX_BINS]; 3])
-}
+const EMPTY_BINS: Bins = [[EMPTY_BIN; MAX_BINS]; 3];
 
-fn merge_bins(mut a: Box<Bins>, b: Box<Bins>, k: usize) -> Box<Bins> {
+fn merge_bins(mut a: Bins, b: Bins, k: usize) -> Bins {
     for (xa, xb) in a.iter_mut().zip(b.iter()) {
         for (x, y) in xa[..k].iter_mut().zip(&xb[..k]) {
             x.b = x.b.union(y.b);
@@ -96,14 +94,56 @@ fn merge_bins(mut a: Box<Bins>, b: Box<Bins>, k: usize) -> Box<Bins> {
     a
 }
 
-impl Splitter for Binned {
-    type Scratch = Box<Bins>;
+/// How many spare bin sets a thread keeps: one per build task it may have in progress at once
+/// (a task waiting in `join` while the thread runs a stolen one).
+const SPARES: usize = 8;
 
-    fn scratch(&self) -> Box<Bins> {
-        empty_bins()
+thread_local! {
+    /// Each thread's spare bins, handed from one build task to the next so that tasks allocate
+    /// none once every thread has its sets.
+    static SPARE_BINS: std::cell::RefCell<[Option<Box<Bins>>; SPARES]> =
+        const { std::cell::RefCell::new([const { None }; SPARES]) };
+}
+
+/// A task's bins: taken from the thread's spares on creation, returned to them on drop.
+pub(crate) struct BinsScratch(Option<Box<Bins>>);
+
+impl BinsScratch {
+    fn take() -> Self {
+        let spare = SPARE_BINS.with_borrow_mut(|s| s.iter_mut().find_map(Option::take));
+        Self(Some(spare.unwrap_or_else(|| Box::new(EMPTY_BINS))))
     }
 
-    fn split(&self, refs: &mut [PrimRef], rb: &RangeBounds, bins: &mut Box<Bins>) -> Option<Split> {
+    fn bins(&mut self) -> &mut Bins {
+        self.0.get_or_insert_with(|| Box::new(EMPTY_BINS))
+    }
+}
+
+impl Drop for BinsScratch {
+    fn drop(&mut self) {
+        let bins = self.0.take();
+        SPARE_BINS.with_borrow_mut(|s| {
+            if let Some(slot) = s.iter_mut().find(|b| b.is_none()) {
+                *slot = bins;
+            }
+        });
+    }
+}
+
+impl Splitter for Binned {
+    type Scratch = BinsScratch;
+
+    fn scratch(&self) -> BinsScratch {
+        BinsScratch::take()
+    }
+
+    fn split(
+        &self,
+        refs: &mut [PrimRef],
+        rb: &RangeBounds,
+        scratch: &mut BinsScratch,
+    ) -> Option<Split> {
+        let bins = scratch.bins();
         let n = refs.len();
         // Small nodes get one bin per primitive at most: more bins could not separate more
         // centroids on average, and the per-node cost of sweeping empty bins would dominate.
@@ -136,14 +176,15 @@ impl Splitter for Binned {
         };
 
         if n >= 8 * self.parallel_threshold {
+            // Large nodes: bin chunks in parallel into bins on each task's stack.
             *bins = refs
                 .par_chunks_mut(self.parallel_threshold)
                 .map(|c| {
-                    let mut b = empty_bins();
+                    let mut b = EMPTY_BINS;
                     bin_refs(c, &map, &mut b);
                     b
                 })
-                .reduce(empty_bins, |a, b| merge_bins(a, b, k));
+                .reduce(|| EMPTY_BINS, |a, b| merge_bins(a, b, k));
         } else {
             for axis in bins.iter_mut() {
                 axis[..k].fill(EMPTY_BIN);

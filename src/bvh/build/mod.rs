@@ -249,46 +249,77 @@ pub(crate) trait Splitter: Sync {
 /// tree's depth stays within [`MAX_DEPTH`] whatever the input.
 pub(crate) const SAH_DEPTH_LIMIT: u32 = MAX_DEPTH as u32 - 40;
 
+/// Buffers a build needs besides the tree itself, kept from one build to the next so that a
+/// rebuild with binned SAH or median split allocates nothing once they have grown (the full
+/// sweep, a reference builder, still allocates its sorted lists).
+#[derive(Clone, Debug, Default)]
+pub struct BuildWorkspace {
+    refs: Vec<PrimRef>,
+    slots: Vec<Node>,
+    pub(crate) boxes: Vec<Aabb>,
+}
+
+impl BuildWorkspace {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        self.refs.capacity() * std::mem::size_of::<PrimRef>()
+            + self.slots.capacity() * std::mem::size_of::<Node>()
+            + self.boxes.capacity() * std::mem::size_of::<Aabb>()
+    }
+}
+
 impl Bvh {
     /// Builds a BVH over primitives given by their boxes; primitive `i` has box `boxes[i]`.
     #[must_use]
     pub fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh {
-        let mut refs: Vec<PrimRef> = if boxes.len() >= 8 * params.parallel_threshold {
-            boxes
-                .par_iter()
-                .enumerate()
-                .map(|(i, b)| PrimRef::new(b, i as u32))
-                .collect()
-        } else {
-            boxes
-                .iter()
-                .enumerate()
-                .map(|(i, b)| PrimRef::new(b, i as u32))
-                .collect()
-        };
-        if refs.is_empty() {
-            return Bvh::empty(params.max_leaf_size);
+        let mut bvh = Bvh::empty(params.max_leaf_size);
+        bvh.rebuild(boxes, params, &mut BuildWorkspace::default());
+        bvh
+    }
+
+    /// Rebuilds this tree over new boxes (any count), reusing its storage and `ws`'s: once
+    /// they have grown to the input's size, a binned or median rebuild allocates nothing.
+    pub fn rebuild(&mut self, boxes: &[Aabb], params: &BuildParams, ws: &mut BuildWorkspace) {
+        self.max_leaf_size = params.max_leaf_size;
+        self.nodes.clear();
+        self.prim_indices.clear();
+        let n = boxes.len();
+        if n == 0 {
+            return;
         }
-        let mut slots = vec![Node::default(); 2 * refs.len() - 1];
-        let (root, desc) = slots.split_at_mut(1);
-        match params.method {
-            Method::Binned => {
-                root[0] = build_range(&binned::Binned::new(params), params, &mut refs, desc);
+        let refs = &mut ws.refs;
+        refs.clear();
+        refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
+        if n >= 8 * params.parallel_threshold {
+            refs.par_chunks_mut(params.parallel_threshold)
+                .zip(boxes.par_chunks(params.parallel_threshold))
+                .enumerate()
+                .for_each(|(c, (r, b))| {
+                    let base = c * params.parallel_threshold;
+                    for (i, (r, b)) in r.iter_mut().zip(b).enumerate() {
+                        *r = PrimRef::new(b, (base + i) as u32);
+                    }
+                });
+        } else {
+            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
+                *r = PrimRef::new(b, i as u32);
             }
+        }
+        let slots = &mut ws.slots;
+        slots.clear();
+        slots.resize(2 * n - 1, Node::default());
+        let (root, desc) = slots.split_at_mut(1);
+        root[0] = match params.method {
+            Method::Binned => build_range(&binned::Binned::new(params), params, refs, desc),
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                root[0] = build_range(&m, params, &mut refs, desc);
+                build_range(&m, params, refs, desc)
             }
-            Method::Sweep => {
-                root[0] = sweep::build(params, &mut refs, desc);
-            }
-        }
-        let prim_indices = refs.iter().map(|r| r.id).collect();
-        Bvh {
-            nodes: compact(slots),
-            prim_indices,
-            max_leaf_size: params.max_leaf_size,
-        }
+            Method::Sweep => sweep::build(params, refs, desc),
+        };
+        self.prim_indices.extend(refs.iter().map(|r| r.id));
+        compact(slots, &mut self.nodes);
     }
 }
 
@@ -407,38 +438,49 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
     }
 }
 
-/// Removes the slots no node was written to, keeping the order, and renumbers child links.
-fn compact(mut slots: Vec<Node>) -> Vec<Node> {
-    // The slots of a leaf's unused descendants were never written: they still hold the
-    // default node, whose count is 0. Mark them by walking the tree from the root.
-    let mut used = vec![false; slots.len()];
-    let mut stack = vec![0u32];
-    while let Some(i) = stack.pop() {
-        used[i as usize] = true;
-        let n = slots[i as usize];
-        if !n.is_leaf() {
-            stack.push(n.first);
-            stack.push(n.first + 1);
+/// Copies the nodes out of the reserved slots into `out`, skipping the slots no node was
+/// written to. Slots hold each subtree as "children pair, left child's descendants, right
+/// child's descendants", so a pre-order walk over pairs emits the nodes in slot order: the
+/// order, and with it every invariant, is kept.
+fn compact(slots: &[Node], out: &mut Vec<Node>) {
+    // Grow with 1/8 headroom: rebuilds of a deforming mesh vary in node count by a few per
+    // cent, and then fit without reallocating.
+    let count = count_nodes(slots, 0);
+    if count > out.capacity() {
+        out.reserve_exact(count + count / 8);
+    }
+    out.push(slots[0]);
+    if !slots[0].is_leaf() {
+        emit_pair(slots, 0, out);
+    }
+}
+
+/// Emits the children of the node already written at `out[parent]` and their subtrees.
+fn emit_pair(slots: &[Node], parent: usize, out: &mut Vec<Node>) {
+    let c = slots_child(out[parent]);
+    let at = out.len();
+    out[parent].first = at as u32;
+    out.push(slots[c]);
+    out.push(slots[c + 1]);
+    for k in [at, at + 1] {
+        if !out[k].is_leaf() {
+            // `out[k].first` still holds the slot index of its children until emitted.
+            emit_pair(slots, k, out);
         }
     }
-    let mut new_index = vec![0u32; slots.len()];
-    let mut next = 0u32;
-    for (i, &u) in used.iter().enumerate() {
-        new_index[i] = next;
-        next += u as u32;
+}
+
+/// Number of nodes in the subtree at slot `i`.
+fn count_nodes(slots: &[Node], i: usize) -> usize {
+    let n = slots[i];
+    if n.is_leaf() {
+        1
+    } else {
+        1 + count_nodes(slots, n.first as usize) + count_nodes(slots, n.first as usize + 1)
     }
-    let mut w = 0;
-    for i in 0..slots.len() {
-        if used[i] {
-            let mut n = slots[i];
-            if !n.is_leaf() {
-                n.first = new_index[n.first as usize];
-            }
-            slots[w] = n;
-            w += 1;
-        }
-    }
-    slots.truncate(w);
-    slots.shrink_to_fit();
-    slots
+}
+
+/// The slot index of a not yet emitted interior node's children.
+fn slots_child(n: Node) -> usize {
+    n.first as usize
 }
