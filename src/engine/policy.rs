@@ -156,7 +156,7 @@ impl Action {
 }
 
 /// Per-mesh state a policy decides on.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct PolicyState {
     /// SAH cost right after the last (re)build.
     pub build_sah: f32,
@@ -173,6 +173,25 @@ pub struct PolicyState {
     pub trace_share_ms: f64,
     /// Fresh ratio of the tree when that trace ran.
     pub traced_ratio: f32,
+    /// How much of the estimated degradation (`fresh ratio - 1`) a rebuild actually recovered,
+    /// learnt at every rebuild that followed a refit (the refitted tree's cost over the new
+    /// tree's is the true fresh ratio at that frame); starts at 1.
+    pub estimate_gain: f32,
+}
+
+impl Default for PolicyState {
+    fn default() -> Self {
+        Self {
+            build_sah: 0.0,
+            build_estimate: 0.0,
+            since_build: 0,
+            extra_ms: 0.0,
+            rebuild_ms: 0.0,
+            trace_share_ms: 0.0,
+            traced_ratio: 1.0,
+            estimate_gain: 1.0,
+        }
+    }
 }
 
 impl PolicyState {
@@ -201,10 +220,21 @@ impl PolicyState {
             Policy::Threshold(r) => ratio > r,
             Policy::Amortized => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
-                self.extra_ms += fresh_ms * f64::from(fresh - 1.0).max(0.0);
+                let degradation = f64::from(self.estimate_gain) * f64::from(fresh - 1.0).max(0.0);
+                self.extra_ms += fresh_ms * degradation;
                 self.extra_ms > self.rebuild_ms
             }
             _ => false,
+        }
+    }
+
+    /// Learns from a rebuild that followed a refit: the fresh ratio was estimated at
+    /// `estimated`, and the refitted tree's cost over the rebuilt one's is `measured`. The
+    /// estimate's gain factor moves halfway towards what this rebuild showed (within 0 ..= 2).
+    pub fn calibrate(&mut self, estimated: f32, measured: f32) {
+        if estimated > 1.0 + 1e-3 && measured.is_finite() {
+            let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(0.0, 2.0);
+            self.estimate_gain = 0.5 * (self.estimate_gain + seen);
         }
     }
 
@@ -267,5 +297,95 @@ mod tests {
         s.rebuilt(1.0, 1.0, 10.0);
         s.trace_share_ms = 0.0;
         assert!(!(0..100).any(|_| s.after_refit(Policy::Amortized, 5.0, 5.0)));
+    }
+
+    /// Feeds `fresh(k)` (the fresh ratio `k` frames after the last build) to the amortized
+    /// policy with `trace` ms of tracing per frame and rebuilds of `rebuild` ms; returns the
+    /// frames (1-based) it rebuilt at.
+    fn amortized_schedule(
+        frames: usize,
+        trace: f64,
+        rebuild: f64,
+        fresh: impl Fn(usize) -> f32,
+    ) -> Vec<usize> {
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, rebuild);
+        let mut since = 0;
+        let mut out = Vec::new();
+        for f in 1..=frames {
+            since += 1;
+            let r = fresh(since);
+            // The trace of the previous frame ran at the previous ratio.
+            s.trace_share_ms = trace * f64::from(fresh(since - 1));
+            s.traced_ratio = fresh(since - 1);
+            if s.after_refit(Policy::Amortized, r, r) {
+                s.rebuilt(1.0, 1.0, rebuild);
+                since = 0;
+                out.push(f);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn amortized_rebuilds_when_degradation_times_trace_passes_rebuild_cost() {
+        // Degradation 0.1 per frame, 4 ms of fresh tracing: the extra time after k frames is
+        // 0.4 k (k + 1) / 2, which first passes 10 ms at k = 7.
+        let at = amortized_schedule(21, 4.0, 10.0, |k| 1.0 + 0.1 * k as f32);
+        assert_eq!(at, vec![7, 14, 21]);
+        // Rebuilds four times as expensive: twice the period (k (k + 1) > 200 at k = 14).
+        let at = amortized_schedule(28, 4.0, 40.0, |k| 1.0 + 0.1 * k as f32);
+        assert_eq!(at, vec![14, 28]);
+        // No degradation: never, however many rays.
+        assert!(amortized_schedule(1000, 1e6, 0.001, |_| 1.0).is_empty());
+        // A tree that got better than a fresh one (estimate noise): no extra time either.
+        assert!(amortized_schedule(1000, 1e6, 0.001, |_| 0.9).is_empty());
+    }
+
+    #[test]
+    fn amortized_is_near_the_oracle_on_linear_degradation() {
+        use crate::engine::oracle::{MeshCosts, best_schedule};
+        let n = 60;
+        let slope = 0.02f32;
+        let c = MeshCosts {
+            refit_ms: vec![0.1; n + 1],
+            rebuild_ms: vec![5.0; n + 1],
+            fresh_trace_ms: vec![8.0; n + 1],
+            sah: (0..=n)
+                .map(|b| {
+                    (b..=n)
+                        .map(|f| 10.0 * (1.0 + slope * (f - b) as f32))
+                        .collect()
+                })
+                .collect(),
+        };
+        let at = amortized_schedule(n, 8.0, 5.0, |k| 1.0 + slope * k as f32);
+        let mut rebuild = vec![false; n + 1];
+        for f in at {
+            rebuild[f] = true;
+        }
+        let best = best_schedule(&c).cost_ms;
+        let ours = c.cost_of(&rebuild);
+        assert!(ours <= best * 1.1, "amortized {ours} against oracle {best}");
+    }
+
+    #[test]
+    fn calibration_scales_the_estimated_degradation() {
+        let mut s = PolicyState::default();
+        assert_eq!(s.estimate_gain, 1.0);
+        // Estimated 1.2, a rebuild recovered only 1.1: half as much as estimated.
+        s.calibrate(1.2, 1.1);
+        assert!((s.estimate_gain - 0.75).abs() < 1e-6);
+        // Rebuilding survives: the gain is not reset.
+        s.rebuilt(1.0, 1.0, 10.0);
+        assert!((s.estimate_gain - 0.75).abs() < 1e-6);
+        // No estimated degradation: nothing learnt.
+        s.calibrate(1.0, 1.5);
+        assert!((s.estimate_gain - 0.75).abs() < 1e-6);
+        // Bounded.
+        for _ in 0..20 {
+            s.calibrate(1.01, 9.0);
+        }
+        assert!(s.estimate_gain <= 2.0);
     }
 }
