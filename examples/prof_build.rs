@@ -10,7 +10,10 @@ fn main() {
     let bins: usize = std::env::args().nth(2).map_or(16, |s| s.parse().unwrap());
     let mesh = dynbvh::io::read_tri(path.as_ref()).unwrap();
     let all_axes = std::env::var("WIDEST").is_err();
-    let p = BuildParams { all_axes, ..BuildParams::binned(bins) };
+    let p = BuildParams {
+        all_axes,
+        ..BuildParams::binned(bins)
+    };
     let iters: usize = std::env::args().nth(3).map_or(3, |s| s.parse().unwrap());
     for _ in 0..iters {
         let c = cpu_s();

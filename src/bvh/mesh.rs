@@ -15,6 +15,9 @@ pub struct MeshBvh {
     pub(super) bvh: Bvh,
     /// `tris[slot]` is the triangle `bvh.prim_indices()[slot]`.
     pub(super) tris: Vec<[Vec3; 3]>,
+    /// `leaf_indices[slot]` are that triangle's vertex indices: refit reads them in order
+    /// instead of looking each triangle up through the mesh's index buffer.
+    leaf_indices: Vec<[u32; 3]>,
 }
 
 impl MeshBvh {
@@ -72,9 +75,12 @@ impl MeshBvh {
         }
         self.bvh.rebuild(&boxes, params, ws);
         ws.boxes = boxes;
+        self.leaf_indices.clear();
+        self.leaf_indices
+            .extend(self.bvh.prim_indices().iter().map(|&p| indices[p as usize]));
         self.tris.clear();
         self.tris.resize(mesh.len(), [Vec3::ZERO; 3]);
-        gather(&self.bvh, &mesh, &mut self.tris);
+        gather(&self.leaf_indices, positions, &mut self.tris);
     }
 
     /// Refits for new vertex positions of the same topology (same triangle count and indices).
@@ -97,7 +103,7 @@ impl MeshBvh {
             self.tris.len(),
             "refit needs the same triangles"
         );
-        gather(&self.bvh, &Indexed { positions, indices }, &mut self.tris);
+        gather(&self.leaf_indices, positions, &mut self.tris);
         let tris = &self.tris;
         self.bvh.refit_leaves(|first, count| {
             tris[first as usize..(first + count) as usize]
@@ -112,10 +118,12 @@ impl MeshBvh {
         &self.bvh
     }
 
-    /// Bytes held: nodes, primitive indices and the leaf-ordered triangles.
+    /// Bytes held: nodes, primitive indices, and the leaf-ordered triangles and vertex indices.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        self.bvh.memory_bytes() + std::mem::size_of_val(self.tris.as_slice())
+        self.bvh.memory_bytes()
+            + std::mem::size_of_val(self.tris.as_slice())
+            + std::mem::size_of_val(self.leaf_indices.as_slice())
     }
 
     /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
@@ -198,20 +206,18 @@ impl Indexed<'_> {
 }
 
 /// Copies each triangle into its leaf slot, in parallel chunks for large meshes.
-fn gather(bvh: &Bvh, mesh: &Indexed<'_>, tris: &mut [[Vec3; 3]]) {
-    let prims = bvh.prim_indices();
+fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
+    let fill = |t: &mut [[Vec3; 3]], idx: &[[u32; 3]]| {
+        for (t, i) in t.iter_mut().zip(idx) {
+            *t = i.map(|v| positions[v as usize]);
+        }
+    };
     if tris.len() >= 2 * GATHER_CHUNK {
         tris.par_chunks_mut(GATHER_CHUNK)
-            .zip(prims.par_chunks(GATHER_CHUNK))
-            .for_each(|(t, p)| {
-                for (t, &p) in t.iter_mut().zip(p) {
-                    *t = mesh.triangle(p as usize);
-                }
-            });
+            .zip(leaf_indices.par_chunks(GATHER_CHUNK))
+            .for_each(|(t, i)| fill(t, i));
     } else {
-        for (t, &p) in tris.iter_mut().zip(prims) {
-            *t = mesh.triangle(p as usize);
-        }
+        fill(tris, leaf_indices);
     }
 }
 
