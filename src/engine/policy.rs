@@ -12,12 +12,41 @@
 //!   degradation is 1.5 (the estimate says 1.58); on `swap.glb` the last-build ratio reaches
 //!   3.2 while a fresh tree is only 1.09 better (estimate 1.2).
 //!
+//! # Why `amortized` is the default
+//!
+//! `dynbvh bench --all` (run from the repository root) prints, for every shipped animation and
+//! animated sample, each policy's total time over the oracle's, then [`WHY_DEFAULT`]:
+//!
+//! - always-refit loses 15-20% where refitting degrades (explode, tube, AnimatedMorphSphere,
+//!   RiggedSimple); always-rebuild up to 1.8x where rebuilds cost more than the rays they save
+//!   (swap, CesiumMan, MorphStressTest); `periodic:8` and `threshold:1.3` are each 10-20% behind
+//!   on some file;
+//! - `amortized` rebuilds when the trace time its degradation has cost since the last build
+//!   (fresh ratio minus one, times the frame's trace time, summed) passes a rebuild's measured
+//!   cost: the optimal period for linearly growing degradation, and no rebuild at all without
+//!   rays or without degradation. The fresh-build estimate spends at most 5% of the mesh's refit
+//!   and trace time (on small meshes with few rays it is refreshed every few frames), and every
+//!   rebuild that follows a refit shows how much the estimate overstated the gain
+//!   ([`PolicyState::estimate_gain`]);
+//! - its worst ratio over the files is the lowest of the five policies.
+//!
 use std::fmt;
 use std::str::FromStr;
 
-/// Why [`Policy::DEFAULT`] is the default (printed under `dynbvh bench --all`).
+/// Why [`Policy::DEFAULT`] is the default (printed under `dynbvh bench --all`; the module docs
+/// say the same).
 pub const WHY_DEFAULT: &str = "\
-Why amortized is the default: see the module docs of dynbvh::engine::policy.
+Why amortized is the default. The sweep runs every policy on the same frames and rays of every
+shipped animation and animated sample (in lockstep, traces interleaved) and divides each total
+(update + trace) by the oracle's. No fixed policy is good everywhere: always-refit loses 15-20%
+where refit degrades (explode, tube, AnimatedMorphSphere, RiggedSimple), always-rebuild up to
+1.8x where rebuilds cost more than the rays they save (swap, CesiumMan, MorphStressTest), and
+periodic:8 and threshold:1.3 are each 10-20% behind on some file. Amortized adapts to both the
+rebuild cost and the rays cast: it charges each frame the trace time the degradation costs (the
+SAH ratio to an estimated fresh build, times the frame's trace time) and rebuilds once that sum
+passes a rebuild's measured cost, learning at every rebuild how much the estimate overstated the
+gain. Its worst ratio is the lowest of the five. Ratios within about 3% of 1 (either side) are
+timing noise: files without deforming meshes run identical trees under every policy.
 ";
 
 /// A refit-or-rebuild policy, selectable per run (see [`Policy::from_str`] for the syntax).
