@@ -1,7 +1,7 @@
 //! Generated scenes load back with the generator's triangle counts and pose to its analytic
 //! positions; the shipped `animations/` files are exactly what their documented command writes.
 
-use dynbvh::anim::generate::{Kind, generate};
+use dynbvh::anim::generate::{Generated, Kind, TubeWeights, generate, skinned_tube};
 use dynbvh::anim::{InstanceClass, LoadOptions, Scene};
 use dynbvh::geom::TriMesh;
 use std::path::Path;
@@ -29,21 +29,70 @@ fn generated_scenes_pose_to_analytic_positions() {
             InstanceClass::Deforming
         };
         assert!(classes.iter().all(|&c| c == want), "{kind:?}: {classes:?}");
-        let mut poser = scene.poser(Some(0)).unwrap();
-        let mut flat = TriMesh::default();
-        assert!(g.checks.len() >= 3);
-        for (t, want) in &g.checks {
-            poser.pose(*t);
-            poser.flatten_into(&mut flat);
-            assert_eq!(flat.positions.len(), want.len(), "{kind:?} t={t}");
-            for (v, (a, b)) in flat.positions.iter().zip(want).enumerate() {
-                assert!(
-                    (*a - *b).abs().max_element() < 1e-4,
-                    "{kind:?} t={t} vertex {v}: posed {a}, analytic {b}"
-                );
-            }
+        check_poses(&format!("{kind:?}"), &scene, &g);
+    }
+}
+
+/// Poses `scene` at the generator's check times and compares with its analytic positions.
+fn check_poses(what: &str, scene: &Scene, g: &Generated) {
+    let mut poser = scene.poser(Some(0)).unwrap();
+    let mut flat = TriMesh::default();
+    assert!(g.checks.len() >= 3);
+    for (t, want) in &g.checks {
+        poser.pose(*t);
+        poser.flatten_into(&mut flat);
+        assert_eq!(flat.positions.len(), want.len(), "{what} t={t}");
+        for (v, (a, b)) in flat.positions.iter().zip(want).enumerate() {
+            assert!(
+                (*a - *b).abs().max_element() < 1e-4,
+                "{what} t={t} vertex {v}: posed {a}, analytic {b}"
+            );
         }
     }
+}
+
+#[test]
+fn cubic_tube_has_four_weights_everywhere_and_poses_analytically() {
+    for (triangles, joints) in [(3000, 4), (3000, 8), (20_000, 15), (40_000, 16)] {
+        let g = skinned_tube(triangles, joints, TubeWeights::Cubic);
+        let what = format!("cubic tube {triangles} triangles {joints} joints");
+        let (scene, warnings) =
+            Scene::from_slice(Path::new("cubic.glb"), &g.glb, &LoadOptions::default()).unwrap();
+        assert!(warnings.is_empty(), "{what}: {warnings:?}");
+        assert_eq!(scene.triangle_count(), g.triangles, "{what}");
+        let skin = scene.meshes[0].skin.as_ref().unwrap();
+        assert_eq!(skin.influences, 4, "{what}");
+        assert_eq!(
+            scene.skins[0].joints.len(),
+            joints.next_multiple_of(2),
+            "{what}"
+        );
+        for (v, w) in skin.weights.chunks_exact(4).enumerate() {
+            assert!(
+                w.iter().all(|&w| w > 0.0),
+                "{what}: vertex {v} weights {w:?}"
+            );
+            assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-5, "{what}: {w:?}");
+        }
+        assert_eq!(
+            scene.classify(Some(0)).unwrap(),
+            vec![InstanceClass::Deforming]
+        );
+        check_poses(&what, &scene, &g);
+    }
+}
+
+#[test]
+fn linear_tube_with_four_joints_is_the_tube_kind() {
+    for n in [100, 2000, 5000] {
+        assert!(skinned_tube(n, 4, TubeWeights::Linear).glb == generate(Kind::Tube, n, 9).glb);
+    }
+    let g = skinned_tube(3000, 7, TubeWeights::Linear);
+    let (scene, warnings) =
+        Scene::from_slice(Path::new("linear.glb"), &g.glb, &LoadOptions::default()).unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    assert_eq!(scene.skins[0].joints.len(), 7);
+    check_poses("linear tube, 7 joints", &scene, &g);
 }
 
 #[test]

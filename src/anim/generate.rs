@@ -87,7 +87,7 @@ impl Rng {
 pub fn generate(kind: Kind, triangles: usize, seed: u64) -> Generated {
     let n = triangles.max(16);
     match kind {
-        Kind::Tube => tube(n),
+        Kind::Tube => skinned_tube(n, 4, TubeWeights::Linear),
         Kind::Wave => wave(n),
         Kind::Orbit => orbit(n, seed),
         Kind::Explode => explode(n, seed),
@@ -125,50 +125,121 @@ fn primitive(pos: usize, idx: usize) -> serde_json::Value {
     json!({"attributes": {"POSITION": pos}, "indices": idx})
 }
 
-/// Skinned tube along +y bending on a chain of joints.
-fn tube(n: usize) -> Generated {
+/// How [`skinned_tube`] weights its vertices to the joints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TubeWeights {
+    /// Two influences: linear interpolation between the two joints around the vertex (joints
+    /// from the tube's bottom to its top). [`Kind::Tube`] is this with 4 joints.
+    Linear,
+    /// Four influences, all non-zero on every vertex: the uniform cubic B-spline weights of the
+    /// four joints around the vertex (a smooth falloff that sums to 1). The first and last
+    /// joints sit beyond the tube's ends, and no ring of vertices lies on a knot of the spline,
+    /// where one of the four weights would vanish.
+    Cubic,
+}
+
+impl TubeWeights {
+    /// Non-zero weights per vertex.
+    #[must_use]
+    pub fn influences(self) -> usize {
+        match self {
+            TubeWeights::Linear => 2,
+            TubeWeights::Cubic => 4,
+        }
+    }
+}
+
+/// The four uniform cubic B-spline weights at fraction `f` of a knot interval (in f64: near a
+/// knot the smallest weight is `f³/6`, which must not round to zero).
+fn cubic_bspline(f: f64) -> [f32; 4] {
+    let g = 1.0 - f;
+    let (f2, f3) = (f * f, f * f * f);
+    [
+        g * g * g / 6.0,
+        (3.0 * f3 - 6.0 * f2 + 4.0) / 6.0,
+        (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) / 6.0,
+        f3 / 6.0,
+    ]
+    .map(|w| w as f32)
+}
+
+/// A skinned tube along +y, about `triangles` triangles, bending on a chain of `joints` joints
+/// (LINEAR rotations, each joint after the first bending about z) with `weights` per vertex.
+///
+/// `joints` is at least 2 for [`TubeWeights::Linear`]; for [`TubeWeights::Cubic`] it is at
+/// least 4 and rounded up to an even count (which keeps rings off the spline's knots).
+/// `skinned_tube(n, 4, TubeWeights::Linear)` is `generate(Kind::Tube, n, _)`, byte for byte.
+#[must_use]
+pub fn skinned_tube(triangles: usize, joints: usize, weights: TubeWeights) -> Generated {
     const SEG: usize = 16;
-    const JOINTS: usize = 4;
     const HEIGHT: f32 = 4.0;
     const DUR: f32 = 2.0;
+    let n = triangles.max(16);
+    let cubic = weights == TubeWeights::Cubic;
+    let joint_count = if cubic {
+        joints.max(4).next_multiple_of(2)
+    } else {
+        joints.max(2)
+    };
     let rings = (n / (2 * SEG)).max(1);
     let (pos, tris) = grid(SEG, rings, |u, v| {
         let a = u * TAU;
         Vec3::new(0.3 * a.cos(), v * HEIGHT, -0.3 * a.sin())
     });
-    let step = HEIGHT / (JOINTS - 1) as f32;
-    let mut joints = Vec::with_capacity(pos.len());
-    let mut weights = Vec::with_capacity(pos.len());
+    // Joint j sits at height `base + j * step`. Linear: joints from the bottom to the top.
+    // Cubic: the spline parameter is u = j at joint j; the tube spans u in (1, J - 2), offset
+    // by half a ring so that with J - 3 odd no ring height (2r + 1) h / 2 is a knot.
+    let ring = HEIGHT / rings as f32;
+    let (base, step) = if cubic {
+        let step = (HEIGHT + ring) / (joint_count - 3) as f32;
+        (-step - ring / 2.0, step)
+    } else {
+        (0.0, HEIGHT / (joint_count - 1) as f32)
+    };
+    let mut joint_ids = Vec::with_capacity(pos.len());
+    let mut joint_weights = Vec::with_capacity(pos.len());
     for p in &pos {
-        let u = (p.y / step).clamp(0.0, (JOINTS - 1) as f32);
-        let j = (u.floor() as usize).min(JOINTS - 2);
-        let f = u - j as f32;
-        joints.push([j as u16, j as u16 + 1, 0, 0]);
-        weights.push([1.0 - f, f, 0.0, 0.0]);
+        if cubic {
+            let u = ((f64::from(p.y) - f64::from(base)) / f64::from(step))
+                .clamp(1.0, (joint_count - 2) as f64);
+            let k = (u.floor() as usize).clamp(1, joint_count - 3);
+            let j = (k - 1) as u16;
+            joint_ids.push([j, j + 1, j + 2, j + 3]);
+            joint_weights.push(cubic_bspline(u - k as f64));
+        } else {
+            let u = (p.y / step).clamp(0.0, (joint_count - 1) as f32);
+            let j = (u.floor() as usize).min(joint_count - 2);
+            let f = u - j as f32;
+            joint_ids.push([j as u16, j as u16 + 1, 0, 0]);
+            joint_weights.push([1.0 - f, f, 0.0, 0.0]);
+        }
     }
     let times = key_times(17, DUR);
-    // Joint j > 0 bends about z by 0.6 sin(2πt/DUR + j).
-    let angle = |j: usize, t: f32| 0.6 * (TAU * t / DUR + j as f32).sin();
-    let ibm: Vec<Mat4> = (0..JOINTS)
-        .map(|j| Mat4::from_translation(Vec3::new(0.0, -(j as f32) * step, 0.0)))
+    // Joint j > 0 bends about z by 0.6 (3 / (J - 1)) sin(2πt/DUR + j): 0.6 for 4 joints.
+    let amplitude = 0.6 * (3.0 / (joint_count - 1) as f32);
+    let angle = |j: usize, t: f32| amplitude * (TAU * t / DUR + j as f32).sin();
+    let ibm: Vec<Mat4> = (0..joint_count)
+        .map(|j| Mat4::from_translation(Vec3::new(0.0, -(base + j as f32 * step), 0.0)))
         .collect();
     let mut w = GlbWriter::default();
     let pa = w.vec3s(&pos);
     let ia = w.indices(&tris);
-    let ja = w.joints(&joints);
-    let wflat: Vec<f32> = weights.iter().flatten().copied().collect();
+    let ja = w.joints(&joint_ids);
+    let wflat: Vec<f32> = joint_weights.iter().flatten().copied().collect();
     let wa = w.floats(&wflat, "VEC4", 4);
     let ba = w.mat4s(&ibm);
     let ta = w.scalars(&times);
     let mut nodes = vec![];
     let mut channels = vec![];
     let mut samplers = vec![];
-    for j in 0..JOINTS {
+    for j in 0..joint_count {
         let mut node = json!({"name": format!("joint{j}")});
         if j > 0 {
             node["translation"] = json!([0.0, step, 0.0]);
+        } else if base != 0.0 {
+            node["translation"] = json!([0.0, base, 0.0]);
         }
-        if j + 1 < JOINTS {
+        if j + 1 < joint_count {
             node["children"] = json!([j + 1]);
         }
         nodes.push(node);
@@ -191,18 +262,19 @@ fn tube(n: usize) -> Generated {
     prim["attributes"]["WEIGHTS_0"] = json!(wa);
     let root = json!({
         "scene": 0,
-        "scenes": [{"nodes": [0, JOINTS]}],
+        "scenes": [{"nodes": [0, joint_count]}],
         "nodes": nodes,
         "meshes": [{"name": "tube", "primitives": [prim]}],
-        "skins": [{"joints": (0..JOINTS).collect::<Vec<_>>(), "inverseBindMatrices": ba, "skeleton": 0}],
+        "skins": [{"joints": (0..joint_count).collect::<Vec<_>>(), "inverseBindMatrices": ba, "skeleton": 0}],
         "animations": [{"name": "bend", "channels": channels, "samplers": samplers}],
     });
+    let influences = weights.influences();
     let checks = [0usize, 3, 8, 13]
         .iter()
         .map(|&k| {
             let t = times[k];
-            let mut world = Mat4::IDENTITY;
-            let mut jm = Vec::with_capacity(JOINTS);
+            let mut world = Mat4::from_translation(Vec3::new(0.0, base, 0.0));
+            let mut jm = Vec::with_capacity(joint_count);
             for (j, b) in ibm.iter().enumerate() {
                 if j > 0 {
                     world = world
@@ -213,9 +285,9 @@ fn tube(n: usize) -> Generated {
             }
             let p = pos
                 .iter()
-                .zip(joints.iter().zip(&weights))
+                .zip(joint_ids.iter().zip(&joint_weights))
                 .map(|(p, (j, w))| {
-                    (0..2)
+                    (0..influences)
                         .map(|i| w[i] * jm[j[i] as usize].transform_point3(*p))
                         .sum()
                 })
