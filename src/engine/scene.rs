@@ -8,15 +8,19 @@
 //! direction is transformed without renormalising, so a hit's `t` is the same parameter along
 //! the world ray and hits of different instances compare directly.
 //!
-//! After the first frame, [`Engine::update`] allocates nothing unless a tree is rebuilt, and
-//! ray casting never allocates. (Run the frame loop on a rayon worker, e.g. inside
-//! `rayon::scope`, for none at all: every parallel call made from outside the pool queues a job
-//! in rayon's global injector, which allocates a block every 63 jobs.)
+//! After the first frame, [`Engine::update`] allocates nothing, rebuilds included: a tree is
+//! rebuilt into its own storage with the engine's one [`BuildWorkspace`] (shared by every mesh
+//! and the top-level tree, sized by the first builds), and ray casting never allocates. Two
+//! things of rayon's can still allocate, so for none at all build the scene and run the frame
+//! loop inside a pool's `install`: every parallel call made from outside the pool queues a job
+//! in rayon's global injector, which allocates a block every 63 jobs; and the binned builder
+//! keeps spare bins per thread, made by each worker's first build task (with one thread, by the
+//! scene's first builds; with several, whenever a worker first steals one).
 
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::stats::{FrameStats, MeshStats};
-use crate::bvh::{BuildParams, Bvh, Counters, MeshBvh, Node, TraversalStats};
+use crate::bvh::{BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, Node, TraversalStats};
 use crate::geom::{Aabb, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
@@ -37,8 +41,8 @@ pub struct InstanceId(pub u32);
 /// microseconds (0.06 ms a frame for the 166 instances of `animations/orbit.glb`) and every
 /// frame traces through a fresh tree; on `orbit.glb` refitting lets its SAH ratio reach 1.16
 /// and traces about 10% slower, and the threshold policy at 1.5 never triggers. On scenes of
-/// one or a few instances the three are within measurement noise. A rebuild allocates (it
-/// makes a new tree); use `Refit` for a strictly allocation-free frame loop.
+/// one or a few instances the three are within measurement noise. A rebuild goes into the
+/// existing tree with the engine's build workspace and allocates nothing once warm.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum TlasPolicy {
     /// Always refit (rebuilt only when instances are added).
@@ -160,6 +164,9 @@ pub struct Engine {
     tlas: Bvh,
     tlas_build_sah: f32,
     tlas_stale: bool,
+    /// Scratch of every build (meshes and top-level tree), kept so that a rebuild into an
+    /// existing tree allocates nothing once it has grown to the largest mesh.
+    workspace: BuildWorkspace,
     frame: u64,
     stats: FrameStats,
 }
@@ -177,6 +184,7 @@ impl Engine {
             tlas: Bvh::empty(config.build.max_leaf_size),
             tlas_build_sah: 0.0,
             tlas_stale: true,
+            workspace: BuildWorkspace::default(),
             frame: 0,
             stats: FrameStats::default(),
         }
@@ -205,7 +213,13 @@ impl Engine {
             "vertex index out of range"
         );
         let t = Instant::now();
-        let bvh = MeshBvh::build_indexed(&positions, &indices, &self.config.build);
+        let mut bvh = MeshBvh::default();
+        bvh.rebuild_indexed(
+            &positions,
+            &indices,
+            &self.config.build,
+            &mut self.workspace,
+        );
         let sah = tree_sah(bvh.bvh());
         let ms = ms_since(t);
         let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
@@ -419,7 +433,8 @@ impl Engine {
             if rebuild {
                 let refitted = (decided != Some(true)).then_some(m.sah);
                 let t = Instant::now();
-                m.bvh = MeshBvh::build_indexed(&m.positions, &m.indices, &build);
+                m.bvh
+                    .rebuild_indexed(&m.positions, &m.indices, &build, &mut self.workspace);
                 m.sah = tree_sah(m.bvh.bvh());
                 let est = if estimate {
                     m.fresh.estimate(&m.positions, &m.indices)
@@ -532,7 +547,8 @@ impl Engine {
     }
 
     fn rebuild_tlas(&mut self) {
-        self.tlas = Bvh::build(&self.tlas_boxes, &self.config.build);
+        self.tlas
+            .rebuild(&self.tlas_boxes, &self.config.build, &mut self.workspace);
         self.tlas_build_sah = tree_sah(&self.tlas);
         self.tlas_stale = false;
     }
