@@ -1,0 +1,91 @@
+//! Posing and loading throughput of `dynbvh::anim` (issue 3, "What it must reach").
+//!
+//! - `pose/tube_1m/threads1`, `pose/tube_1m/threads2`: `Poser::pose(t)` of a generated skinned
+//!   tube of about 1M vertices with 4 non-zero weights each (`skinned_tube` with cubic
+//!   B-spline weights over 16 joints), at successive times 1/60 s apart, inside a 1-thread and
+//!   a 2-thread rayon pool. Throughput is in vertices.
+//! - `load/metal_rough_spheres`: `Scene::load` of the 1M-triangle
+//!   `../shared/gltf-samples/MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb`
+//!   (skipped with a message when the samples are missing); `load/metal_rough_spheres_flattened`
+//!   adds `Scene::flatten_rest`, the 1M world-space triangles.
+//!
+//! Run: `cargo bench --bench pose` (short: `cargo bench --bench pose -- --warm-up-time 1
+//! --measurement-time 3`; one group: `cargo bench --bench pose -- load`).
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use dynbvh::anim::generate::{TubeWeights, skinned_tube};
+use dynbvh::anim::{LoadOptions, Scene};
+use std::hint::black_box;
+use std::path::Path;
+
+/// Triangles of the generated tube: 16 segments × 58,825 rings, 1,000,042 vertices.
+const TUBE_TRIANGLES: usize = 1_882_400;
+/// Joints of the generated tube's chain.
+const TUBE_JOINTS: usize = 16;
+/// Time between successive poses.
+const FRAME: f32 = 1.0 / 60.0;
+
+fn pose(c: &mut Criterion) {
+    let g = skinned_tube(TUBE_TRIANGLES, TUBE_JOINTS, TubeWeights::Cubic);
+    let (scene, warnings) =
+        Scene::from_slice(Path::new("tube_1m.glb"), &g.glb, &LoadOptions::default())
+            .expect("the generated tube loads");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let skin = scene.meshes[0].skin.as_ref().expect("the tube is skinned");
+    assert!(skin.influences == 4 && skin.weights.iter().all(|&w| w > 0.0));
+    let vertices = scene.vertex_count();
+    let mut group = c.benchmark_group("pose");
+    group.throughput(Throughput::Elements(vertices as u64));
+    group.sample_size(20);
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a rayon pool");
+        let mut poser = scene.poser(Some(0)).expect("the tube has an animation");
+        let mut t = 0.0f32;
+        group.bench_function(
+            BenchmarkId::new("tube_1m", format!("threads{threads}")),
+            |b| {
+                pool.install(|| {
+                    b.iter(|| {
+                        t += FRAME;
+                        poser.pose(t);
+                        black_box(poser.positions(0).last().copied())
+                    });
+                });
+            },
+        );
+    }
+    group.finish();
+}
+
+fn load(c: &mut Criterion) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/gltf-samples/MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb");
+    if !path.exists() {
+        eprintln!(
+            "skipping load/metal_rough_spheres: {} not found (the glTF samples live in ../shared/gltf-samples)",
+            path.display()
+        );
+        return;
+    }
+    let mut group = c.benchmark_group("load");
+    group.sample_size(10);
+    group.bench_function("metal_rough_spheres", |b| {
+        b.iter(|| {
+            let (scene, _) = Scene::load(&path).expect("the sample loads");
+            black_box(scene.triangle_count())
+        });
+    });
+    group.bench_function("metal_rough_spheres_flattened", |b| {
+        b.iter(|| {
+            let (scene, _) = Scene::load(&path).expect("the sample loads");
+            black_box(scene.flatten_rest().indices.len())
+        });
+    });
+    group.finish();
+}
+
+criterion_group!(benches, pose, load);
+criterion_main!(benches);
