@@ -167,6 +167,8 @@ pub struct Engine {
     /// Scratch of every build (meshes and top-level tree), kept so that a rebuild into an
     /// existing tree allocates nothing once it has grown to the largest mesh.
     workspace: BuildWorkspace,
+    /// Pose time recorded since the last update, reported by the next.
+    pending_pose_ms: f64,
     frame: u64,
     stats: FrameStats,
 }
@@ -185,6 +187,7 @@ impl Engine {
             tlas_build_sah: 0.0,
             tlas_stale: true,
             workspace: BuildWorkspace::default(),
+            pending_pose_ms: 0.0,
             frame: 0,
             stats: FrameStats::default(),
         }
@@ -339,11 +342,11 @@ impl Engine {
         self.instances[i.0 as usize].transform
     }
 
-    /// Tells the engine how long posing took this frame (reported in the frame's statistics).
+    /// Tells the engine how long posing the next frame took: the time is reported in the
+    /// statistics of the next [`Engine::update`] (as `pose_ms`, and counted in `update_ms`).
+    /// Calls before one update add up.
     pub fn record_pose(&mut self, ms: f64) {
-        self.stats.pose_ms = ms;
-        self.stats.update_ms =
-            ms + self.stats.refit_ms + self.stats.rebuild_ms + self.stats.tlas_ms;
+        self.pending_pose_ms += ms;
     }
 
     /// Tells the engine how long this frame's rays took: the amortized policy predicts each
@@ -380,6 +383,7 @@ impl Engine {
         let estimate = PolicyState::needs_fresh_ratio(policy);
         let mut stats = FrameStats {
             frame: self.frame,
+            pose_ms: std::mem::take(&mut self.pending_pose_ms),
             sah_ratio: 1.0,
             max_sah_ratio: 1.0,
             max_fresh_ratio: if estimate { 1.0 } else { 0.0 },
@@ -540,7 +544,7 @@ impl Engine {
         if total > 0.0 {
             stats.sah_ratio = (weighted / total) as f32;
         }
-        stats.update_ms = stats.refit_ms + stats.rebuild_ms + stats.tlas_ms;
+        stats.update_ms = stats.pose_ms + stats.refit_ms + stats.rebuild_ms + stats.tlas_ms;
         self.stats = stats;
         self.frame += 1;
         &self.stats

@@ -27,7 +27,8 @@ pub struct MeshStats {
 pub struct FrameStats {
     /// Frame number (updates since the engine was made).
     pub frame: u64,
-    /// Time spent posing (recorded by the caller with [`super::Engine::record_pose`]), ms.
+    /// Time spent posing this frame (recorded by the caller with
+    /// [`super::Engine::record_pose`] before the update), ms.
     pub pose_ms: f64,
     /// Refit time over all meshes, ms.
     pub refit_ms: f64,
