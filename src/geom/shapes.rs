@@ -82,6 +82,35 @@ pub fn bumpy_sphere(triangles: usize) -> TriMesh {
     TriMesh::new(positions, indices)
 }
 
+/// A closed unit icosphere: the icosahedron with each face split into four `subdiv` times,
+/// vertices shared and projected onto the sphere. Every edge is shared by exactly two triangles.
+#[must_use]
+pub fn icosphere(subdiv: u32) -> TriMesh {
+    let mut positions: Vec<Vec3> = ICO_VERTS
+        .iter()
+        .map(|p| Vec3::from(*p).normalize())
+        .collect();
+    let mut faces: Vec<[u32; 3]> = ICO_FACES.iter().map(|f| f.map(|i| i as u32)).collect();
+    for _ in 0..subdiv {
+        let mut mid = std::collections::HashMap::new();
+        let mut midpoint = |a: u32, b: u32, pos: &mut Vec<Vec3>| {
+            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
+                pos.len() as u32 - 1
+            })
+        };
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        for [a, b, c] in faces {
+            let ab = midpoint(a, b, &mut positions);
+            let bc = midpoint(b, c, &mut positions);
+            let ca = midpoint(c, a, &mut positions);
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    TriMesh::new(positions, faces)
+}
+
 /// Moves every vertex by a smooth sine wave of amplitude `amplitude` times the largest extent
 /// of the mesh's box, `phase` shifting the wave (animate it to deform over time).
 pub fn sine_deform(rest: &[Vec3], out: &mut [Vec3], amplitude: f32, phase: f32) {
@@ -102,6 +131,20 @@ pub fn sine_deform(rest: &[Vec3], out: &mut [Vec3], amplitude: f32, phase: f32) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn icosphere_is_closed() {
+        let m = icosphere(2);
+        assert_eq!(m.len(), 20 * 16);
+        let mut edges = std::collections::HashMap::new();
+        for t in &m.indices {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        assert!(edges.values().all(|&n| n == 2));
+    }
 
     #[test]
     fn sphere_has_the_asked_size_and_valid_indices() {

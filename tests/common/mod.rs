@@ -41,67 +41,7 @@ pub fn check_ray(mesh: &TriMesh, bvh: &MeshBvh, ray: &Ray) -> Result<(), String>
     Ok(())
 }
 
-/// A closed icosphere: the icosahedron with each face split `subdiv` times (shared vertices).
-pub fn icosphere(subdiv: u32) -> TriMesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut pos: Vec<Vec3> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|p| Vec3::from(*p).normalize())
-    .collect();
-    let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..subdiv {
-        let mut mid = std::collections::HashMap::new();
-        let mut next = Vec::with_capacity(faces.len() * 4);
-        let mut midpoint = |a: u32, b: u32, pos: &mut Vec<Vec3>| {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
-                pos.len() as u32 - 1
-            })
-        };
-        for [a, b, c] in faces {
-            let ab = midpoint(a, b, &mut pos);
-            let bc = midpoint(b, c, &mut pos);
-            let ca = midpoint(c, a, &mut pos);
-            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        faces = next;
-    }
-    TriMesh::new(pos, faces)
-}
+pub use dynbvh::geom::shapes::icosphere;
 
 /// Deterministic pseudo-random numbers (splitmix64) for non-proptest tests.
 pub struct Rng(pub u64);
