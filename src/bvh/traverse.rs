@@ -57,6 +57,33 @@ impl Bvh {
     pub fn closest_slot(
         &self,
         ray: &Ray,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+        counters: &mut impl Counters,
+    ) -> Option<(usize, f32)> {
+        self.traverse::<false>(ray, test, counters)
+    }
+
+    /// True when some primitive is hit within `[ray.tmin, ray.tmax)`; `test(slot, tmax)` as for
+    /// [`Bvh::closest_slot`]. Stops at the first hit found (for shadow and visibility rays) and
+    /// returns its slot.
+    #[inline]
+    pub fn any_slot(
+        &self,
+        ray: &Ray,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+        counters: &mut impl Counters,
+    ) -> Option<usize> {
+        self.traverse::<true>(ray, test, counters)
+            .map(|(slot, _)| slot)
+    }
+
+    /// The traversal both queries share: nearer child first, farther one on the stack with its
+    /// entry distance. `ANY` returns at the first hit; otherwise each hit shortens the ray and
+    /// subtrees entered beyond it are skipped when popped.
+    #[inline(always)]
+    fn traverse<const ANY: bool>(
+        &self,
+        ray: &Ray,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
         counters: &mut impl Counters,
     ) -> Option<(usize, f32)> {
@@ -74,6 +101,9 @@ impl Bvh {
                 for slot in node.first as usize..(node.first + node.count) as usize {
                     counters.prim();
                     if let Some(t) = test(slot, tmax) {
+                        if ANY {
+                            return Some((slot, t));
+                        }
                         tmax = t;
                         best = Some((slot, t));
                     }
@@ -118,67 +148,6 @@ impl Bvh {
                     break;
                 }
             }
-        }
-    }
-
-    /// True when some primitive is hit within `[ray.tmin, ray.tmax)`; `test(slot, tmax)` as for
-    /// [`Bvh::closest_slot`]. Stops at the first hit found (for shadow and visibility rays).
-    #[inline]
-    pub fn any_slot(
-        &self,
-        ray: &Ray,
-        mut test: impl FnMut(usize, f32) -> Option<f32>,
-        counters: &mut impl Counters,
-    ) -> Option<usize> {
-        let nodes = self.nodes.as_slice();
-        let root = nodes.first()?;
-        let tmax = ray.tmax;
-        ray.hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)?;
-        let mut stack = [0u32; MAX_DEPTH];
-        let mut sp = 0;
-        let mut node = root;
-        loop {
-            counters.node();
-            if node.is_leaf() {
-                for slot in node.first as usize..(node.first + node.count) as usize {
-                    counters.prim();
-                    if test(slot, tmax).is_some() {
-                        return Some(slot);
-                    }
-                }
-            } else {
-                let l = &nodes[node.first as usize];
-                let r = &nodes[node.first as usize + 1];
-                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
-                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
-                match (tl, tr) {
-                    (Some(a), Some(b)) => {
-                        let (near, far) = if a <= b {
-                            (l, node.first + 1)
-                        } else {
-                            (r, node.first)
-                        };
-                        stack[sp] = far;
-                        sp += 1;
-                        node = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        node = l;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        node = r;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
-            }
-            if sp == 0 {
-                return None;
-            }
-            sp -= 1;
-            node = &nodes[stack[sp] as usize];
         }
     }
 }
