@@ -31,11 +31,11 @@ impl Lcg {
 fn glb(mut root: serde_json::Value, bin: &[u8]) -> Vec<u8> {
     root["buffers"] = json!([{"byteLength": bin.len()}]);
     let mut js = serde_json::to_vec(&root).unwrap();
-    while js.len() % 4 != 0 {
+    while !js.len().is_multiple_of(4) {
         js.push(b' ');
     }
     let mut b = bin.to_vec();
-    while b.len() % 4 != 0 {
+    while !b.len().is_multiple_of(4) {
         b.push(0);
     }
     let total = 12 + 8 + js.len() + 8 + b.len();
@@ -54,7 +54,7 @@ fn glb(mut root: serde_json::Value, bin: &[u8]) -> Vec<u8> {
 
 /// Appends `bytes` to `bin` as a new buffer view (4-byte aligned) and returns its index.
 fn view(bin: &mut Vec<u8>, views: &mut Vec<serde_json::Value>, bytes: &[u8]) -> usize {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()}));

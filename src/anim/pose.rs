@@ -1,10 +1,10 @@
 //! Posing a scene at time `t`: node world transforms, morph weights, joint matrices, and
 //! morphed-then-skinned vertex positions written into buffers reused from call to call.
 
-use super::scene::{Animation, Instance, Mesh, Property, Scene, TimeMode, Trs};
+use super::scene::{Animation, Instance, Mesh, Property, Scene, SkinAttributes, TimeMode, Trs};
 use crate::error::{Error, Result};
 use crate::geom::TriMesh;
-use glam::{Affine3A, Mat4, Quat, Vec3};
+use glam::{Affine3A, Mat4, Quat, Vec3, Vec3A};
 use rayon::prelude::*;
 
 /// Vertex count above which an instance is deformed in parallel.
@@ -86,6 +86,7 @@ pub struct Poser<'s> {
     joints: Vec<Vec<Affine3A>>,
     buffers: Vec<Vec<Vec3>>,
     world_space: Vec<bool>,
+    unweighted: Vec<Vec<u32>>,
     scratch: Vec<f32>,
     time: f32,
     posed: bool,
@@ -182,6 +183,11 @@ impl<'s> Poser<'s> {
                     let k = i.skin.map_or(0, |s| scene.skins[s].joints.len());
                     vec![Affine3A::IDENTITY; k]
                 })
+                .collect(),
+            unweighted: scene
+                .instances
+                .iter()
+                .map(|i| unweighted_vertices(&scene.meshes[i.mesh], i))
                 .collect(),
             buffers,
             world_space,
@@ -293,6 +299,7 @@ impl<'s> Poser<'s> {
                 &self.weights[i],
                 &self.joints[i],
                 self.world_space[i].then_some(node_world),
+                &self.unweighted[i],
                 &mut self.buffers[i],
             );
         }
@@ -367,58 +374,169 @@ impl<'s> Poser<'s> {
     }
 }
 
+/// Vertices per task of the parallel path and per pass of the serial one: a chunk's positions
+/// stay in cache between the morph pass and the skin pass.
+const CHUNK: usize = 2048;
+
+/// Vertices of `mesh` whose skin weights are all zero (skinning leaves them to the node's
+/// transform), when `inst` is skinned.
+fn unweighted_vertices(mesh: &Mesh, inst: &Instance) -> Vec<u32> {
+    match mesh.skin.as_ref().filter(|_| inst.skin.is_some()) {
+        Some(sk) if sk.influences > 0 => sk
+            .weights
+            .chunks_exact(sk.influences)
+            .enumerate()
+            .filter(|(_, w)| w.iter().all(|&w| w == 0.0))
+            .map(|(v, _)| v as u32)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
 /// Morphs then skins the vertices of `inst` into `out`; without a skin, `world` (if any) maps
-/// the morphed positions to world space.
+/// the morphed positions to world space, and so it does for the skinned vertices listed in
+/// `unweighted` (all their weights are zero).
 fn deform(
     mesh: &Mesh,
     inst: &Instance,
     weights: &[f32],
     joints: &[Affine3A],
     world: Option<Affine3A>,
+    unweighted: &[u32],
     out: &mut [Vec3],
 ) {
     let skin = mesh.skin.as_ref().filter(|_| inst.skin.is_some());
     let fallback = world.unwrap_or(Affine3A::IDENTITY);
-    let one = |v: usize| -> Vec3 {
-        let mut p = mesh.positions[v];
-        for (w, d) in weights.iter().zip(&mesh.targets) {
-            if *w != 0.0 {
-                p += *w * d[v];
-            }
+    let morphing = weights.iter().zip(&mesh.targets).any(|(&w, _)| w != 0.0);
+    let chunk = |start: usize, out: &mut [Vec3]| match skin {
+        Some(sk) if morphing => {
+            morph(mesh, weights, start, out);
+            skin_chunk(sk, joints, start, out.iter_mut().map(|o| (*o, o)));
         }
-        match skin {
-            Some(sk) => {
-                let k = sk.influences;
-                let (js, ws) = (&sk.joints[v * k..v * k + k], &sk.weights[v * k..v * k + k]);
-                let mut acc = Vec3::ZERO;
-                let mut total = 0.0;
-                for (&j, &w) in js.iter().zip(ws) {
-                    if w != 0.0 {
-                        acc += w * joints[usize::from(j)].transform_point3(p);
-                        total += w;
-                    }
-                }
-                if total > 0.0 {
-                    acc
-                } else {
-                    fallback.transform_point3(p)
-                }
-            }
-            None => fallback.transform_point3(p),
+        Some(sk) => {
+            let rest = &mesh.positions[start..start + out.len()];
+            skin_chunk(sk, joints, start, rest.iter().copied().zip(out));
+        }
+        None => {
+            morph(mesh, weights, start, out);
+            transform_all(&fallback, out);
         }
     };
-    const CHUNK: usize = 4096;
     if out.len() > PARALLEL_VERTICES {
         out.par_chunks_mut(CHUNK)
             .enumerate()
-            .for_each(|(c, chunk)| {
-                for (k, o) in chunk.iter_mut().enumerate() {
-                    *o = one(c * CHUNK + k);
-                }
-            });
+            .for_each(|(c, o)| chunk(c * CHUNK, o));
     } else {
-        for (v, o) in out.iter_mut().enumerate() {
-            *o = one(v);
+        for (c, o) in out.chunks_mut(CHUNK).enumerate() {
+            chunk(c * CHUNK, o);
         }
+    }
+    if skin.is_some() {
+        for &v in unweighted {
+            let v = v as usize;
+            let p = &mut out[v..=v];
+            morph(mesh, weights, v, p);
+            transform_all(&fallback, p);
+        }
+    }
+}
+
+/// Writes the morphed rest positions of vertices `start..start + out.len()` into `out`:
+/// the rest position plus each target's delta times its weight, targets in order.
+fn morph(mesh: &Mesh, weights: &[f32], start: usize, out: &mut [Vec3]) {
+    let range = start..start + out.len();
+    out.copy_from_slice(&mesh.positions[range.clone()]);
+    for (&w, deltas) in weights.iter().zip(&mesh.targets) {
+        if w != 0.0 {
+            for (o, &d) in out.iter_mut().zip(&deltas[range.clone()]) {
+                *o += w * d;
+            }
+        }
+    }
+}
+
+/// Maps every point of `out` by `m` (nothing to do for the identity).
+fn transform_all(m: &Affine3A, out: &mut [Vec3]) {
+    if *m != Affine3A::IDENTITY {
+        for o in out {
+            *o = m.transform_point3(*o);
+        }
+    }
+}
+
+/// Linear blend skinning of vertices `start..` of the mesh: each `(p, o)` of `points` (the
+/// morphed position and where to write) gets the weighted sum of its joints' matrices applied
+/// to `p`. Vertices whose weights are all zero get the origin (the caller places them).
+fn skin_chunk<'o>(
+    sk: &SkinAttributes,
+    joints: &[Affine3A],
+    start: usize,
+    points: impl ExactSizeIterator<Item = (Vec3, &'o mut Vec3)>,
+) {
+    let k = sk.influences;
+    let range = start * k..(start + points.len()) * k;
+    let (js, ws) = (&sk.joints[range.clone()], &sk.weights[range]);
+    if k == 4 {
+        let (js, ws) = (js.as_chunks::<4>().0, ws.as_chunks::<4>().0);
+        for (((p, o), j), w) in points.zip(js).zip(ws) {
+            *o = blend4(joints, j, w, Vec3A::from(p)).into();
+        }
+    } else if k > 0 && k.is_multiple_of(4) {
+        for (((p, o), j), w) in points.zip(js.chunks_exact(k)).zip(ws.chunks_exact(k)) {
+            let p = Vec3A::from(p);
+            let (j, w) = (j.as_chunks::<4>().0, w.as_chunks::<4>().0);
+            *o = j
+                .iter()
+                .zip(w)
+                .fold(Vec3A::ZERO, |acc, (j, w)| acc + blend4(joints, j, w, p))
+                .into();
+        }
+    } else if k > 0 {
+        for (((p, o), j), w) in points.zip(js.chunks_exact(k)).zip(ws.chunks_exact(k)) {
+            let p = Vec3A::from(p);
+            *o = j
+                .iter()
+                .zip(w)
+                .fold(Vec3A::ZERO, |acc, (&j, &w)| {
+                    acc + w * joints[usize::from(j)].transform_point3a(p)
+                })
+                .into();
+        }
+    }
+}
+
+/// `Σ w[i] · joints[j[i]] · p` over one set of four influences: the four affine matrices are
+/// blended by weight, then the blend maps `p` once (measured faster than mapping `p` by each
+/// matrix and blending the points).
+#[inline(always)]
+fn blend4(joints: &[Affine3A], j: &[u16; 4], w: &[f32; 4], p: Vec3A) -> Vec3A {
+    let m = |i: usize| &joints[usize::from(j[i])];
+    let (a, b, c, d) = (m(0), m(1), m(2), m(3));
+    let [w0, w1, w2, w3] = w.map(Vec3A::splat);
+    let blend = |col: fn(&Affine3A) -> Vec3A| {
+        madd(col(a), w0, madd(col(b), w1, madd(col(c), w2, col(d) * w3)))
+    };
+    let x = blend(|m| m.matrix3.x_axis);
+    let y = blend(|m| m.matrix3.y_axis);
+    let z = blend(|m| m.matrix3.z_axis);
+    let t = blend(|m| m.translation);
+    madd(
+        x,
+        Vec3A::splat(p.x),
+        madd(y, Vec3A::splat(p.y), madd(z, Vec3A::splat(p.z), t)),
+    )
+}
+
+/// `a * b + c`, fused when the target has FMA (glam's `mul_add` is a slow library call
+/// otherwise).
+#[inline(always)]
+fn madd(a: Vec3A, b: Vec3A, c: Vec3A) -> Vec3A {
+    #[cfg(target_feature = "fma")]
+    {
+        a.mul_add(b, c)
+    }
+    #[cfg(not(target_feature = "fma"))]
+    {
+        a * b + c
     }
 }
