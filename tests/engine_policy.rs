@@ -3,6 +3,7 @@
 //! on a generated mesh, and the oracle against the measured schedules' model.
 
 use dynbvh::anim::Scene;
+use dynbvh::bvh::{BuildParams, MeshBvh};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{Action, EngineConfig, Policy, SceneHit};
@@ -136,4 +137,60 @@ fn explode_degrades_refit_and_policies_rebuild() {
     assert!(ratio <= 1.05 + 1e-6);
     let (_, rebuilds) = run("explode.glb", Policy::Periodic(5));
     assert_eq!(rebuilds, 6);
+}
+
+#[test]
+fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
+    // Swap: a tree built while the grids overlap degrades far faster than the frame-0 tree,
+    // which never gets much worse than a fresh one. With tracing a few times the cost of a
+    // rebuild, the default policy tries rebuilding, refits the replaced tree alongside, and
+    // goes back to it once it is the better one again.
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("animations/swap.glb");
+    let (scene, _) = Scene::load(&path).unwrap();
+    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(60)).unwrap();
+    let config = |policy| EngineConfig {
+        policy,
+        ..EngineConfig::default()
+    };
+    let mut e = src.build(0, config(Policy::DEFAULT));
+    let mut refit = src.build(0, config(Policy::Refit));
+    let m = src.deforming()[0];
+    // Tracing priced against this machine's rebuild, so the decisions do not depend on its
+    // speed.
+    let t = std::time::Instant::now();
+    for _ in 0..5 {
+        let b = MeshBvh::build_indexed(e.positions(m), e.indices(m), &BuildParams::BINNED);
+        assert!(b.bvh().sah_cost() > 0.0);
+    }
+    let trace_ms = 3.0 * t.elapsed().as_secs_f64() * 1e3 / 5.0;
+    let rays = camera_rays(&e.bounds(), 16, 16);
+    let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
+    let (mut rebuilds, mut reverts) = (0, 0);
+    for f in 1..=src.frames() {
+        src.advance(&mut e, f);
+        src.advance(&mut refit, f);
+        let s = *e.update();
+        refit.update();
+        rebuilds += s.rebuilds;
+        reverts += s.reverts;
+        if s.reverts > 0 && reverts == 1 {
+            // The first rebuild replaced the frame-0 tree: it is back, refitted to this frame.
+            assert_eq!(e.mesh_stats(m).sah, refit.mesh_stats(m).sah, "frame {f}");
+            assert_eq!(s.action, Action::Refit);
+        }
+        // Hits stay right whichever tree is in use.
+        e.trace_closest(&rays, &mut hits);
+        for (r, h) in rays.iter().zip(&hits) {
+            let want = refit.closest_hit(r);
+            assert_eq!(h.map(|h| h.t), want.map(|h| h.t), "frame {f}");
+        }
+        e.record_trace(trace_ms, rays.len() as u64);
+    }
+    assert!(rebuilds >= 1, "never tried a rebuild");
+    assert!(reverts >= 1, "{rebuilds} rebuilds, never went back");
+    // What it learnt: it tries again less often than it went back.
+    assert!(
+        rebuilds <= 2 * reverts + 1,
+        "{rebuilds} rebuilds, {reverts} reverts"
+    );
 }

@@ -57,6 +57,10 @@ pub struct BenchArgs {
     /// Skip the oracle (it builds at every frame and refits through the later ones).
     #[arg(long)]
     no_oracle: bool,
+    /// Skip the builder points of the speed-against-accuracy chart (each rebuilds every frame
+    /// with one builder, the full sweep included: slow on large meshes).
+    #[arg(long)]
+    no_builders: bool,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
@@ -89,6 +93,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
         oracle: !a.no_oracle,
         ..Options::default()
     };
+    if a.no_builders {
+        opts.builders.clear();
+    }
     if !a.policies.is_empty() {
         opts.policies = a
             .policies

@@ -68,6 +68,12 @@ pub enum Policy {
     /// `fresh * (ratio_now - 1)` more. With degradation growing linearly over frames this
     /// rebuilds at the optimal period (`k = sqrt(2 C / a)`); with no rays or no degradation it
     /// never rebuilds.
+    ///
+    /// A rebuild is then on probation: the tree it replaced is refitted alongside until the new
+    /// tree has saved the rebuild's cost in trace time (by the two trees' SAH costs), or the old
+    /// tree is the better one again, in which case the mesh goes back to it and the next rebuild
+    /// must be expected to save twice as much ([`PolicyState::rebuild_scale`]), or refitting
+    /// the old tree has cost half a rebuild.
     Amortized,
 }
 
@@ -206,6 +212,10 @@ pub struct PolicyState {
     /// learnt at every rebuild that followed a refit (the refitted tree's cost over the new
     /// tree's is the true fresh ratio at that frame); starts at 1.
     pub estimate_gain: f32,
+    /// Factor on the rebuild cost the extra trace time must pass: doubled by each rebuild that
+    /// did not pay for itself (the tree it replaced, refitted alongside, turned out better
+    /// before the new one had saved its cost), halved towards 1 by each that did.
+    pub rebuild_scale: f64,
 }
 
 impl Default for PolicyState {
@@ -219,6 +229,7 @@ impl Default for PolicyState {
             trace_share_ms: 0.0,
             traced_ratio: 1.0,
             estimate_gain: 1.0,
+            rebuild_scale: 1.0,
         }
     }
 }
@@ -242,6 +253,14 @@ impl PolicyState {
         matches!(policy, Policy::Amortized)
     }
 
+    /// True when the policy keeps the tree a rebuild replaced and refits it alongside until
+    /// the rebuild has paid for itself, going back to it if it turns out better (and learning
+    /// from it: [`PolicyState::rebuild_failed`]).
+    #[must_use]
+    pub fn probes_rebuilds(policy: Policy) -> bool {
+        matches!(policy, Policy::Amortized)
+    }
+
     /// Decides after a refit that gave last-build SAH ratio `ratio` and fresh ratio `fresh`:
     /// true to rebuild. Updates the accumulated extra trace time of [`Policy::Amortized`].
     pub fn after_refit(&mut self, policy: Policy, ratio: f32, fresh: f32) -> bool {
@@ -251,7 +270,7 @@ impl PolicyState {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(fresh - 1.0).max(0.0);
                 self.extra_ms += fresh_ms * degradation;
-                self.extra_ms > self.rebuild_ms
+                self.extra_ms > self.rebuild_ms * self.rebuild_scale
             }
             _ => false,
         }
@@ -267,6 +286,17 @@ impl PolicyState {
         }
     }
 
+    /// Learns that a rebuild did not pay for itself: the next must be expected to save twice as
+    /// much.
+    pub fn rebuild_failed(&mut self) {
+        self.rebuild_scale = (self.rebuild_scale * 2.0).min(MAX_REBUILD_SCALE);
+    }
+
+    /// Learns that a rebuild paid for itself.
+    pub fn rebuild_paid(&mut self) {
+        self.rebuild_scale = (self.rebuild_scale * 0.5).max(1.0);
+    }
+
     /// Resets after a (re)build of SAH cost `sah` (fresh-build estimate `estimate`, 0 when not
     /// computed) that took `ms`.
     pub fn rebuilt(&mut self, sah: f32, estimate: f32, ms: f64) {
@@ -278,6 +308,9 @@ impl PolicyState {
         self.traced_ratio = 1.0;
     }
 }
+
+/// Bound of [`PolicyState::rebuild_scale`].
+const MAX_REBUILD_SCALE: f64 = 64.0;
 
 #[cfg(test)]
 mod tests {
@@ -396,6 +429,37 @@ mod tests {
         let best = best_schedule(&c).cost_ms;
         let ours = c.cost_of(&rebuild);
         assert!(ours <= best * 1.1, "amortized {ours} against oracle {best}");
+    }
+
+    #[test]
+    fn failed_rebuilds_raise_the_bar_and_paid_ones_lower_it() {
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, 10.0);
+        s.trace_share_ms = 4.0;
+        s.failed_then(2);
+        // Four times the rebuild cost: 2 ms extra a frame passes 40 ms at the 21st frame.
+        let frames = (1..=40)
+            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5))
+            .unwrap();
+        assert_eq!(frames, 21);
+        s.rebuild_paid();
+        assert_eq!(s.rebuild_scale, 2.0);
+        s.rebuild_paid();
+        s.rebuild_paid();
+        assert_eq!(s.rebuild_scale, 1.0);
+        s.failed_then(100);
+        assert_eq!(s.rebuild_scale, MAX_REBUILD_SCALE);
+        // Rebuilding does not forget it.
+        s.rebuilt(1.0, 1.0, 10.0);
+        assert_eq!(s.rebuild_scale, MAX_REBUILD_SCALE);
+    }
+
+    impl PolicyState {
+        fn failed_then(&mut self, n: usize) {
+            for _ in 0..n {
+                self.rebuild_failed();
+            }
+        }
     }
 
     #[test]

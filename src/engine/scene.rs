@@ -10,7 +10,10 @@
 //!
 //! After the first frame, [`Engine::update`] allocates nothing, rebuilds included: a tree is
 //! rebuilt into its own storage with the engine's one [`BuildWorkspace`] (shared by every mesh
-//! and the top-level tree, sized by the first builds), and ray casting never allocates. Two
+//! and the top-level tree, sized by the first builds), and ray casting never allocates. The
+//! exception is [`Policy::Amortized`], which keeps the tree a rebuild replaced for a while (see
+//! [`Policy::Amortized`]): a mesh's first rebuild makes its second tree, and later ones
+//! alternate between the two. Two
 //! things of rayon's can still allocate, so for none at all build the scene and run the frame
 //! loop inside a pool's `install`: every parallel call made from outside the pool queues a job
 //! in rayon's global injector, which allocates a block every 63 jobs; and the binned builder
@@ -98,6 +101,10 @@ struct MeshEntry {
     positions: Vec<Vec3>,
     indices: Vec<[u32; 3]>,
     bvh: MeshBvh,
+    /// While probing, the tree the last rebuild replaced, refitted alongside; otherwise spare
+    /// storage the next probed rebuild goes into.
+    prev: MeshBvh,
+    probe: Option<Probe>,
     sah: f32,
     dirty: bool,
     moved: bool,
@@ -113,6 +120,24 @@ struct MeshEntry {
     stats: MeshStats,
     /// Sum over its instances of world box area times SAH: its share of the trace cost.
     weight: f64,
+}
+
+/// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
+/// saved what the rebuild cost (it paid), the old one is better again (back to it: it did not
+/// pay), or refitting the old one has cost [`PROBE_SHARE`] of the rebuild (undecided).
+#[derive(Clone, Copy)]
+struct Probe {
+    /// Policy state of the replaced tree, restored if it wins.
+    state: PolicyState,
+    /// Trace time the new tree has saved so far (the last recorded trace time times the old
+    /// tree's SAH over the new one's, minus one), ms.
+    saved_ms: f64,
+    /// Time spent refitting the old tree alongside, ms.
+    cost_ms: f64,
+    /// What the rebuild cost, ms.
+    rebuild_ms: f64,
+    /// Frames since the rebuild.
+    frames: u32,
 }
 
 #[derive(Clone, Copy)]
@@ -235,6 +260,8 @@ impl Engine {
             positions,
             indices,
             bvh,
+            prev: MeshBvh::default(),
+            probe: None,
             sah,
             dirty: false,
             moved: true,
@@ -381,6 +408,7 @@ impl Engine {
         let policy = self.config.policy;
         let build = self.config.build;
         let estimate = PolicyState::needs_fresh_ratio(policy);
+        let probes = PolicyState::probes_rebuilds(policy);
         let mut stats = FrameStats {
             frame: self.frame,
             pose_ms: std::mem::take(&mut self.pending_pose_ms),
@@ -407,6 +435,11 @@ impl Engine {
                 m.bvh.refit_indexed(&m.positions, &m.indices);
                 m.sah = tree_sah(m.bvh.bvh());
                 m.state.since_build += 1;
+                if let Some(p) = m.probe.take()
+                    && probe_step(m, p)
+                {
+                    stats.reverts += 1;
+                }
                 let ratio = ratio(m.sah, m.state.build_sah);
                 m.stats.sah_ratio = ratio;
                 // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the
@@ -436,7 +469,12 @@ impl Engine {
             let mut rebuild_ms = 0.0;
             if rebuild {
                 let refitted = (decided != Some(true)).then_some(m.sah);
+                let probe = probes && refitted.is_some();
                 let t = Instant::now();
+                if probe {
+                    // Keep the refitted tree: rebuild into the spare.
+                    std::mem::swap(&mut m.bvh, &mut m.prev);
+                }
                 m.bvh
                     .rebuild_indexed(&m.positions, &m.indices, &build, &mut self.workspace);
                 m.sah = tree_sah(m.bvh.bvh());
@@ -454,7 +492,24 @@ impl Engine {
                     m.state
                         .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
                 }
+                let replaced = m.state;
                 m.state.rebuilt(m.sah, est, rebuild_ms);
+                m.probe = None;
+                if let (true, Some(refit_sah)) = (probe, refitted) {
+                    // This frame's trace already gains from the new tree.
+                    let saved = m.state.trace_share_ms * f64::from(ratio(refit_sah, m.sah) - 1.0);
+                    if saved >= rebuild_ms {
+                        m.state.rebuild_paid();
+                    } else {
+                        m.probe = Some(Probe {
+                            state: replaced,
+                            saved_ms: saved,
+                            cost_ms: 0.0,
+                            rebuild_ms,
+                            frames: 0,
+                        });
+                    }
+                }
                 m.stats.sah_ratio = 1.0;
                 m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
                 stats.rebuilds += 1;
@@ -762,12 +817,57 @@ impl Engine {
     }
 }
 
-/// Share of a mesh's refit and trace time the fresh-build estimate may spend (so that on
-/// small meshes with few rays, where a rebuild can hardly pay, it runs only every few frames).
-const ESTIMATE_SHARE: f64 = 0.05;
+/// Share of a mesh's refit and trace time the fresh-build estimate may spend (so that it runs
+/// every few frames where the estimate costs about as much as a refit, e.g. small meshes). 5%
+/// cost 3-5% of the total on the small shipped animations, where the trace takes 15-20
+/// times a refit and an estimate as much as a refit; 1% was as good at deciding (see the
+/// policy module's docs).
+const ESTIMATE_SHARE: f64 = 0.01;
+
+/// How much refitting the replaced tree alongside a new one may cost, as a share of the
+/// rebuild's cost, before the probation ends undecided. With the whole rebuild cost, failed
+/// rebuilds on `MorphStressTest` cost twice as much as the rebuild (1.08-1.11 of the oracle);
+/// with half, 1.06.
+const PROBE_SHARE: f64 = 0.5;
 
 /// Rays per parallel task.
 const RAY_CHUNK: usize = 256;
+
+/// One frame of a probed rebuild, after `m`'s tree was refitted: refits the replaced tree too
+/// and decides. Returns true when it went back to the replaced tree.
+fn probe_step(m: &mut MeshEntry, mut p: Probe) -> bool {
+    let t = Instant::now();
+    m.prev.refit_indexed(&m.positions, &m.indices);
+    let old_sah = tree_sah(m.prev.bvh());
+    p.cost_ms += ms_since(t);
+    p.frames += 1;
+    if old_sah < m.sah {
+        std::mem::swap(&mut m.bvh, &mut m.prev);
+        m.sah = old_sah;
+        // The old tree's build figures and age; what was learnt since stays, and the extra
+        // trace time counts afresh.
+        let learnt = m.state;
+        m.state = PolicyState {
+            since_build: p.state.since_build + p.frames,
+            extra_ms: 0.0,
+            ..p.state
+        };
+        m.state.rebuild_ms = learnt.rebuild_ms;
+        m.state.trace_share_ms = learnt.trace_share_ms;
+        m.state.traced_ratio = learnt.traced_ratio;
+        m.state.estimate_gain = learnt.estimate_gain;
+        m.state.rebuild_scale = learnt.rebuild_scale;
+        m.state.rebuild_failed();
+        return true;
+    }
+    p.saved_ms += m.state.trace_share_ms * f64::from(ratio(old_sah, m.sah) - 1.0);
+    if p.saved_ms >= p.rebuild_ms {
+        m.state.rebuild_paid();
+    } else if p.cost_ms < PROBE_SHARE * p.rebuild_ms {
+        m.probe = Some(p);
+    }
+    false
+}
 
 fn set_transform(inst: &mut InstanceEntry, transform: Affine3A) {
     inst.transform = transform;

@@ -50,6 +50,9 @@ pub struct FrameStats {
     pub refits: u32,
     /// Meshes rebuilt.
     pub rebuilds: u32,
+    /// Meshes that went back to the tree their last rebuild replaced (it had become better
+    /// again before the rebuild paid for itself).
+    pub reverts: u32,
     /// Whether the top-level tree was rebuilt (else refitted, or untouched).
     pub tlas_rebuilt: bool,
     /// Expected cost of a ray that hits the scene's box: top-level nodes plus each instance's

@@ -121,6 +121,8 @@ pub struct FrameRow {
     pub est_fresh_ratio: f32,
     /// Meshes rebuilt.
     pub rebuilds: u32,
+    /// Meshes that went back to the tree their last rebuild replaced (`amortized`).
+    pub reverts: u32,
     /// Rays traced.
     pub rays: u64,
     /// Millions of rays per second.
@@ -158,6 +160,8 @@ pub struct PolicySummary {
     pub trace_us_per_ray: f64,
     /// Mesh rebuilds.
     pub rebuilds: u64,
+    /// Returns to the tree a rebuild replaced.
+    pub reverts: u64,
     /// Mean trace-weighted SAH ratio.
     pub mean_sah_ratio: f64,
     /// Largest SAH ratio of any mesh in any frame.
@@ -365,6 +369,7 @@ fn record_frame(
         fresh_ratio: 0.0,
         est_fresh_ratio: s.max_fresh_ratio,
         rebuilds: s.rebuilds,
+        reverts: s.reverts,
         rays: s.rays,
         mrays: s.mrays,
         nodes_per_ray: counted.nodes as f64 / n.max(1) as f64,
@@ -395,6 +400,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
             0.0
         },
         rebuilds: rows.iter().map(|r| u64::from(r.rebuilds)).sum(),
+        reverts: rows.iter().map(|r| u64::from(r.reverts)).sum(),
         mean_sah_ratio: rows.iter().map(|r| f64::from(r.sah_ratio)).sum::<f64>() / n,
         max_sah_ratio: rows.iter().map(|r| r.max_sah_ratio).fold(1.0, f32::max),
         max_fresh_ratio: rows.iter().map(|r| r.fresh_ratio).fold(0.0, f32::max),
@@ -627,11 +633,11 @@ pub fn to_csv(rows: &[FrameRow]) -> String {
     let mut s = String::from(
         "policy,frame,action,pose_ms,refit_ms,rebuild_ms,tlas_ms,update_ms,trace_ms,sah,\
          sah_ratio,max_sah_ratio,fresh_ratio,est_fresh_ratio,rebuilds,rays,mrays,nodes_per_ray,\
-         tris_per_ray,predicted_nodes_per_ray,predicted_tris_per_ray\n",
+         tris_per_ray,predicted_nodes_per_ray,predicted_tris_per_ray,reverts\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3},{:.2},{:.2},{:.2},{:.2}\n",
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{}\n",
             r.policy,
             r.frame,
             r.action.name(),
@@ -652,7 +658,8 @@ pub fn to_csv(rows: &[FrameRow]) -> String {
             r.nodes_per_ray,
             r.tris_per_ray,
             r.predicted_nodes_per_ray,
-            r.predicted_tris_per_ray
+            r.predicted_tris_per_ray,
+            r.reverts
         ));
     }
     s
@@ -688,7 +695,11 @@ pub fn summary_table(r: &Report) -> String {
             p.trace_ms,
             p.update_ms_per_frame,
             p.trace_ms_per_frame,
-            p.rebuilds,
+            if p.reverts > 0 {
+                format!("{} ({})", p.rebuilds, p.reverts)
+            } else {
+                p.rebuilds.to_string()
+            },
             p.mean_sah_ratio,
             p.max_sah_ratio,
             p.max_fresh_ratio,
@@ -706,7 +717,8 @@ pub fn summary_table(r: &Report) -> String {
         ));
     }
     s.push_str(
-        "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now\n",
+        "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
+         rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
     if !r.tlas.is_empty() {
         s.push_str(&format!(
