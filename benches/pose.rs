@@ -1,16 +1,45 @@
 //! Posing and loading throughput of `dynbvh::anim` (issue 3, "What it must reach").
 //!
 //! - `pose/tube_1m/threads1`, `pose/tube_1m/threads2`: `Poser::pose(t)` of a generated skinned
-//!   tube of about 1M vertices with 4 non-zero weights each (`skinned_tube` with cubic
+//!   tube of 1,000,042 vertices with 4 non-zero weights each (`skinned_tube` with cubic
 //!   B-spline weights over 16 joints), at successive times 1/60 s apart, inside a 1-thread and
 //!   a 2-thread rayon pool. Throughput is in vertices.
+//! - `pose/tube_24k/*`: the same on a 23,817-vertex tube, whose data stays in cache: what the
+//!   arithmetic alone allows.
 //! - `load/metal_rough_spheres`: `Scene::load` of the 1M-triangle
 //!   `../shared/gltf-samples/MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb`
 //!   (skipped with a message when the samples are missing); `load/metal_rough_spheres_flattened`
-//!   adds `Scene::flatten_rest`, the 1M world-space triangles.
+//!   adds `Scene::flatten_rest`, the 1,040,409 world-space triangles.
 //!
-//! Run: `cargo bench --bench pose` (short: `cargo bench --bench pose -- --warm-up-time 1
-//! --measurement-time 3`; one group: `cargo bench --bench pose -- load`).
+//! Run (from the repository root):
+//!
+//! ```sh
+//! cargo bench --bench pose                                              # everything
+//! cargo bench --bench pose -- --warm-up-time 1 --measurement-time 3     # short
+//! cargo bench --bench pose -- pose/tube_1m --warm-up-time 1 --measurement-time 3
+//! ```
+//!
+//! Measured with the short command on the 2-core development VM (Xeon, AVX-512, the
+//! `target-cpu=native` build of `.cargo/config.toml`), in runs where both cores were otherwise
+//! idle; medians:
+//!
+//! | benchmark | 1 thread | 2 threads | 2 threads / 1 thread |
+//! |---|---|---|---|
+//! | `pose/tube_1m` | 6.42 ms, 156 M vertices/s | 2.19 ms, 457 M vertices/s | 2.9 |
+//! | `pose/tube_24k` | 91 µs, 261 M vertices/s | 49 µs, 484 M vertices/s | 1.85 |
+//!
+//! | benchmark | median |
+//! |---|---|
+//! | `load/metal_rough_spheres` | 15.2 ms |
+//! | `load/metal_rough_spheres_flattened` | 20.8 ms |
+//!
+//! Issue 3 asks for at least 100 M vertices/s on one core and at least 60% more with the
+//! second, and for the sample to load in under 1 s. The 1M tube's super-linear scaling is the
+//! VM's: one thread streams its ~60 bytes per vertex (rest positions, joints, weights, output)
+//! more slowly alone than two threads do together, and its one-thread figure moves between
+//! 155 and 205 M vertices/s with what the other core is doing; the cache-resident tube scales
+//! as expected. When another process holds the second core, the 2-thread figures fall to the
+//! 1-thread ones: compare figures taken side by side in one quiet run.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use dynbvh::anim::generate::{TubeWeights, skinned_tube};
