@@ -841,6 +841,10 @@ fn probe_step(m: &mut MeshEntry, mut p: Probe) -> bool {
     let old_sah = tree_sah(m.prev.bvh());
     p.cost_ms += ms_since(t);
     p.frames += 1;
+    // What tracing this frame with the new tree gains (or would lose: then the old tree is
+    // back before the trace, and the loss counts against the rebuild as a measure of how fast
+    // the new tree degraded).
+    p.saved_ms += m.state.trace_share_ms * f64::from(ratio(old_sah, m.sah) - 1.0);
     if old_sah < m.sah {
         std::mem::swap(&mut m.bvh, &mut m.prev);
         m.sah = old_sah;
@@ -857,10 +861,16 @@ fn probe_step(m: &mut MeshEntry, mut p: Probe) -> bool {
         m.state.traced_ratio = learnt.traced_ratio;
         m.state.estimate_gain = learnt.estimate_gain;
         m.state.rebuild_scale = learnt.rebuild_scale;
-        m.state.rebuild_failed();
+        // A rebuild that earned back less than half its cost before the old tree won was a
+        // mistake to learn from (on `swap.glb` a tree built mid-swap is worse than the frame-0
+        // tree two frames later); one that earned more was worth about what it cost (on
+        // `AnimatedMorphSphere` the morph swings back to where the old tree was built, and
+        // penalising those returns halved the rebuilds the mesh needs).
+        if p.saved_ms < 0.5 * p.rebuild_ms {
+            m.state.rebuild_failed();
+        }
         return true;
     }
-    p.saved_ms += m.state.trace_share_ms * f64::from(ratio(old_sah, m.sah) - 1.0);
     if p.saved_ms >= p.rebuild_ms {
         m.state.rebuild_paid();
     } else if p.cost_ms < PROBE_SHARE * p.rebuild_ms {
