@@ -24,11 +24,65 @@
 //! - `amortized` rebuilds when the trace time its degradation has cost since the last build
 //!   (fresh ratio minus one, times the frame's trace time, summed) passes a rebuild's measured
 //!   cost: the optimal period for linearly growing degradation, and no rebuild at all without
-//!   rays or without degradation. The fresh-build estimate spends at most 5% of the mesh's refit
-//!   and trace time (on small meshes with few rays it is refreshed every few frames), and every
-//!   rebuild that follows a refit shows how much the estimate overstated the gain
-//!   ([`PolicyState::estimate_gain`]);
+//!   rays or without degradation. Every rebuild that follows a refit shows how much the
+//!   estimate overstated the gain ([`PolicyState::estimate_gain`]);
+//! - a rebuild is then on probation (see [`Policy::Amortized`]): the replaced tree is refitted
+//!   alongside, and if it is the better one again before the rebuild has paid for itself, the
+//!   mesh goes back to it, and the next rebuild must be expected to save twice as much
+//!   ([`PolicyState::rebuild_scale`]);
 //! - its worst ratio over the files is the lowest of the five policies.
+//!
+//! ## What probation fixed: `swap.glb`
+//!
+//! Without it, `amortized` was 1.14-1.32 of the oracle on `animations/swap.glb`, the only file
+//! beyond 10%. The oracle never rebuilds there: the frame-0 tree, refitted, is never more than
+//! 1.13 worse than a fresh build, and all the rebuilds in the world save about 2% of the trace
+//! time. But the estimate sees the fresh ratio climb while the two grids pass through each
+//! other, and a tree built then, mid-swap, is 1.6-2.1 worse than a fresh build two frames later:
+//! the old rule rebuilt again and again (6-9 times in 60 frames). Now the first such rebuild is
+//! undone two frames later (the frame-0 tree is back, refitted: nothing lost but the rebuild and
+//! two refits), and the doubled bar keeps the mesh from trying again at the next crossing.
+//! Only a rebuild that earned back less than half its cost counts as a failure: on
+//! AnimatedMorphSphere the morph swings back to where an old tree was built and the old tree
+//! wins after a rebuild that had nearly paid; counting those too cost it rebuilds it needed
+//! (1.13-1.16 of the oracle then, 1.04-1.10 now).
+//!
+//! Two other changes came with it. The fresh-build estimate may spend 1% of the mesh's refit and
+//! trace time instead of 5% (on the small shipped files an estimate costs about a refit, and 5%
+//! was a flat 3-5% on the total, a third of the 10% margin; 2% and 1% decided as well). And the
+//! old tree's refits during probation stop when they have cost half a rebuild (with the whole
+//! rebuild cost, undecided probations on MorphStressTest made each failed rebuild cost double).
+//!
+//! Variants compared in lockstep in the same sweeps (`--all --frames 60 --size 192x192`, two
+//! runs each, mean ratio to the oracle; this machine is shared, and a single frame preempted
+//! during an update moves a small file's ratio by 5%):
+//!
+//! | file | old amortized | + probation | + estimate 2% | + estimate 1% | + probe cost 1/2 |
+//! |------|------|------|------|------|------|
+//! | swap | 1.16-1.26 | 1.07 | 1.07 | 1.04-1.05 | 1.05 |
+//! | tube | 1.06-1.07 | 1.08 | 1.08-1.09 | 1.05-1.06 | 1.06 |
+//! | MorphStressTest | 1.08-1.09 | 1.06 | 1.06-1.15 | 1.08-1.10 | 1.06 |
+//! | CesiumMan | 1.05-1.08 | 1.10 | 1.07 | 1.04-1.05 | 1.04 |
+//! | worst of 19 | 1.16-1.26 | 1.10 | 1.08-1.15 | 1.08-1.10 | 1.07 (1.14 on a one-triangle static file: noise) |
+//!
+//! The default as it stands (all of the above, failures only below half the cost), two sweeps:
+//!
+//! | file | refit | rebuild | periodic:8 | threshold:1.3 | amortized |
+//! |------|------|------|------|------|------|
+//! | explode | 1.15 | 1.12 | 1.03 | 1.16 | 0.99 |
+//! | swap | 1.03 | 1.57 | 1.17 | 1.19 | 1.06 (1.05, 1.08) |
+//! | tube | 1.11 | 1.19 | 1.04 | 1.03 | 1.04 |
+//! | AnimatedMorphSphere | 1.18 | 1.04 | 1.05 | 1.14 | 1.07 (1.04, 1.10) |
+//! | CesiumMan | 1.06 | 1.67 | 1.06 | 1.01 | 1.05 |
+//! | MorphStressTest | 1.05 | 1.47 | 1.10 | 1.04 | 1.06 |
+//! | RiggedSimple | 1.19 | 1.02 | 0.99 | 1.03 | 0.98 |
+//! | worst of 19 (mean of the two) | 1.19 | 1.67 | 1.17 | 1.19 | 1.07 |
+//! | worst of 19 (each sweep) | 1.19, 1.19 | 1.56, 1.77 | 1.15, 1.18 | 1.16, 1.22 | 1.08, 1.10 |
+//!
+//! What is left: `amortized` lags the oracle on AnimatedMorphSphere (7-9 rebuilds where the
+//! oracle makes 12-14: the estimate, refreshed on a budget, misses part of the degradation of
+//! a fast morph) and on MorphStressTest (refitting alone is 1.05 there: the oracle's single
+//! rebuild at frame 6 is one no estimate foresees).
 //!
 use std::fmt;
 use std::str::FromStr;
@@ -45,8 +99,12 @@ periodic:8 and threshold:1.3 are each 10-20% behind on some file. Amortized adap
 rebuild cost and the rays cast: it charges each frame the trace time the degradation costs (the
 SAH ratio to an estimated fresh build, times the frame's trace time) and rebuilds once that sum
 passes a rebuild's measured cost, learning at every rebuild how much the estimate overstated the
-gain. Its worst ratio is the lowest of the five. Ratios within about 3% of 1 (either side) are
-timing noise: files without deforming meshes run identical trees under every policy.
+gain. A rebuild is on probation until it has paid: the tree it replaced is refitted alongside,
+and if that one is better again first (swap: a tree built while the grids overlap degrades in
+two frames), the mesh goes back to it and the next rebuild must promise twice as much. Its worst
+ratio is the lowest of the five. Ratios within about 3% of 1 (either side) are timing noise:
+files without deforming meshes run identical trees under every policy, and one preempted update
+moves a small file by 5%.
 ";
 
 /// A refit-or-rebuild policy, selectable per run (see [`Policy::from_str`] for the syntax).
