@@ -197,7 +197,7 @@ fn nan_and_infinite_vertices_do_not_break_the_tree() {
 }
 
 fn scaled_sphere(scale: f32) -> TriMesh {
-    let mut m = common::icosphere(3);
+    let mut m = dynbvh::geom::shapes::icosphere(3);
     for p in &mut m.positions {
         *p *= scale;
     }

@@ -3,8 +3,9 @@
 
 mod common;
 
-use common::{Rng, check_ray, icosphere};
+use common::{Rng, check_ray};
 use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::geom::shapes::icosphere;
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
 use std::collections::HashSet;

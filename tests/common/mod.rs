@@ -41,8 +41,6 @@ pub fn check_ray(mesh: &TriMesh, bvh: &MeshBvh, ray: &Ray) -> Result<(), String>
     Ok(())
 }
 
-pub use dynbvh::geom::shapes::icosphere;
-
 /// Deterministic pseudo-random numbers (splitmix64) for non-proptest tests.
 pub struct Rng(pub u64);
 

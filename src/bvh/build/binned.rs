@@ -175,7 +175,7 @@ impl Splitter for Binned {
             last: k as u32 - 1,
         };
 
-        if n >= 8 * self.parallel_threshold {
+        if n >= self.parallel_threshold.saturating_mul(8) {
             // Large nodes: bin chunks in parallel into bins on each task's stack.
             *bins = refs
                 .par_chunks_mut(self.parallel_threshold)

@@ -214,7 +214,7 @@ impl RangeBounds {
 
     /// Bounds of `refs`, in parallel when there are many.
     pub fn of(refs: &[PrimRef], parallel_threshold: usize) -> RangeBounds {
-        if refs.len() >= 8 * parallel_threshold {
+        if refs.len() >= parallel_threshold.saturating_mul(8) {
             refs.par_chunks(parallel_threshold)
                 .map(|c| RangeBounds::of(c, usize::MAX))
                 .reduce(|| RangeBounds::EMPTY, RangeBounds::merge)
@@ -288,6 +288,11 @@ impl Bvh {
     /// Rebuilds this tree over new boxes (any count), reusing its storage and `ws`'s: once
     /// they have grown to the input's size, a binned or median rebuild allocates nothing.
     pub fn rebuild(&mut self, boxes: &[Aabb], params: &BuildParams, ws: &mut BuildWorkspace) {
+        // A threshold of 0 would ask for chunks of no element.
+        let params = &BuildParams {
+            parallel_threshold: params.parallel_threshold.max(1),
+            ..*params
+        };
         self.max_leaf_size = params.max_leaf_size;
         self.nodes.clear();
         self.prim_indices.clear();
@@ -298,7 +303,7 @@ impl Bvh {
         let refs = &mut ws.refs;
         refs.clear();
         refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
-        if n >= 8 * params.parallel_threshold {
+        if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
                 .zip(boxes.par_chunks(params.parallel_threshold))
                 .enumerate()
