@@ -239,17 +239,10 @@ fn inputs() -> Vec<Input> {
     v
 }
 
-/// The builders measured: median, binned SAH with 4 to 32 bins, 16 bins on the widest axis
-/// only, and the full sweep.
+/// The builders measured: the same as `dynbvh build-bench` (median, binned SAH with 4 to 32
+/// bins, 16 bins on the widest axis only, and the full sweep).
 fn builders() -> Vec<BuildParams> {
-    let mut v = vec![BuildParams::MEDIAN];
-    v.extend([4, 8, 16, 32].map(BuildParams::binned));
-    v.push(BuildParams {
-        all_axes: false,
-        ..BuildParams::BINNED
-    });
-    v.push(BuildParams::SWEEP);
-    v
+    dynbvh::report::build_bench::default_methods()
 }
 
 /// Sample size and measurement time for an input: small for the 1M meshes so that the whole

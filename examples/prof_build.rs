@@ -3,6 +3,10 @@ use dynbvh::bvh::{BuildParams, Bvh, MeshBvh};
 use dynbvh::geom::Aabb;
 use std::time::Instant;
 
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_s;
+
 fn main() {
     let path = std::env::args()
         .nth(1)
@@ -33,15 +37,4 @@ fn main() {
             bvh.sah_cost() + m.bvh().sah_cost() * 0.0
         );
     }
-}
-
-/// CPU time of all this process's threads in seconds (robust to the machine being shared).
-fn cpu_s() -> f64 {
-    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    dir.filter_map(|e| std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok())
-        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
-        .sum::<u64>() as f64
-        * 1e-9
 }

@@ -2,6 +2,10 @@
 use dynbvh::bvh::{BuildParams, MeshBvh};
 use std::time::Instant;
 
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_s;
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let a = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
@@ -20,15 +24,4 @@ fn main() {
         "refit median {wall:.2} ms wall ({cpu:.2} ms cpu), sah {:.2}",
         bvh.bvh().sah_cost()
     );
-}
-
-/// CPU time of all this process's threads in seconds (robust to the machine being shared).
-fn cpu_s() -> f64 {
-    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    dir.filter_map(|e| std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok())
-        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
-        .sum::<u64>() as f64
-        * 1e-9
 }

@@ -2,6 +2,10 @@
 use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 use std::time::Instant;
 
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_s;
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
@@ -38,15 +42,4 @@ fn main() {
             rays.len() as f64 / cs / 1e6
         );
     }
-}
-
-/// CPU time of all this process's threads in seconds (robust to the machine being shared).
-fn cpu_s() -> f64 {
-    let Ok(dir) = std::fs::read_dir("/proc/self/task") else {
-        return 0.0;
-    };
-    dir.filter_map(|e| std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok())
-        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
-        .sum::<u64>() as f64
-        * 1e-9
 }
