@@ -4,7 +4,7 @@
 mod common;
 
 use common::check_ray;
-use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::bvh::{BuildParams, BuildWorkspace, MeshBvh};
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
 use proptest::prelude::*;
@@ -160,6 +160,23 @@ proptest! {
                 }
                 bvh.refit(&m);
                 check_all(&m, &bvh, &rays)?;
+            }
+        }
+    }
+
+    #[test]
+    fn rebuilds_into_a_reused_tree_match_brute_force(
+        meshes in prop::collection::vec(mesh(), 1..4),
+        rays in rays(),
+    ) {
+        // Meshes of different sizes in a row: the tree and workspace keep stale contents
+        // from the previous, possibly larger, build.
+        for params in builders() {
+            let mut ws = BuildWorkspace::default();
+            let mut bvh = MeshBvh::default();
+            for m in &meshes {
+                bvh.rebuild_indexed(&m.positions, &m.indices, &params, &mut ws);
+                check_all(m, &bvh, &rays)?;
             }
         }
     }

@@ -301,7 +301,8 @@ impl Bvh {
             return;
         }
         let refs = &mut ws.refs;
-        refs.clear();
+        // Every reference is written below and every used slot is written before it is read,
+        // so old contents are kept: only growth initialises memory.
         refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
         if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
@@ -319,9 +320,10 @@ impl Bvh {
             }
         }
         let slots = &mut ws.slots;
-        slots.clear();
-        slots.resize(2 * n - 1, Node::default());
-        let (root, desc) = slots.split_at_mut(1);
+        if slots.len() < 2 * n - 1 {
+            slots.resize(2 * n - 1, Node::default());
+        }
+        let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         root[0] = match params.method {
             Method::Binned => build_range(&binned::Binned::new(params), params, refs, desc),
             Method::Median => {
