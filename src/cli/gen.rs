@@ -2,7 +2,7 @@
 
 use anyhow::{Result, bail};
 use clap::Args;
-use dynbvh::anim::generate::{Kind, generate};
+use dynbvh::anim::generate::{Kind, TubeWeights, generate, skinned_tube};
 use std::path::PathBuf;
 
 /// Arguments of `dynbvh gen`.
@@ -20,6 +20,10 @@ pub struct GenArgs {
     /// Seed of the random parts (orbit radii and hops, explode speeds).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// For `tube`: give every vertex 4 non-zero skin weights over a chain of this many joints
+    /// (cubic B-spline falloff; at least 4), as the posing benchmark does, instead of 2.
+    #[arg(long, value_name = "JOINTS")]
+    pub four_weights: Option<usize>,
 }
 
 /// Generates and writes the file.
@@ -28,7 +32,12 @@ pub fn run(a: GenArgs) -> Result<()> {
         let names: Vec<_> = Kind::ALL.iter().map(|k| k.name()).collect();
         bail!("unknown kind {:?}; one of {}", a.kind, names.join(", "));
     };
-    let g = generate(kind, a.triangles, a.seed);
+    let g = match (kind, a.four_weights) {
+        (Kind::Tube, Some(j)) if j >= 4 => skinned_tube(a.triangles, j, TubeWeights::Cubic),
+        (Kind::Tube, Some(j)) => bail!("--four-weights needs at least 4 joints, got {j}"),
+        (_, Some(_)) => bail!("--four-weights applies to the tube only"),
+        (_, None) => generate(kind, a.triangles, a.seed),
+    };
     std::fs::write(&a.out, &g.glb).map_err(|e| dynbvh::Error::io(&a.out, e))?;
     eprintln!(
         "{}: {} triangles, {:.2} s animation, {} bytes",
