@@ -131,10 +131,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     }
     let report = match (&a.file, a.synthetic) {
         (Some(path), _) => {
-            let (scene, warnings) = Scene::load(path)?;
-            for w in &warnings {
-                eprintln!("warning: {w}");
-            }
+            let scene = super::load_scene(path, None)?;
             let anim = match &a.animation {
                 Some(k) => Some(
                     scene

@@ -6,7 +6,6 @@
 use super::render::{RenderArgs, RenderSummary, execute};
 use anyhow::{Context, Result};
 use clap::Parser;
-use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
 use std::path::{Path, PathBuf};
@@ -85,10 +84,7 @@ pub fn run() -> Result<()> {
     ])?;
 
     eprintln!("benchmarking the policies ...");
-    let (scene, warnings) = Scene::load(&file)?;
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
+    let scene = super::load_scene(&file, None)?;
     let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(FRAMES))?;
     let opts = Options {
         rays: RaySpec::Size(256, 192),

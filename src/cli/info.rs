@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use clap::Args;
-use dynbvh::anim::{InstanceClass, Interpolation, LoadOptions, Property, Scene};
+use dynbvh::anim::{InstanceClass, Interpolation, Property};
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -29,10 +29,7 @@ pub struct InfoArgs {
 
 /// Prints the summary.
 pub fn run(a: InfoArgs) -> Result<()> {
-    let (scene, warnings) = Scene::load_with(&a.file, &LoadOptions { scene: a.scene })?;
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
+    let scene = super::load_scene(&a.file, a.scene)?;
     let mut text = String::new();
     let label = |name: &Option<String>| {
         name.as_deref()

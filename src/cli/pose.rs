@@ -2,7 +2,6 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use dynbvh::anim::{LoadOptions, Scene};
 use dynbvh::geom::TriMesh;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -28,10 +27,7 @@ pub struct PoseArgs {
 
 /// Poses and writes.
 pub fn run(a: PoseArgs) -> Result<()> {
-    let (scene, warnings) = Scene::load_with(&a.file, &LoadOptions { scene: a.scene })?;
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
+    let scene = super::load_scene(&a.file, a.scene)?;
     let anim = match &a.animation {
         None => None,
         Some(key) => Some(scene.find_animation(key).with_context(|| {

@@ -372,10 +372,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         None => vec![a.policy.parse::<Policy>()?],
     };
 
-    let (scene, warnings) = Scene::load(&a.file)?;
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
+    let scene = super::load_scene(&a.file, None)?;
     let anim = match &a.animation {
         Some(k) => Some(
             scene
