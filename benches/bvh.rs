@@ -145,19 +145,9 @@ fn exactly(rays: Vec<Ray>) -> Vec<Ray> {
     rays.iter().cycle().take(RAYS_PER_ITER).copied().collect()
 }
 
-/// About `n` rays of a square camera image, as a lower-resolution image of the same view
-/// (every k-th row and column) so that they stay coherent; the first `n` rays when the set is
-/// not a square image.
+/// A coherent subset of about `n` camera rays (see `dynbvh::report::rays::image_subset`).
 fn image_subset(rays: &[Ray], n: usize) -> Vec<Ray> {
-    let side = (rays.len() as f64).sqrt().round() as usize;
-    if side * side != rays.len() || rays.len() <= n {
-        return rays.iter().take(n).copied().collect();
-    }
-    let step = ((rays.len() as f64 / n as f64).sqrt().round() as usize).max(1);
-    (0..side)
-        .step_by(step)
-        .flat_map(|y| (0..side).step_by(step).map(move |x| rays[y * side + x]))
-        .collect()
+    dynbvh::report::rays::image_subset(rays, n)
 }
 
 /// The inputs that exist on this machine; a message for each one that does not.

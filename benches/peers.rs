@@ -589,21 +589,13 @@ fn ray_budget() -> Option<usize> {
     }
 }
 
-/// About `n` rays of a square camera image, as a lower-resolution image of the same view
-/// (every k-th row and column), so that they stay as coherent as the full image.
+/// A coherent subset of about `n` camera rays (`dynbvh::report::rays::image_subset`), or all
+/// of them when `n` is `None`.
 fn image_subset(rays: &[Ray], n: Option<usize>) -> Vec<Ray> {
-    let Some(n) = n else {
-        return rays.to_vec();
-    };
-    let side = (rays.len() as f64).sqrt().round() as usize;
-    if side * side != rays.len() || rays.len() <= n {
-        return rays.iter().take(n).copied().collect();
+    match n {
+        Some(n) => dynbvh::report::rays::image_subset(rays, n),
+        None => rays.to_vec(),
     }
-    let step = ((rays.len() as f64 / n as f64).sqrt().round() as usize).max(1);
-    (0..side)
-        .step_by(step)
-        .flat_map(|y| (0..side).step_by(step).map(move |x| rays[y * side + x]))
-        .collect()
 }
 
 fn load(dir: &Path, stem: &str) -> Option<Input> {

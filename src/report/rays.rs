@@ -58,3 +58,19 @@ pub fn random_rays(bounds: &Aabb, n: usize, seed: u64) -> Vec<Ray> {
         })
         .collect()
 }
+
+/// About `n` rays of a square camera image, as a lower-resolution image of the same view (every
+/// k-th row and column) so that they stay coherent; the first `n` rays when the set is not a
+/// square image.
+#[must_use]
+pub fn image_subset(rays: &[Ray], n: usize) -> Vec<Ray> {
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    if side * side != rays.len() || rays.len() <= n {
+        return rays.iter().take(n).copied().collect();
+    }
+    let step = ((rays.len() as f64 / n.max(1) as f64).sqrt().round() as usize).max(1);
+    (0..side)
+        .step_by(step)
+        .flat_map(|y| (0..side).step_by(step).map(move |x| rays[y * side + x]))
+        .collect()
+}
