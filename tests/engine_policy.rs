@@ -3,10 +3,9 @@
 //! on a generated mesh, and the oracle against the measured schedules' model.
 
 use dynbvh::anim::Scene;
-use dynbvh::bvh::{BuildParams, MeshBvh};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Action, EngineConfig, Policy, SceneHit};
+use dynbvh::engine::{Action, EngineConfig, Policy, SceneHit, Timing};
 use dynbvh::report::rays::camera_rays;
 use std::path::PathBuf;
 
@@ -148,32 +147,33 @@ fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("animations/swap.glb");
     let (scene, _) = Scene::load(&path).unwrap();
     let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(60)).unwrap();
+    // Costs modelled from triangle counts (about what an idle machine measures here), so that
+    // the decisions are the same on every run and machine: a shared, loaded machine times the
+    // same rebuild at anything from 1x to 3x, and decisions taken on such times are not
+    // repeatable.
+    let timing = Timing::Modeled {
+        refit_ns_per_tri: 17.0,
+        rebuild_ns_per_tri: 200.0,
+        estimate_ns_per_tri: 75.0,
+    };
     let config = |policy| EngineConfig {
         policy,
+        timing,
         ..EngineConfig::default()
     };
     let mut e = src.build(0, config(Policy::DEFAULT));
     let mut refit = src.build(0, config(Policy::Refit));
     let m = src.deforming()[0];
-    // Tracing priced against this machine's rebuild, so the decisions do not depend on its
-    // speed.
     // Five rebuilds' worth of tracing a frame: enough for the degradation to call for a
     // rebuild within a few frames (the fresh ratio's excess sums to about 0.6 before the
     // grids overlap most), not enough for a rebuild to pay for itself in its first frame (the
-    // true fresh ratio is then 1.09, so it would take 11). The fastest of a few builds, since
-    // the engine's own rebuilds run warm.
-    let build_ms = (0..7)
-        .map(|_| {
-            let t = std::time::Instant::now();
-            let b = MeshBvh::build_indexed(e.positions(m), e.indices(m), &BuildParams::BINNED);
-            assert!(b.bvh().sah_cost() > 0.0);
-            t.elapsed().as_secs_f64() * 1e3
-        })
-        .fold(f64::INFINITY, f64::min);
-    let trace_ms = 5.0 * build_ms;
+    // true fresh ratio is then 1.09, so it would take 11).
+    let trace_ms = 5.0 * timing.build_ms(0.0, e.indices(m).len());
     let rays = camera_rays(&e.bounds(), 16, 16);
     let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
     let (mut rebuilds, mut reverts) = (0, 0);
+    // Rebuilds in each of the two swaps.
+    let mut per_swap = [0, 0];
     for f in 1..=src.frames() {
         src.advance(&mut e, f);
         src.advance(&mut refit, f);
@@ -181,6 +181,7 @@ fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
         refit.update();
         rebuilds += s.rebuilds;
         reverts += s.reverts;
+        per_swap[(f - 1) * 2 / src.frames()] += s.rebuilds;
         if s.reverts > 0 && reverts == 1 {
             // The first rebuild replaced the frame-0 tree: it is back, refitted to this frame.
             assert_eq!(e.mesh_stats(m).sah, refit.mesh_stats(m).sah, "frame {f}");
@@ -196,9 +197,9 @@ fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
     }
     assert!(rebuilds >= 1, "never tried a rebuild");
     assert!(reverts >= 1, "{rebuilds} rebuilds, never went back");
-    // What it learnt: it tries again less often than it went back.
+    // What it learnt: the second swap, the same motion again, gets fewer rebuilds.
     assert!(
-        rebuilds <= 2 * reverts + 1,
-        "{rebuilds} rebuilds, {reverts} reverts"
+        per_swap[1] < per_swap[0],
+        "rebuilds per swap {per_swap:?}, {reverts} reverts"
     );
 }

@@ -70,6 +70,8 @@ pub struct EngineConfig {
     pub policy: Policy,
     /// Policy of the top-level tree.
     pub tlas: TlasPolicy,
+    /// Where the policy's costs of refits, rebuilds and estimates come from.
+    pub timing: Timing,
 }
 
 impl Default for EngineConfig {
@@ -78,6 +80,65 @@ impl Default for EngineConfig {
             build: BuildParams::BINNED,
             policy: Policy::DEFAULT,
             tlas: TlasPolicy::DEFAULT,
+            timing: Timing::Measured,
+        }
+    }
+}
+
+/// Where the costs the amortized policy weighs come from: the time of a rebuild, of a refit
+/// (which pays for the fresh-build estimate and for refitting a replaced tree on probation) and
+/// of the estimate itself. The trace time always comes from [`Engine::record_trace`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Timing {
+    /// Timed with the wall clock as the engine runs, so the decisions follow the machine and
+    /// its load: the default.
+    Measured,
+    /// Costs in proportion to the triangles worked on, so the same frames and recorded trace
+    /// times give the same decisions on every run and machine (reproducible simulations,
+    /// tests). Frame statistics still report the measured times.
+    Modeled {
+        /// Cost of refitting one triangle, ns.
+        refit_ns_per_tri: f64,
+        /// Cost of rebuilding over one triangle, ns.
+        rebuild_ns_per_tri: f64,
+        /// Cost of the fresh-build estimate per triangle of its subsample, ns.
+        estimate_ns_per_tri: f64,
+    },
+}
+
+impl Timing {
+    /// The cost (ms) the policy uses for a refit over `tris` triangles measured at `ms`.
+    #[must_use]
+    pub fn refit_ms(self, ms: f64, tris: usize) -> f64 {
+        match self {
+            Self::Measured => ms,
+            Self::Modeled {
+                refit_ns_per_tri, ..
+            } => refit_ns_per_tri * tris as f64 * 1e-6,
+        }
+    }
+
+    /// The cost (ms) the policy uses for a rebuild over `tris` triangles measured at `ms`.
+    #[must_use]
+    pub fn build_ms(self, ms: f64, tris: usize) -> f64 {
+        match self {
+            Self::Measured => ms,
+            Self::Modeled {
+                rebuild_ns_per_tri, ..
+            } => rebuild_ns_per_tri * tris as f64 * 1e-6,
+        }
+    }
+
+    /// The cost (ms) the policy uses for an estimate over a subsample of `tris` triangles
+    /// measured at `ms`.
+    #[must_use]
+    pub fn estimate_ms(self, ms: f64, tris: usize) -> f64 {
+        match self {
+            Self::Measured => ms,
+            Self::Modeled {
+                estimate_ns_per_tri,
+                ..
+            } => estimate_ns_per_tri * tris as f64 * 1e-6,
         }
     }
 }
@@ -253,9 +314,10 @@ impl Engine {
         let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
         let t = Instant::now();
         let estimate = fresh.estimate(&positions, &indices);
-        let estimate_ms = ms_since(t);
+        let timing = self.config.timing;
+        let estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len());
         let mut state = PolicyState::default();
-        state.rebuilt(sah, estimate, ms);
+        state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len()));
         self.meshes.push(MeshEntry {
             positions,
             indices,
@@ -409,6 +471,7 @@ impl Engine {
         let build = self.config.build;
         let estimate = PolicyState::needs_fresh_ratio(policy);
         let probes = PolicyState::probes_rebuilds(policy);
+        let timing = self.config.timing;
         let mut stats = FrameStats {
             frame: self.frame,
             pose_ms: std::mem::take(&mut self.pending_pose_ms),
@@ -436,7 +499,7 @@ impl Engine {
                 m.sah = tree_sah(m.bvh.bvh());
                 m.state.since_build += 1;
                 if let Some(p) = m.probe.take()
-                    && probe_step(m, p)
+                    && probe_step(m, p, timing)
                 {
                     stats.reverts += 1;
                 }
@@ -445,11 +508,13 @@ impl Engine {
                 // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the
                 // latest estimate when this frame has not earned a new one.
                 m.stats.fresh_ratio = if estimate && m.state.build_estimate > 0.0 {
-                    m.estimate_budget += ESTIMATE_SHARE * (m.state.trace_share_ms + ms_since(t));
+                    let tris = m.indices.len();
+                    m.estimate_budget += ESTIMATE_SHARE
+                        * (m.state.trace_share_ms + timing.refit_ms(ms_since(t), tris));
                     if m.estimate_budget >= m.estimate_ms {
                         let te = Instant::now();
                         m.last_estimate = m.fresh.estimate(&m.positions, &m.indices);
-                        m.estimate_ms = ms_since(te);
+                        m.estimate_ms = timing.estimate_ms(ms_since(te), m.fresh.sample_len());
                         m.estimate_budget = (m.estimate_budget - m.estimate_ms).max(0.0);
                     }
                     if m.last_estimate > 0.0 {
@@ -493,19 +558,21 @@ impl Engine {
                         .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
                 }
                 let replaced = m.state;
-                m.state.rebuilt(m.sah, est, rebuild_ms);
+                // What the policy weighs; the statistics keep the measured time.
+                let rebuild_cost = timing.build_ms(rebuild_ms, m.indices.len());
+                m.state.rebuilt(m.sah, est, rebuild_cost);
                 m.probe = None;
                 if let (true, Some(refit_sah)) = (probe, refitted) {
                     // This frame's trace already gains from the new tree.
                     let saved = m.state.trace_share_ms * f64::from(ratio(refit_sah, m.sah) - 1.0);
-                    if saved >= rebuild_ms {
+                    if saved >= rebuild_cost {
                         m.state.rebuild_paid();
                     } else {
                         m.probe = Some(Probe {
                             state: replaced,
                             saved_ms: saved,
                             cost_ms: 0.0,
-                            rebuild_ms,
+                            rebuild_ms: rebuild_cost,
                             frames: 0,
                         });
                     }
@@ -835,11 +902,11 @@ const RAY_CHUNK: usize = 256;
 
 /// One frame of a probed rebuild, after `m`'s tree was refitted: refits the replaced tree too
 /// and decides. Returns true when it went back to the replaced tree.
-fn probe_step(m: &mut MeshEntry, mut p: Probe) -> bool {
+fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing) -> bool {
     let t = Instant::now();
     m.prev.refit_indexed(&m.positions, &m.indices);
     let old_sah = tree_sah(m.prev.bvh());
-    p.cost_ms += ms_since(t);
+    p.cost_ms += timing.refit_ms(ms_since(t), m.indices.len());
     p.frames += 1;
     // What tracing this frame with the new tree gains (or would lose: then the old tree is
     // back before the trace, and the loss counts against the rebuild as a measure of how fast

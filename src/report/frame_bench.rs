@@ -419,6 +419,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         build: opts.build,
         policy,
         tlas: opts.tlas,
+        ..EngineConfig::default()
     };
     let rays = {
         let e = src.build(0, config(Policy::Refit));
@@ -574,6 +575,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 build: *b,
                 policy: Policy::Rebuild,
                 tlas: opts.tlas,
+                ..EngineConfig::default()
             };
             let r = run_lockstep(src, &[cfg], &rays, opts, bf).remove(0);
             let s = summarize(Policy::Rebuild, &r.rows, 0.0);
