@@ -194,11 +194,6 @@ impl RangeBounds {
     };
 
     #[inline(always)]
-    pub fn add_centroid(&mut self, r: &PrimRef) {
-        self.cbounds.grow_point(r.c2());
-    }
-
-    #[inline(always)]
     pub fn add(&mut self, r: &PrimRef) {
         let (lo, hi) = (r.lo(), r.hi());
         self.bounds.grow(lo, hi);
@@ -235,7 +230,8 @@ pub(crate) struct Split {
     pub right: RangeBounds,
 }
 
-/// A split strategy over references kept in one array (binned SAH, median).
+/// A split strategy over references kept in one array (the median split; binned SAH has a
+/// recursion of its own that bins the children while partitioning).
 pub(crate) trait Splitter: Sync {
     /// Working memory a task reuses from node to node.
     type Scratch: Send;
@@ -325,7 +321,7 @@ impl Bvh {
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         root[0] = match params.method {
-            Method::Binned => build_range(&binned::Binned::new(params), params, refs, desc),
+            Method::Binned => binned::build(params, refs, desc),
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
                 build_range(&m, params, refs, desc)
