@@ -366,14 +366,19 @@ impl Ctx {
             }
             let mut acc = Box3::EMPTY;
             let mut count = 0u32;
+            let (mut best_cost, mut best_bin) = (f32::INFINITY, 0);
             for i in 0..k - 1 {
                 acc = acc.union(bx[i]);
                 count += bn[i];
                 let c = acc.half_area() * count as f32 + right_cost[i];
                 let c = if count == 0 { f32::INFINITY } else { c };
-                if c < best.0 {
-                    best = (c, axis, i);
-                }
+                // Branch-free: which candidate wins is unpredictable.
+                let better = c < best_cost;
+                best_cost = if better { c } else { best_cost };
+                best_bin = if better { i } else { best_bin };
+            }
+            if best_cost < best.0 {
+                best = (best_cost, axis, best_bin);
             }
         }
         let (cost, axis, bin) = best;
