@@ -13,7 +13,7 @@
 use super::{
     Box3, BuildParams, MAX_BINS, Node, PrimRef, RangeBounds, SAH_DEPTH_LIMIT, Slots, halve,
 };
-use glam::Vec3A;
+use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
 
 /// The binned builder's settings.
@@ -133,13 +133,12 @@ impl BinMap {
         } else {
             2
         };
-        let mut scale = Vec3A::ZERO;
-        for a in 0..3 {
-            let s = k as f32 / ext[a];
-            if ext[a] > 0.0 && s.is_finite() && (all_axes || a == widest) {
-                scale[a] = s;
-            }
+        let s = Vec3A::splat(k as f32) / ext;
+        let mut ok = ext.cmpgt(Vec3A::ZERO) & s.is_finite_mask();
+        if !all_axes {
+            ok &= BVec3A::new(widest == 0, widest == 1, widest == 2);
         }
+        let scale = Vec3A::select(ok, s, Vec3A::ZERO);
         BinMap {
             origin: cb.min,
             scale,
