@@ -1,12 +1,14 @@
 //! Times binned-SAH builds over a `.tri` file's triangle boxes, cold (`Bvh::build`: fresh
 //! buffers, page faults included) and warm (`Bvh::rebuild` into a grown tree and workspace, as
-//! the engine rebuilds), and prints the medians of CPU and wall time with the SAH cost:
+//! the engine rebuilds), and prints the medians of CPU and wall time with the SAH cost; then the
+//! same for the whole `MeshBvh` (triangle boxes, tree, triangles copied in leaf order: what
+//! `dynbvh build-bench` times, cold):
 //!
 //! `cargo run --release --example prof_build FILE.tri [bins] [runs]`
 //!
 //! `WIDEST=1` bins only the widest axis; `METHOD=sweep` or `METHOD=median` times that builder
 //! instead; `RAYON_NUM_THREADS` sets the thread count.
-use dynbvh::bvh::{BuildParams, BuildWorkspace, Bvh};
+use dynbvh::bvh::{BuildParams, BuildWorkspace, Bvh, MeshBvh};
 use dynbvh::geom::Aabb;
 use std::time::Instant;
 
@@ -51,14 +53,33 @@ fn main() {
         warm.0.push((cpu_s() - c) * 1e3);
         warm.1.push(t.elapsed().as_secs_f64() * 1e3);
     }
-    println!(
-        "{} {} threads: cold {:.1} ms cpu ({:.1} wall), warm {:.1} ms cpu ({:.1} wall), sah {:.3}",
-        p.name(),
-        rayon::current_num_threads(),
-        median(cold.0),
-        median(cold.1),
-        median(warm.0),
-        median(warm.1),
-        tree.sah_cost()
-    );
+    let report = |what: &str, cold: (Vec<f64>, Vec<f64>), warm: (Vec<f64>, Vec<f64>), sah: f32| {
+        println!(
+            "{what} {} {} threads: cold {:.1} ms cpu ({:.1} wall), warm {:.1} ms cpu ({:.1} wall), sah {sah:.3}",
+            p.name(),
+            rayon::current_num_threads(),
+            median(cold.0),
+            median(cold.1),
+            median(warm.0),
+            median(warm.1),
+        );
+    };
+    report("bvh", cold, warm, tree.sah_cost());
+
+    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
+    let mut ws = BuildWorkspace::default();
+    let mut m = MeshBvh::build(&mesh, &p);
+    m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+    for _ in 0..runs {
+        let (c, t) = (cpu_s(), Instant::now());
+        let fresh = MeshBvh::build(&mesh, &p);
+        cold.0.push((cpu_s() - c) * 1e3);
+        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
+        drop(fresh);
+        let (c, t) = (cpu_s(), Instant::now());
+        m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+        warm.0.push((cpu_s() - c) * 1e3);
+        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    report("mesh", cold, warm, m.bvh().sah_cost());
 }

@@ -75,12 +75,26 @@ impl MeshBvh {
         }
         self.bvh.rebuild(&boxes, params, ws);
         ws.boxes = boxes;
-        self.leaf_indices.clear();
-        self.leaf_indices
-            .extend(self.bvh.prim_indices().iter().map(|&p| indices[p as usize]));
-        self.tris.clear();
+        // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
+        // old contents are kept: only growth initialises memory).
+        self.leaf_indices.resize(mesh.len(), [0; 3]);
         self.tris.resize(mesh.len(), [Vec3::ZERO; 3]);
-        gather(&self.leaf_indices, positions, &mut self.tris);
+        let prims = self.bvh.prim_indices();
+        let fill = |li: &mut [[u32; 3]], t: &mut [[Vec3; 3]], p: &[u32]| {
+            for (li, &p) in li.iter_mut().zip(p) {
+                *li = indices[p as usize];
+            }
+            gather(li, positions, t);
+        };
+        if mesh.len() >= 2 * GATHER_CHUNK {
+            self.leaf_indices
+                .par_chunks_mut(GATHER_CHUNK)
+                .zip(self.tris.par_chunks_mut(GATHER_CHUNK))
+                .zip(prims.par_chunks(GATHER_CHUNK))
+                .for_each(|((li, t), p)| fill(li, t, p));
+        } else {
+            fill(&mut self.leaf_indices, &mut self.tris, prims);
+        }
     }
 
     /// Refits for new vertex positions of the same topology (same triangle count and indices).
@@ -205,24 +219,15 @@ impl Indexed<'_> {
     }
 }
 
-/// Copies each triangle into its leaf slot, in parallel chunks for large meshes.
+/// Copies each triangle into its leaf slot.
 fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
-    let fill = |t: &mut [[Vec3; 3]], idx: &[[u32; 3]]| {
-        // Spelled out: `[u32; 3]::map` goes through a temporary on the stack.
-        for (t, &[a, b, c]) in t.iter_mut().zip(idx) {
-            *t = [
-                positions[a as usize],
-                positions[b as usize],
-                positions[c as usize],
-            ];
-        }
-    };
-    if tris.len() >= 2 * GATHER_CHUNK {
-        tris.par_chunks_mut(GATHER_CHUNK)
-            .zip(leaf_indices.par_chunks(GATHER_CHUNK))
-            .for_each(|(t, i)| fill(t, i));
-    } else {
-        fill(tris, leaf_indices);
+    // Spelled out: `[u32; 3]::map` goes through a temporary on the stack.
+    for (t, &[a, b, c]) in tris.iter_mut().zip(leaf_indices) {
+        *t = [
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        ];
     }
 }
 

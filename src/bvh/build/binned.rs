@@ -28,7 +28,13 @@ struct Ctx {
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
 /// the root into `desc` and returns the root.
-pub(crate) fn build(p: &BuildParams, refs: &mut [PrimRef], desc: &mut [Node]) -> Node {
+/// `rb` bounds `refs`.
+pub(crate) fn build(
+    p: &BuildParams,
+    refs: &mut [PrimRef],
+    rb: RangeBounds,
+    desc: &mut [Node],
+) -> Node {
     let ctx = Ctx {
         bins: p.bins.clamp(2, MAX_BINS),
         all_axes: p.all_axes,
@@ -37,7 +43,6 @@ pub(crate) fn build(p: &BuildParams, refs: &mut [PrimRef], desc: &mut [Node]) ->
         max_leaf_size: p.max_leaf_size.max(1) as usize,
         parallel_threshold: p.parallel_threshold.max(1),
     };
-    let rb = RangeBounds::of(refs, ctx.parallel_threshold);
     let info = Info {
         bounds: rb.bounds,
         cbounds: rb.cbounds,

@@ -110,12 +110,15 @@ pub(crate) struct PrimRef {
 }
 
 impl PrimRef {
+    /// The reference to box `b` ([`Aabb::sanitized`], in vector form).
+    #[inline(always)]
     fn new(b: &Aabb, id: u32) -> Self {
-        let b = b.sanitized();
+        let m = Vec3A::splat(f32::MAX);
+        let fix = |v: Vec3A, if_nan: Vec3A| Vec3A::select(v.is_nan_mask(), if_nan, v.clamp(-m, m));
         Self {
-            min: b.min.into(),
+            min: fix(b.min.into(), m).into(),
             id,
-            max: b.max.into(),
+            max: fix(b.max.into(), -m).into(),
             bins: 0,
         }
     }
@@ -300,31 +303,34 @@ impl Bvh {
         // Every reference is written below and every used slot is written before it is read,
         // so old contents are kept: only growth initialises memory.
         refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
-        if n >= params.parallel_threshold.saturating_mul(8) {
+        // The references, and the root's bounds gathered on the way.
+        let fill = |refs: &mut [PrimRef], boxes: &[Aabb], base: usize| {
+            let mut rb = RangeBounds::EMPTY;
+            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
+                *r = PrimRef::new(b, (base + i) as u32);
+                rb.add(r);
+            }
+            rb
+        };
+        let rb = if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
                 .zip(boxes.par_chunks(params.parallel_threshold))
                 .enumerate()
-                .for_each(|(c, (r, b))| {
-                    let base = c * params.parallel_threshold;
-                    for (i, (r, b)) in r.iter_mut().zip(b).enumerate() {
-                        *r = PrimRef::new(b, (base + i) as u32);
-                    }
-                });
+                .map(|(c, (r, b))| fill(r, b, c * params.parallel_threshold))
+                .reduce(|| RangeBounds::EMPTY, RangeBounds::merge)
         } else {
-            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
-                *r = PrimRef::new(b, i as u32);
-            }
-        }
+            fill(refs, boxes, 0)
+        };
         let slots = &mut ws.slots;
         if slots.len() < 2 * n - 1 {
             slots.resize(2 * n - 1, Node::default());
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         root[0] = match params.method {
-            Method::Binned => binned::build(params, refs, desc),
+            Method::Binned => binned::build(params, refs, rb, desc),
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                build_range(&m, params, refs, desc)
+                build_range(&m, params, refs, rb, desc)
             }
             Method::Sweep => sweep::build(params, refs, desc),
         };
@@ -339,9 +345,9 @@ fn build_range<S: Splitter>(
     splitter: &S,
     params: &BuildParams,
     refs: &mut [PrimRef],
+    rb: RangeBounds,
     desc: &mut [Node],
 ) -> Node {
-    let rb = RangeBounds::of(refs, params.parallel_threshold);
     let mut scratch = splitter.scratch();
     let b = Recursion { splitter, params };
     b.node(
