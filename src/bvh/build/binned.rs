@@ -479,7 +479,7 @@ impl Ctx {
 }
 
 /// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified and binned
-/// once, into its side's bins when that side has a map), gathering both sides' doubled
+/// once, into its side's bins with its side's map), gathering both sides' doubled
 /// centroid bounds. Returns the left count and the two centroid bounds.
 fn partition_bin(
     refs: &mut [PrimRef],
@@ -487,26 +487,21 @@ fn partition_bin(
     left: (Option<&BinMap>, &mut Bins),
     right: (Option<&BinMap>, &mut Bins),
 ) -> (usize, Box3, Box3) {
-    #[inline(always)]
-    fn take(r: &mut PrimRef, map: Option<&BinMap>, bins: &mut Bins, cb: &mut Box3) {
-        let c2 = match map {
-            Some(m) => bins.add(r, m),
-            None => r.c2(),
-        };
-        cb.grow_point(c2);
-    }
+    // A side that is not binned is binned anyway, into bin 0 of bins nobody reads: the loop
+    // then has no branch but the partition's, and keeps both maps in registers.
     let (lmap, lbins) = left;
     let (rmap, rbins) = right;
+    let (lmap, rmap) = (*lmap.unwrap_or(&NO_MAP), *rmap.unwrap_or(&NO_MAP));
     let mut lcb = Box3::EMPTY;
     let mut rcb = Box3::EMPTY;
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && goes_left(&refs[i]) {
-            take(&mut refs[i], lmap, lbins, &mut lcb);
+            lcb.grow_point(lbins.add(&mut refs[i], &lmap));
             i += 1;
         }
         while i < j && !goes_left(&refs[j - 1]) {
-            take(&mut refs[j - 1], rmap, rbins, &mut rcb);
+            rcb.grow_point(rbins.add(&mut refs[j - 1], &rmap));
             j -= 1;
         }
         if i >= j {
@@ -516,3 +511,11 @@ fn partition_bin(
     }
     (i, lcb, rcb)
 }
+
+/// The map of a side that is not binned: everything into bin 0.
+const NO_MAP: BinMap = BinMap {
+    origin: Vec3A::ZERO,
+    scale: Vec3A::ZERO,
+    last: Vec3A::ZERO,
+    k: 1,
+};
