@@ -241,6 +241,13 @@ struct Split {
 }
 
 impl Ctx {
+    /// Bins for a node of `n` primitives: at most one per two primitives (and at least 4, or
+    /// `n` if fewer): a small node's candidates cost more to price than they gain.
+    #[inline]
+    fn bins_for(&self, n: usize) -> usize {
+        (n / 2).max(4).min(n).min(self.bins).max(2)
+    }
+
     /// Builds the subtree over `refs`; its bins (if `info.map` is set) are `stack[level][side]`.
     #[allow(clippy::too_many_arguments)]
     fn node(
@@ -343,7 +350,7 @@ impl Ctx {
             Some(m) if m.any_usable() => m,
             // Not binned yet, or binned with a predicted map that was empty on every axis.
             _ => {
-                let map = BinMap::new(&info.cbounds, self.bins.min(n), self.all_axes);
+                let map = BinMap::new(&info.cbounds, self.bins_for(n), self.all_axes);
                 if !map.any_usable() {
                     return None;
                 }
@@ -420,7 +427,7 @@ impl Ctx {
             } else {
                 cb.min[axis] = cb.min[axis].max(cut);
             }
-            Some(BinMap::new(&cb, self.bins.min(count), self.all_axes))
+            Some(BinMap::new(&cb, self.bins_for(count), self.all_axes))
         };
         let lmap = child_map(&lb, nl, true);
         let rmap = child_map(&rb, nr, false);
