@@ -53,12 +53,13 @@ pub const MAX_BINS: usize = 64;
 impl BuildParams {
     /// Binned SAH with the default bin count: the builder dynbvh uses for rebuilds.
     ///
-    /// Why 16 bins on all three axes (`dynbvh build-bench` on the shared inputs, one thread):
-    /// on sphere_100k, 8 / 16 / 32 bins gave SAH 42.01 / 41.74 / 41.51 (full sweep 41.26) in
-    /// 40.3 / 38.8 / 41.8 ms, and on sphere_1m 49.66 / 49.33 / 49.12 (sweep 48.80): 16 bins
-    /// stay within 1.2% of the sweep at no measurable extra cost over 8. Binning only the widest
-    /// axis saved 14% of the time (33.4 ms) for a 3.5% worse SAH (43.20), which costs more in
-    /// tracing than it saves in building.
+    /// Why 16 bins on all three axes (`examples/prof_build.rs`, one thread, CPU time of a warm
+    /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 216 / 212 / 216 /
+    /// 221 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
+    /// the bin count hardly changes the time any more, and 16 bins stay within 1.2% of the sweep
+    /// on every shared input (8 bins do not: 1.8% at 1M, 1.8% on sphere_100k). Binning only the
+    /// widest axis saved 8% of the time (198 ms) for a 4.3% worse SAH (51.47), which costs more
+    /// in tracing than it saves in building.
     pub const BINNED: BuildParams = BuildParams::binned(16);
     /// Full-sweep SAH: slowest, best quality.
     pub const SWEEP: BuildParams = BuildParams {
@@ -335,7 +336,7 @@ impl Bvh {
             Method::Sweep => sweep::build(params, refs, desc),
         };
         self.prim_indices.extend(refs.iter().map(|r| r.id));
-        compact(slots, &mut self.nodes);
+        compact(&slots[..2 * n - 1], &mut self.nodes);
     }
 }
 
@@ -459,11 +460,13 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
 /// child's descendants", so a pre-order walk over pairs emits the nodes in slot order: the
 /// order, and with it every invariant, is kept.
 fn compact(slots: &[Node], out: &mut Vec<Node>) {
-    // Grow with 1/8 headroom: rebuilds of a deforming mesh vary in node count by a few per
-    // cent, and then fit without reallocating.
+    // Grow with 1/8 headroom plus a few nodes, but never past the most a tree over these
+    // primitives can have (`slots.len()`): rebuilds of a deforming mesh vary in node count by
+    // a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
+    // and then fit without reallocating.
     let count = count_nodes(slots, 0);
     if count > out.capacity() {
-        out.reserve_exact(count + count / 8);
+        out.reserve_exact((count + count / 8 + 8).min(slots.len()).max(count));
     }
     out.push(slots[0]);
     if !slots[0].is_leaf() {
