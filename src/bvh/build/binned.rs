@@ -15,6 +15,7 @@ use super::{
 };
 use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
+use wide::f32x8;
 
 /// The binned builder's settings.
 struct Ctx {
@@ -64,22 +65,45 @@ pub(crate) fn build(
     )
 }
 
-/// Bins on the three axes: boxes and counts; only the first `k` of each axis are in use.
+/// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
+/// is a single lane-wise minimum) and counts; only the first `k` of each axis are in use.
 #[derive(Clone, Copy)]
 struct Bins {
-    b: [[Box3; MAX_BINS]; 3],
+    b: [[f32x8; MAX_BINS]; 3],
     n: [[u32; MAX_BINS]; 3],
 }
 
+/// The empty box in `[min, -max]` form.
+const EMPTY8: f32x8 = f32x8::new([f32::INFINITY; 8]);
+
 const EMPTY_BINS: Bins = Bins {
-    b: [[Box3::EMPTY; MAX_BINS]; 3],
+    b: [[EMPTY8; MAX_BINS]; 3],
     n: [[0; MAX_BINS]; 3],
 };
+
+/// A `[min, -max]` box as a [`Box3`].
+#[inline(always)]
+fn unpack(v: f32x8) -> Box3 {
+    let a = v.as_array();
+    Box3 {
+        min: Vec3A::new(a[0], a[1], a[2]),
+        max: -Vec3A::new(a[4], a[5], a[6]),
+    }
+}
+
+/// Half the surface area of a `[min, -max]` box (0 when empty).
+#[inline(always)]
+fn half_area8(v: f32x8) -> f32 {
+    let a = v.as_array();
+    // max - min = -(-max + min)
+    let e = (-(Vec3A::new(a[4], a[5], a[6]) + Vec3A::new(a[0], a[1], a[2]))).max(Vec3A::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
 
 impl Bins {
     fn clear(&mut self, k: usize) {
         for a in 0..3 {
-            self.b[a][..k].fill(Box3::EMPTY);
+            self.b[a][..k].fill(EMPTY8);
             self.n[a][..k].fill(0);
         }
     }
@@ -87,7 +111,7 @@ impl Bins {
     fn merge(mut self, o: &Bins, k: usize) -> Bins {
         for a in 0..3 {
             for i in 0..k {
-                self.b[a][i] = self.b[a][i].union(o.b[a][i]);
+                self.b[a][i] = self.b[a][i].fast_min(o.b[a][i]);
                 self.n[a][i] += o.n[a][i];
             }
         }
@@ -98,13 +122,13 @@ impl Bins {
     /// centroid.
     #[inline(always)]
     fn add(&mut self, r: &mut PrimRef, map: &BinMap) -> Vec3A {
-        let (lo, hi) = (r.lo(), r.hi());
-        let c2 = lo + hi;
+        let p = r.packed();
+        let c2 = r.c2();
         let [ix, iy, iz] = map.index(c2);
-        r.bins = ix as u32 | (iy as u32) << 8 | (iz as u32) << 16;
-        self.b[0][ix].grow(lo, hi);
-        self.b[1][iy].grow(lo, hi);
-        self.b[2][iz].grow(lo, hi);
+        r.set_bins(ix as u32 | (iy as u32) << 8 | (iz as u32) << 16);
+        self.b[0][ix] = self.b[0][ix].fast_min(p);
+        self.b[1][iy] = self.b[1][iy].fast_min(p);
+        self.b[2][iz] = self.b[2][iz].fast_min(p);
         self.n[0][ix] += 1;
         self.n[1][iy] += 1;
         self.n[2][iz] += 1;
@@ -367,21 +391,21 @@ impl Ctx {
         let mut right_cost = [0f32; MAX_BINS];
         for axis in (0..3).filter(|&a| map.usable(a)) {
             let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
-            let mut acc = Box3::EMPTY;
+            let mut acc = EMPTY8;
             let mut count = 0u32;
             for i in (1..k).rev() {
-                acc = acc.union(bx[i]);
+                acc = acc.fast_min(bx[i]);
                 count += bn[i];
-                let c = acc.half_area() * count as f32;
+                let c = half_area8(acc) * count as f32;
                 right_cost[i - 1] = if count == 0 { f32::INFINITY } else { c };
             }
-            let mut acc = Box3::EMPTY;
+            let mut acc = EMPTY8;
             let mut count = 0u32;
             let (mut best_cost, mut best_bin) = (f32::INFINITY, 0);
             for i in 0..k - 1 {
-                acc = acc.union(bx[i]);
+                acc = acc.fast_min(bx[i]);
                 count += bn[i];
-                let c = acc.half_area() * count as f32 + right_cost[i];
+                let c = half_area8(acc) * count as f32 + right_cost[i];
                 let c = if count == 0 { f32::INFINITY } else { c };
                 // Branch-free: which candidate wins is unpredictable.
                 let better = c < best_cost;
@@ -406,7 +430,7 @@ impl Ctx {
         // The children: boxes and counts from the bins, predicted maps, then the partition
         // bins them.
         let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
-        let union = |b: &[Box3]| b.iter().fold(Box3::EMPTY, |acc, b| acc.union(*b));
+        let union = |b: &[f32x8]| unpack(b.iter().fold(EMPTY8, |acc, b| acc.fast_min(*b)));
         let (lb, rb) = (union(&bx[..=bin]), union(&bx[bin + 1..]));
         let nl = bn[..=bin].iter().sum::<u32>() as usize;
         let nr = n - nl;
@@ -442,7 +466,7 @@ impl Ctx {
         let bin = bin as u32;
         let (mid, lcb, rcb) = partition_bin(
             refs,
-            |r| (r.bins >> shift) & 0xff <= bin,
+            |r| (r.bins() >> shift) & 0xff <= bin,
             (lmap.as_ref(), lbins),
             (rmap.as_ref(), rbins),
         );

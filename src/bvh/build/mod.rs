@@ -14,6 +14,7 @@ use super::{Bvh, MAX_DEPTH, Node};
 use crate::geom::Aabb;
 use glam::Vec3A;
 use rayon::prelude::*;
+use wide::f32x8;
 
 /// Which split strategy a build uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -99,15 +100,15 @@ impl BuildParams {
     }
 }
 
-/// A primitive as builders see it: its box, its id, and scratch room for the binned builder
-/// (the bin of its centroid on each axis, one byte each), in 32 bytes.
+/// A primitive as builders see it, in one 32-byte vector: `[min.x, min.y, min.z, id, -max.x,
+/// -max.y, -max.z, bins]` (`id` and `bins` as bit patterns). `bins` is scratch room for the
+/// binned builder (the bin of its centroid on each axis, one byte each). With the upper corner
+/// negated, the box of two such vectors is one lane-wise minimum (the id and bins lanes carry
+/// junk through it and are never read as floats).
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 pub(crate) struct PrimRef {
-    pub min: [f32; 3],
-    pub id: u32,
-    pub max: [f32; 3],
-    pub bins: u32,
+    v: f32x8,
 }
 
 impl PrimRef {
@@ -116,22 +117,45 @@ impl PrimRef {
     fn new(b: &Aabb, id: u32) -> Self {
         let m = Vec3A::splat(f32::MAX);
         let fix = |v: Vec3A, if_nan: Vec3A| Vec3A::select(v.is_nan_mask(), if_nan, v.clamp(-m, m));
+        let (lo, hi) = (fix(b.min.into(), m), -fix(b.max.into(), -m));
         Self {
-            min: fix(b.min.into(), m).into(),
-            id,
-            max: fix(b.max.into(), -m).into(),
-            bins: 0,
+            v: f32x8::new([lo.x, lo.y, lo.z, f32::from_bits(id), hi.x, hi.y, hi.z, 0.0]),
         }
+    }
+
+    /// The primitive's index.
+    #[inline(always)]
+    pub fn id(&self) -> u32 {
+        self.v.as_array()[3].to_bits()
+    }
+
+    /// The binned builder's scratch word.
+    #[inline(always)]
+    pub fn bins(&self) -> u32 {
+        self.v.as_array()[7].to_bits()
+    }
+
+    #[inline(always)]
+    pub fn set_bins(&mut self, bins: u32) {
+        self.v.as_mut_array()[7] = f32::from_bits(bins);
+    }
+
+    /// `[min, -max]` as one vector.
+    #[inline(always)]
+    pub fn packed(&self) -> f32x8 {
+        self.v
     }
 
     #[inline(always)]
     pub fn lo(&self) -> Vec3A {
-        Vec3A::from(self.min)
+        let a = self.v.as_array();
+        Vec3A::new(a[0], a[1], a[2])
     }
 
     #[inline(always)]
     pub fn hi(&self) -> Vec3A {
-        Vec3A::from(self.max)
+        let a = self.v.as_array();
+        -Vec3A::new(a[4], a[5], a[6])
     }
 
     /// Twice the centroid: builders compare centroids, and the factor 2 changes no order.
@@ -335,7 +359,7 @@ impl Bvh {
             }
             Method::Sweep => sweep::build(params, refs, desc),
         };
-        self.prim_indices.extend(refs.iter().map(|r| r.id));
+        self.prim_indices.extend(refs.iter().map(PrimRef::id));
         compact(&slots[..2 * n - 1], &mut self.nodes);
     }
 }
