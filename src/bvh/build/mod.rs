@@ -55,12 +55,12 @@ impl BuildParams {
     /// Binned SAH with the default bin count: the builder dynbvh uses for rebuilds.
     ///
     /// Why 16 bins on all three axes (`examples/prof_build.rs`, one thread, CPU time of a warm
-    /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 216 / 212 / 216 /
-    /// 221 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
-    /// the bin count hardly changes the time any more, and 16 bins stay within 1.2% of the sweep
-    /// on every shared input (8 bins do not: 1.8% at 1M, 1.8% on sphere_100k). Binning only the
-    /// widest axis saved 8% of the time (198 ms) for a 4.3% worse SAH (51.47), which costs more
-    /// in tracing than it saves in building.
+    /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 189 / 194 / 204 /
+    /// 208 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
+    /// the bin count changes the time by a few per cent only, and 16 bins stay within 1.2% of
+    /// the sweep on every shared input (8 bins: 1.8% at 1M and on sphere_100k). Binning only the
+    /// widest axis saved 10% of the time (184 ms) for a 4.3% worse SAH (51.47), which costs
+    /// more in tracing than it saves in building.
     pub const BINNED: BuildParams = BuildParams::binned(16);
     /// Full-sweep SAH: slowest, best quality.
     pub const SWEEP: BuildParams = BuildParams {
