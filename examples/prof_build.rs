@@ -1,5 +1,14 @@
-//! Times the pieces of a build on a `.tri` file: `cargo run --release --example prof_build FILE`.
-use dynbvh::bvh::{BuildParams, Bvh, MeshBvh};
+//! Times binned-SAH builds over a `.tri` file's triangle boxes, cold (`Bvh::build`: fresh
+//! buffers, page faults included) and warm (`Bvh::rebuild` into a grown tree and workspace, as
+//! the engine rebuilds), and prints the medians of CPU and wall time with the SAH cost; then the
+//! same for the whole `MeshBvh` (triangle boxes, tree, triangles copied in leaf order: what
+//! `dynbvh build-bench` times, cold):
+//!
+//! `cargo run --release --example prof_build FILE.tri [bins] [runs]`
+//!
+//! `WIDEST=1` bins only the widest axis; `METHOD=sweep` or `METHOD=median` times that builder
+//! instead; `RAYON_NUM_THREADS` sets the thread count.
+use dynbvh::bvh::{BuildParams, BuildWorkspace, Bvh, MeshBvh};
 use dynbvh::geom::Aabb;
 use std::time::Instant;
 
@@ -7,34 +16,70 @@ use std::time::Instant;
 mod cpu;
 use cpu::cpu_s;
 
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 fn main() {
     let path = std::env::args()
         .nth(1)
-        .expect("usage: prof_build FILE.tri [bins]");
+        .expect("usage: prof_build FILE.tri [bins] [runs]");
     let bins: usize = std::env::args().nth(2).map_or(16, |s| s.parse().unwrap());
+    let runs: usize = std::env::args().nth(3).map_or(5, |s| s.parse().unwrap());
     let mesh = dynbvh::io::read_tri(path.as_ref()).unwrap();
-    let all_axes = std::env::var("WIDEST").is_err();
-    let p = BuildParams {
-        all_axes,
+    let mut p = BuildParams {
+        all_axes: std::env::var("WIDEST").is_err(),
         ..BuildParams::binned(bins)
     };
-    let iters: usize = std::env::args().nth(3).map_or(3, |s| s.parse().unwrap());
-    for _ in 0..iters {
-        let c = cpu_s();
-        let t = Instant::now();
-        let boxes: Vec<Aabb> = (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect();
-        let t1 = t.elapsed();
-        let bvh = Bvh::build(&boxes, &p);
-        let t2 = t.elapsed();
-        let m = MeshBvh::build(&mesh, &p);
-        let t3 = t.elapsed();
-        println!(
-            "boxes {:?} build {:?} meshbvh {:?} cpu total {:.1} ms sah {}",
-            t1,
-            t2 - t1,
-            t3 - t2,
-            (cpu_s() - c) * 1e3,
-            bvh.sah_cost() + m.bvh().sah_cost() * 0.0
-        );
+    match std::env::var("METHOD").as_deref() {
+        Ok("sweep") => p = BuildParams::SWEEP,
+        Ok("median") => p = BuildParams::MEDIAN,
+        _ => {}
     }
+    let boxes: Vec<Aabb> = (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect();
+    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
+    let mut ws = BuildWorkspace::default();
+    let mut tree = Bvh::build(&boxes, &p);
+    tree.rebuild(&boxes, &p, &mut ws);
+    for _ in 0..runs {
+        let (c, t) = (cpu_s(), Instant::now());
+        let bvh = Bvh::build(&boxes, &p);
+        cold.0.push((cpu_s() - c) * 1e3);
+        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
+        drop(bvh);
+        let (c, t) = (cpu_s(), Instant::now());
+        tree.rebuild(&boxes, &p, &mut ws);
+        warm.0.push((cpu_s() - c) * 1e3);
+        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let report = |what: &str, cold: (Vec<f64>, Vec<f64>), warm: (Vec<f64>, Vec<f64>), sah: f32| {
+        println!(
+            "{what} {} {} threads: cold {:.1} ms cpu ({:.1} wall), warm {:.1} ms cpu ({:.1} wall), sah {sah:.3}",
+            p.name(),
+            rayon::current_num_threads(),
+            median(cold.0),
+            median(cold.1),
+            median(warm.0),
+            median(warm.1),
+        );
+    };
+    report("bvh", cold, warm, tree.sah_cost());
+
+    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
+    let mut ws = BuildWorkspace::default();
+    let mut m = MeshBvh::build(&mesh, &p);
+    m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+    for _ in 0..runs {
+        let (c, t) = (cpu_s(), Instant::now());
+        let fresh = MeshBvh::build(&mesh, &p);
+        cold.0.push((cpu_s() - c) * 1e3);
+        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
+        drop(fresh);
+        let (c, t) = (cpu_s(), Instant::now());
+        m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+        warm.0.push((cpu_s() - c) * 1e3);
+        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    report("mesh", cold, warm, m.bvh().sah_cost());
 }

@@ -3,7 +3,7 @@
 
 use super::{BuildParams, BuildWorkspace, Bvh, Counters};
 use crate::geom::{Aabb, Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 /// Triangles gathered per chunk in parallel when refitting.
@@ -75,12 +75,26 @@ impl MeshBvh {
         }
         self.bvh.rebuild(&boxes, params, ws);
         ws.boxes = boxes;
-        self.leaf_indices.clear();
-        self.leaf_indices
-            .extend(self.bvh.prim_indices().iter().map(|&p| indices[p as usize]));
-        self.tris.clear();
+        // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
+        // old contents are kept: only growth initialises memory).
+        self.leaf_indices.resize(mesh.len(), [0; 3]);
         self.tris.resize(mesh.len(), [Vec3::ZERO; 3]);
-        gather(&self.leaf_indices, positions, &mut self.tris);
+        let prims = self.bvh.prim_indices();
+        let fill = |li: &mut [[u32; 3]], t: &mut [[Vec3; 3]], p: &[u32]| {
+            for (li, &p) in li.iter_mut().zip(p) {
+                *li = indices[p as usize];
+            }
+            gather(li, positions, t);
+        };
+        if mesh.len() >= 2 * GATHER_CHUNK {
+            self.leaf_indices
+                .par_chunks_mut(GATHER_CHUNK)
+                .zip(self.tris.par_chunks_mut(GATHER_CHUNK))
+                .zip(prims.par_chunks(GATHER_CHUNK))
+                .for_each(|((li, t), p)| fill(li, t, p));
+        } else {
+            fill(&mut self.leaf_indices, &mut self.tris, prims);
+        }
     }
 
     /// Refits for new vertex positions of the same topology (same triangle count and indices).
@@ -103,12 +117,12 @@ impl MeshBvh {
             self.tris.len(),
             "refit needs the same triangles"
         );
-        gather(&self.leaf_indices, positions, &mut self.tris);
-        let tris = &self.tris;
-        self.bvh.refit_leaves(|first, count| {
-            tris[first as usize..(first + count) as usize]
-                .iter()
-                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
+        // One pass: each leaf copies its triangles' new vertices into its slots and bounds them
+        // on the way.
+        let leaf_indices = &self.leaf_indices;
+        self.bvh.refit_with(&mut self.tris, |tris, first, _| {
+            let idx = &leaf_indices[first as usize..first as usize + tris.len()];
+            gather_bounds(tris, idx, positions)
         });
     }
 
@@ -205,19 +219,51 @@ impl Indexed<'_> {
     }
 }
 
-/// Copies each triangle into its leaf slot, in parallel chunks for large meshes.
+/// Copies each triangle into its leaf slot.
 fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
-    let fill = |t: &mut [[Vec3; 3]], idx: &[[u32; 3]]| {
-        for (t, i) in t.iter_mut().zip(idx) {
-            *t = i.map(|v| positions[v as usize]);
+    // Spelled out: `[u32; 3]::map` goes through a temporary on the stack.
+    for (t, &[a, b, c]) in tris.iter_mut().zip(leaf_indices) {
+        *t = [
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        ];
+    }
+}
+
+/// Copies the triangles with vertex indices `idx` into `tris` and returns their box, the same
+/// box as the union of [`Aabb::of_triangle`] over them.
+#[inline]
+fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -> Aabb {
+    // SSE `min`/`max` return their second operand when either is NaN, so `v.min(lo)` skips a
+    // NaN coordinate exactly as `of_triangle` does; clamping the union to `±f32::MAX` then
+    // matches its sanitizing (an axis with no number at all becomes `MAX .. -MAX`). Other
+    // targets take the per-triangle path.
+    #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+    {
+        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for (t, &[a, b, c]) in tris.iter_mut().zip(idx) {
+            let (a, b, c) = (
+                positions[a as usize],
+                positions[b as usize],
+                positions[c as usize],
+            );
+            *t = [a, b, c];
+            let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
+            lo = c.min(b.min(a.min(lo)));
+            hi = c.max(b.max(a.max(hi)));
         }
-    };
-    if tris.len() >= 2 * GATHER_CHUNK {
-        tris.par_chunks_mut(GATHER_CHUNK)
-            .zip(leaf_indices.par_chunks(GATHER_CHUNK))
-            .for_each(|(t, i)| fill(t, i));
-    } else {
-        fill(tris, leaf_indices);
+        let m = Vec3A::splat(f32::MAX);
+        Aabb::new(lo.clamp(-m, m).into(), hi.clamp(-m, m).into())
+    }
+    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+    {
+        let mut b = Aabb::EMPTY;
+        for (t, i) in tris.iter_mut().zip(idx) {
+            *t = i.map(|v| positions[v as usize]);
+            b = b.union(Aabb::of_triangle(t));
+        }
+        b
     }
 }
 

@@ -25,23 +25,97 @@ impl Bvh {
     /// Refits the tree given each leaf's new box: `leaf_bounds(first, count)` bounds the
     /// primitives in slots `first .. first + count`. No allocation.
     pub fn refit_leaves(&mut self, leaf_bounds: impl Fn(u32, u32) -> Aabb + Sync) {
+        self.refit_with(&mut [(); 0], |_: &mut [()], first, count| {
+            leaf_bounds(first, count)
+        });
+    }
+
+    /// Refits the tree while updating per-slot data: `slot_data` is empty or has one entry per
+    /// primitive slot, and `leaf(data, first, count)` gets a leaf's entries
+    /// (`slot_data[first .. first + count]`, or an empty slice) to update, and returns the
+    /// leaf's new box. Every leaf is visited once; leaves of disjoint subtrees may be visited
+    /// in parallel. No allocation.
+    pub(crate) fn refit_with<T: Send>(
+        &mut self,
+        slot_data: &mut [T],
+        leaf: impl Fn(&mut [T], u32, u32) -> Aabb + Sync,
+    ) {
+        debug_assert!(slot_data.is_empty() || slot_data.len() == self.prim_indices.len());
         let Some((root, desc)) = self.nodes.split_first_mut() else {
             return;
         };
+        let mut data = SlotData {
+            data: slot_data,
+            first: 0,
+        };
         if root.is_leaf() {
-            root.set_bounds(leaf_bounds(root.first, root.count));
+            root.set_bounds(leaf(
+                data.leaf(root.first, root.count),
+                root.first,
+                root.count,
+            ));
             return;
         }
-        refit_desc(desc, 1, &leaf_bounds);
+        refit_desc(desc, 1, &mut data, &leaf);
         root.set_bounds(desc[0].bounds().union(desc[1].bounds()));
     }
 }
 
+/// The per-slot data of one subtree: its slots start at `first`.
+struct SlotData<'a, T> {
+    data: &'a mut [T],
+    first: u32,
+}
+
+impl<T> SlotData<'_, T> {
+    /// A leaf's entries (empty when there is no per-slot data).
+    #[inline(always)]
+    fn leaf(&mut self, first: u32, count: u32) -> &mut [T] {
+        if self.data.is_empty() {
+            return &mut [];
+        }
+        let at = (first - self.first) as usize;
+        &mut self.data[at..at + count as usize]
+    }
+
+    /// Splits off the slots from global slot `at` on.
+    fn split_at(&mut self, at: u32) -> (SlotData<'_, T>, SlotData<'_, T>) {
+        let k = if self.data.is_empty() {
+            0
+        } else {
+            (at - self.first) as usize
+        };
+        let (l, r) = self.data.split_at_mut(k);
+        (
+            SlotData {
+                data: l,
+                first: self.first,
+            },
+            SlotData { data: r, first: at },
+        )
+    }
+}
+
+/// The first primitive slot of the subtree rooted at `node`, whose descendants are `desc`
+/// (global index of `desc[0]` is `base`): its leftmost leaf's.
+fn first_slot(node: &Node, desc: &[Node], base: u32) -> u32 {
+    let mut n = *node;
+    while !n.is_leaf() {
+        n = desc[(n.first - base) as usize];
+    }
+    n.first
+}
+
 /// Refits the descendants of one interior node: `desc` starts with its children pair, whose
-/// global index is `base`, and holds exactly that node's descendants.
-fn refit_desc<F: Fn(u32, u32) -> Aabb + Sync>(desc: &mut [Node], base: u32, leaf_bounds: &F) {
+/// global index is `base`, and holds exactly that node's descendants; `data` holds its slots.
+fn refit_desc<T: Send, F: Fn(&mut [T], u32, u32) -> Aabb + Sync>(
+    desc: &mut [Node],
+    base: u32,
+    data: &mut SlotData<'_, T>,
+    leaf: &F,
+) {
     if desc.len() < PARALLEL_NODES {
-        refit_sweep(desc, base, leaf_bounds);
+        refit_sweep(desc, base, data, leaf);
         return;
     }
     let (pair, rest) = desc.split_at_mut(2);
@@ -51,37 +125,49 @@ fn refit_desc<F: Fn(u32, u32) -> Aabb + Sync>(desc: &mut [Node], base: u32, leaf
     } else {
         (pair[1].first - base - 2) as usize
     };
-    let (ldesc, rdesc) = rest.split_at_mut(right_start);
     let lbase = base + 2;
     let rbase = lbase + right_start as u32;
+    let rfirst = first_slot(&pair[1], rest, lbase);
+    let (ldesc, rdesc) = rest.split_at_mut(right_start);
+    let (mut ldata, mut rdata) = data.split_at(rfirst);
     let [left, right] = pair else { unreachable!() };
     rayon::join(
-        || refit_child(left, ldesc, lbase, leaf_bounds),
-        || refit_child(right, rdesc, rbase, leaf_bounds),
+        || refit_child(left, ldesc, lbase, &mut ldata, leaf),
+        || refit_child(right, rdesc, rbase, &mut rdata, leaf),
     );
 }
 
-fn refit_child<F: Fn(u32, u32) -> Aabb + Sync>(
+fn refit_child<T: Send, F: Fn(&mut [T], u32, u32) -> Aabb + Sync>(
     node: &mut Node,
     desc: &mut [Node],
     base: u32,
-    leaf_bounds: &F,
+    data: &mut SlotData<'_, T>,
+    leaf: &F,
 ) {
     if node.is_leaf() {
-        node.set_bounds(leaf_bounds(node.first, node.count));
+        node.set_bounds(leaf(
+            data.leaf(node.first, node.count),
+            node.first,
+            node.count,
+        ));
     } else {
-        refit_desc(desc, base, leaf_bounds);
+        refit_desc(desc, base, data, leaf);
         node.set_bounds(desc[0].bounds().union(desc[1].bounds()));
     }
 }
 
 /// One reverse sweep over a contiguous, closed range of nodes (global index of `nodes[0]` is
 /// `base`): every child is met before its parent.
-fn refit_sweep<F: Fn(u32, u32) -> Aabb>(nodes: &mut [Node], base: u32, leaf_bounds: &F) {
+fn refit_sweep<T, F: Fn(&mut [T], u32, u32) -> Aabb>(
+    nodes: &mut [Node],
+    base: u32,
+    data: &mut SlotData<'_, T>,
+    leaf: &F,
+) {
     for i in (0..nodes.len()).rev() {
         let n = nodes[i];
         let b = if n.is_leaf() {
-            leaf_bounds(n.first, n.count)
+            leaf(data.leaf(n.first, n.count), n.first, n.count)
         } else {
             let c = (n.first - base) as usize;
             nodes[c].bounds().union(nodes[c + 1].bounds())

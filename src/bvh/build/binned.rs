@@ -1,11 +1,24 @@
-//! Binned SAH (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", 2007).
+//! Binned SAH (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", 2007),
+//! with the partition of a node fused with the binning of its two children.
+//!
+//! A plain binned builder reads every primitive twice per level: once to bin it, once to
+//! partition it. Here only the root (and any node reached by a fallback split) is binned on
+//! its own; every SAH split bins each primitive into its child's bins while partitioning. A
+//! child's bin map must be chosen before its primitives are seen, so it is predicted from what
+//! is known then: the parent's centroid bounds cut at the chosen bin boundary, intersected with
+//! the child's box (exact: the union of its bins). Any monotone map gives valid bins; a
+//! predicted map only spreads the child's centroids over somewhat fewer bins than its exact
+//! centroid bounds would.
 
-use super::{BuildParams, MAX_BINS, PrimRef, RangeBounds, Split, Splitter};
-use crate::bvh::build::Box3;
-use glam::Vec3A;
+use super::{
+    Box3, BuildParams, MAX_BINS, Node, PrimRef, RangeBounds, SAH_DEPTH_LIMIT, Slots, halve,
+};
+use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
+use wide::f32x8;
 
-pub(crate) struct Binned {
+/// The binned builder's settings.
+struct Ctx {
     bins: usize,
     all_axes: bool,
     traversal_cost: f32,
@@ -14,40 +27,124 @@ pub(crate) struct Binned {
     parallel_threshold: usize,
 }
 
-impl Binned {
-    pub fn new(p: &BuildParams) -> Self {
-        Self {
-            bins: p.bins.clamp(2, MAX_BINS),
-            all_axes: p.all_axes,
-            traversal_cost: p.traversal_cost,
-            intersection_cost: p.intersection_cost,
-            max_leaf_size: p.max_leaf_size.max(1) as usize,
-            parallel_threshold: p.parallel_threshold.max(1),
-        }
+/// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
+/// the root into `desc` and returns the root.
+/// `rb` bounds `refs`.
+pub(crate) fn build(
+    p: &BuildParams,
+    refs: &mut [PrimRef],
+    rb: RangeBounds,
+    desc: &mut [Node],
+) -> Node {
+    let ctx = Ctx {
+        bins: p.bins.clamp(2, MAX_BINS),
+        all_axes: p.all_axes,
+        traversal_cost: p.traversal_cost,
+        intersection_cost: p.intersection_cost,
+        max_leaf_size: p.max_leaf_size.max(1) as usize,
+        parallel_threshold: p.parallel_threshold.max(1),
+    };
+    let info = Info {
+        bounds: rb.bounds,
+        cbounds: rb.cbounds,
+        map: None,
+    };
+    let mut stack = Stack::take();
+    ctx.node(
+        refs,
+        info,
+        Slots {
+            prim_offset: 0,
+            desc,
+            desc_base: 1,
+        },
+        0,
+        &mut stack,
+        0,
+        0,
+    )
+}
+
+/// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
+/// is a single lane-wise minimum) and counts; only the first `k` of each axis are in use.
+#[derive(Clone, Copy)]
+struct Bins {
+    b: [[f32x8; MAX_BINS]; 3],
+    n: [[u32; MAX_BINS]; 3],
+}
+
+/// The empty box in `[min, -max]` form.
+const EMPTY8: f32x8 = f32x8::new([f32::INFINITY; 8]);
+
+const EMPTY_BINS: Bins = Bins {
+    b: [[EMPTY8; MAX_BINS]; 3],
+    n: [[0; MAX_BINS]; 3],
+};
+
+/// A `[min, -max]` box as a [`Box3`].
+#[inline(always)]
+fn unpack(v: f32x8) -> Box3 {
+    let a = v.as_array();
+    Box3 {
+        min: Vec3A::new(a[0], a[1], a[2]),
+        max: -Vec3A::new(a[4], a[5], a[6]),
     }
 }
 
-/// One bin: the box and count of the primitives whose centroid falls in it.
-#[derive(Clone, Copy)]
-pub(crate) struct Bin {
-    b: Box3,
-    count: u32,
+/// Half the surface area of a `[min, -max]` box (0 when empty).
+#[inline(always)]
+fn half_area8(v: f32x8) -> f32 {
+    let a = v.as_array();
+    // max - min = -(-max + min)
+    let e = (-(Vec3A::new(a[4], a[5], a[6]) + Vec3A::new(a[0], a[1], a[2]))).max(Vec3A::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
 }
 
-const EMPTY_BIN: Bin = Bin {
-    b: Box3::EMPTY,
-    count: 0,
-};
+impl Bins {
+    fn clear(&mut self, k: usize) {
+        for a in 0..3 {
+            self.b[a][..k].fill(EMPTY8);
+            self.n[a][..k].fill(0);
+        }
+    }
 
-/// Bins on the three axes; only the first `k` of each axis are in use.
-pub(crate) type Bins = [[Bin; MAX_BINS]; 3];
+    fn merge(mut self, o: &Bins, k: usize) -> Bins {
+        for a in 0..3 {
+            for i in 0..k {
+                self.b[a][i] = self.b[a][i].fast_min(o.b[a][i]);
+                self.n[a][i] += o.n[a][i];
+            }
+        }
+        self
+    }
 
-/// Maps doubled centroids to bin indices `0 .. bins` on each axis.
+    /// Adds `r` (its bins on each axis given by `map`, noted in `r.bins`); returns its doubled
+    /// centroid.
+    #[inline(always)]
+    fn add(&mut self, r: &mut PrimRef, map: &BinMap) -> Vec3A {
+        let p = r.packed();
+        let c2 = r.c2();
+        let [ix, iy, iz] = map.index(c2);
+        r.set_bins(ix as u32 | (iy as u32) << 8 | (iz as u32) << 16);
+        self.b[0][ix] = self.b[0][ix].fast_min(p);
+        self.b[1][iy] = self.b[1][iy].fast_min(p);
+        self.b[2][iz] = self.b[2][iz].fast_min(p);
+        self.n[0][ix] += 1;
+        self.n[1][iy] += 1;
+        self.n[2][iz] += 1;
+        c2
+    }
+}
+
+/// Maps doubled centroids to bin indices `0 .. k` on each axis (an axis with scale 0 is not
+/// binned: everything lands in its bin 0).
 #[derive(Clone, Copy)]
 struct BinMap {
     origin: Vec3A,
     scale: Vec3A,
-    last: u32,
+    /// `k - 1` as a float, the largest index.
+    last: Vec3A,
+    k: usize,
 }
 
 /// 1.5 * 2^23: adding it to a float in `[-0.5, 2^22)` leaves `2^22` plus the nearest integer
@@ -55,101 +152,9 @@ struct BinMap {
 const ROUNDING_MAGIC: f32 = 12_582_912.0;
 
 impl BinMap {
-    /// Bin indices of a doubled centroid on each axis. Rounding `x - 0.5` to the nearest integer
-    /// through the mantissa is monotone and branch-free (unlike a saturating float-to-int cast);
-    /// any monotone map gives valid bins, and partitioning reads back the same indices.
-    #[inline(always)]
-    fn index(&self, c2: Vec3A) -> [usize; 3] {
-        let x = (c2 - self.origin) * self.scale + Vec3A::splat(ROUNDING_MAGIC - 0.5);
-        x.to_array().map(|f| {
-            let i = (f.to_bits() & 0x7f_ffff).wrapping_sub(1 << 22);
-            (i.min(self.last) as usize) & (MAX_BINS - 1)
-        })
-    }
-}
-
-/// Adds `refs` to `bins` and notes each reference's bins in it.
-fn bin_refs(refs: &mut [PrimRef], map: &BinMap, bins: &mut Bins) {
-    let [bx, by, bz] = bins;
-    for r in refs {
-        let (lo, hi) = (r.lo(), r.hi());
-        let [ix, iy, iz] = map.index(lo + hi);
-        r.bins = ix as u32 | (iy as u32) << 8 | (iz as u32) << 16;
-        for b in [&mut bx[ix], &mut by[iy], &mut bz[iz]] {
-            b.b.grow(lo, hi);
-            b.count += 1;
-        }
-    }
-}
-
-const EMPTY_BINS: Bins = [[EMPTY_BIN; MAX_BINS]; 3];
-
-fn merge_bins(mut a: Bins, b: Bins, k: usize) -> Bins {
-    for (xa, xb) in a.iter_mut().zip(b.iter()) {
-        for (x, y) in xa[..k].iter_mut().zip(&xb[..k]) {
-            x.b = x.b.union(y.b);
-            x.count += y.count;
-        }
-    }
-    a
-}
-
-/// How many spare bin sets a thread keeps: one per build task it may have in progress at once
-/// (a task waiting in `join` while the thread runs a stolen one).
-const SPARES: usize = 8;
-
-thread_local! {
-    /// Each thread's spare bins, handed from one build task to the next so that tasks allocate
-    /// none once every thread has its sets.
-    static SPARE_BINS: std::cell::RefCell<[Option<Box<Bins>>; SPARES]> =
-        const { std::cell::RefCell::new([const { None }; SPARES]) };
-}
-
-/// A task's bins: taken from the thread's spares on creation, returned to them on drop.
-pub(crate) struct BinsScratch(Option<Box<Bins>>);
-
-impl BinsScratch {
-    fn take() -> Self {
-        let spare = SPARE_BINS.with_borrow_mut(|s| s.iter_mut().find_map(Option::take));
-        Self(Some(spare.unwrap_or_else(|| Box::new(EMPTY_BINS))))
-    }
-
-    fn bins(&mut self) -> &mut Bins {
-        self.0.get_or_insert_with(|| Box::new(EMPTY_BINS))
-    }
-}
-
-impl Drop for BinsScratch {
-    fn drop(&mut self) {
-        let bins = self.0.take();
-        SPARE_BINS.with_borrow_mut(|s| {
-            if let Some(slot) = s.iter_mut().find(|b| b.is_none()) {
-                *slot = bins;
-            }
-        });
-    }
-}
-
-impl Splitter for Binned {
-    type Scratch = BinsScratch;
-
-    fn scratch(&self) -> BinsScratch {
-        BinsScratch::take()
-    }
-
-    fn split(
-        &self,
-        refs: &mut [PrimRef],
-        rb: &RangeBounds,
-        scratch: &mut BinsScratch,
-    ) -> Option<Split> {
-        let bins = scratch.bins();
-        let n = refs.len();
-        // Small nodes get one bin per primitive at most: more bins could not separate more
-        // centroids on average, and the per-node cost of sweeping empty bins would dominate.
-        let k = self.bins.min(n.max(2));
-        let origin = rb.cbounds.min;
-        let ext = rb.cbounds.max - origin;
+    /// The map spreading `cb` over `k` bins on each usable axis (all, or only the widest).
+    fn new(cb: &Box3, k: usize, all_axes: bool) -> BinMap {
+        let ext = cb.max - cb.min;
         let widest = if ext.x >= ext.y && ext.x >= ext.z {
             0
         } else if ext.y >= ext.z {
@@ -157,110 +162,377 @@ impl Splitter for Binned {
         } else {
             2
         };
-        let usable = |a: usize| {
-            ext[a] > 0.0 && (k as f32 / ext[a]).is_finite() && (self.all_axes || a == widest)
-        };
-        if !(0..3).any(usable) {
-            return None;
+        let s = Vec3A::splat(k as f32) / ext;
+        let mut ok = ext.cmpgt(Vec3A::ZERO) & s.is_finite_mask();
+        if !all_axes {
+            ok &= BVec3A::new(widest == 0, widest == 1, widest == 2);
         }
-        let mut scale = Vec3A::ZERO;
-        for a in 0..3 {
-            if usable(a) {
-                scale[a] = k as f32 / ext[a];
-            }
-        }
-        let map = BinMap {
-            origin,
+        let scale = Vec3A::select(ok, s, Vec3A::ZERO);
+        BinMap {
+            origin: cb.min,
             scale,
-            last: k as u32 - 1,
-        };
-
-        if n >= self.parallel_threshold.saturating_mul(8) {
-            // Large nodes: bin chunks in parallel into bins on each task's stack.
-            *bins = refs
-                .par_chunks_mut(self.parallel_threshold)
-                .map(|c| {
-                    let mut b = EMPTY_BINS;
-                    bin_refs(c, &map, &mut b);
-                    b
-                })
-                .reduce(|| EMPTY_BINS, |a, b| merge_bins(a, b, k));
-        } else {
-            for axis in bins.iter_mut() {
-                axis[..k].fill(EMPTY_BIN);
-            }
-            bin_refs(refs, &map, bins);
+            last: Vec3A::splat((k - 1) as f32),
+            k,
         }
+    }
 
-        // Compute costs for splitting after each bin: right-to-left areas and counts first,
-        // then a left-to-right sweep evaluates `A_L N_L + A_R N_R`. Empty bins change neither
-        // side, so their candidates repeat the previous one and are skipped.
+    fn usable(&self, axis: usize) -> bool {
+        self.scale[axis] > 0.0
+    }
+
+    fn any_usable(&self) -> bool {
+        self.scale.cmpgt(Vec3A::ZERO).any()
+    }
+
+    /// Bin indices of a doubled centroid on each axis: clamped to `[0, k - 1]` (so that the map
+    /// is monotone everywhere, also for centroids outside a predicted range), then rounded
+    /// (`x - 0.5` to nearest, i.e. down) through the mantissa, branch-free.
+    #[inline(always)]
+    fn index(&self, c2: Vec3A) -> [usize; 3] {
+        // `max` first: it turns a NaN (0 times infinity on an unused axis) into 0.
+        let x = ((c2 - self.origin) * self.scale)
+            .max(Vec3A::ZERO)
+            .min(self.last)
+            + Vec3A::splat(ROUNDING_MAGIC - 0.5);
+        x.to_array()
+            .map(|f| ((f.to_bits() & 0x7f_ffff).wrapping_sub(1 << 22) as usize) & (MAX_BINS - 1))
+    }
+}
+
+/// What a node knows about its primitives on entry.
+#[derive(Clone, Copy)]
+struct Info {
+    bounds: Box3,
+    /// Exact (doubled) centroid bounds.
+    cbounds: Box3,
+    /// When set, the node's bins (in the stack) already hold its primitives, binned with this
+    /// map, and each primitive's `bins` field says where.
+    map: Option<BinMap>,
+}
+
+/// A task's bins: two per tree level below the task's root (the pair of children a split
+/// fills), so that a right child's bins wait intact while its left sibling's subtree is built.
+struct Stack(Option<Vec<[Bins; 2]>>);
+
+/// How many spare stacks a thread keeps: one per build task it may have in progress at once
+/// (a task waiting in `join` while the thread runs a stolen one).
+const SPARES: usize = 8;
+
+thread_local! {
+    /// Each thread's spare stacks, handed from one build task to the next so that tasks
+    /// allocate none once every thread has its own.
+    static SPARE_STACKS: std::cell::RefCell<[Option<Vec<[Bins; 2]>>; SPARES]> =
+        const { std::cell::RefCell::new([const { None }; SPARES]) };
+}
+
+impl Stack {
+    fn take() -> Self {
+        let spare = SPARE_STACKS.with_borrow_mut(|s| s.iter_mut().find_map(Option::take));
+        // Reserved for the deepest SAH split, so that a warm stack never reallocates.
+        Self(Some(spare.unwrap_or_else(|| {
+            Vec::with_capacity(SAH_DEPTH_LIMIT as usize + 2)
+        })))
+    }
+
+    /// The levels `level` and `level + 1` (growing the stack as needed).
+    fn pair(&mut self, level: usize) -> (&mut [Bins; 2], &mut [Bins; 2]) {
+        let v = self.0.get_or_insert_with(Vec::new);
+        while v.len() < level + 2 {
+            v.push([EMPTY_BINS; 2]);
+        }
+        let (a, b) = v.split_at_mut(level + 1);
+        (&mut a[level], &mut b[0])
+    }
+}
+
+impl Drop for Stack {
+    fn drop(&mut self) {
+        let stack = self.0.take();
+        SPARE_STACKS.with_borrow_mut(|s| {
+            if let Some(slot) = s.iter_mut().find(|b| b.is_none()) {
+                *slot = stack;
+            }
+        });
+    }
+}
+
+/// A split: `refs[..mid]` go left; both children's [`Info`], their bins filled in the stack's
+/// next level when their maps are set.
+struct Split {
+    mid: usize,
+    left: Info,
+    right: Info,
+}
+
+impl Ctx {
+    /// Bins for a node of `n` primitives: at most one per two primitives (and at least 4, or
+    /// `n` if fewer): a small node's candidates cost more to price than they gain.
+    #[inline]
+    fn bins_for(&self, n: usize) -> usize {
+        (n / 2).max(4).min(n).min(self.bins).max(2)
+    }
+
+    /// Builds the subtree over `refs`; its bins (if `info.map` is set) are `stack[level][side]`.
+    #[allow(clippy::too_many_arguments)]
+    fn node(
+        &self,
+        refs: &mut [PrimRef],
+        info: Info,
+        out: Slots<'_>,
+        depth: u32,
+        stack: &mut Stack,
+        level: usize,
+        side: usize,
+    ) -> Node {
+        let n = refs.len();
+        let bounds = info.bounds.to_aabb();
+        if n == 1 {
+            return Node::leaf(bounds, out.prim_offset, 1);
+        }
+        let split = if depth < SAH_DEPTH_LIMIT {
+            self.split(refs, &info, depth, stack, level, side)
+        } else {
+            None
+        };
+        let split = match split {
+            Some(sp) => sp,
+            None if n <= self.max_leaf_size => {
+                return Node::leaf(bounds, out.prim_offset, n as u32);
+            }
+            None => {
+                let h = halve(refs, self.parallel_threshold);
+                let info = |rb: RangeBounds| Info {
+                    bounds: rb.bounds,
+                    cbounds: rb.cbounds,
+                    map: None,
+                };
+                Split {
+                    mid: h.mid,
+                    left: info(h.left),
+                    right: info(h.right),
+                }
+            }
+        };
+        let mid = split.mid;
+        debug_assert!(mid > 0 && mid < n);
+        let (pair, rest) = out.desc.split_at_mut(2);
+        let (ldesc, rdesc) = rest.split_at_mut(2 * mid - 2);
+        let (lrefs, rrefs) = refs.split_at_mut(mid);
+        let lbase = out.desc_base + 2;
+        let left = Slots {
+            prim_offset: out.prim_offset,
+            desc: ldesc,
+            desc_base: lbase,
+        };
+        let right = Slots {
+            prim_offset: out.prim_offset + mid as u32,
+            desc_base: lbase + 2 * mid as u32 - 2,
+            desc: rdesc,
+        };
+        let (l, r) = if n >= self.parallel_threshold {
+            // The right child becomes a task of its own, with its bins in a stack of its own.
+            // (Its stack is taken when the task starts, so that a thread holds one stack per
+            // task it has in progress, not one per pending sibling.)
+            let rbins = split.right.map.map(|_| stack.pair(level).1[1]);
+            rayon::join(
+                || self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
+                || {
+                    let mut rs = Stack::take();
+                    if let Some(b) = rbins {
+                        rs.pair(0).0[0] = b;
+                    }
+                    self.node(rrefs, split.right, right, depth + 1, &mut rs, 0, 0)
+                },
+            )
+        } else {
+            (
+                self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
+                self.node(rrefs, split.right, right, depth + 1, stack, level + 1, 1),
+            )
+        };
+        pair[0] = l;
+        pair[1] = r;
+        Node::interior(bounds, out.desc_base)
+    }
+
+    /// Finds the cheapest split of the node's bins (binning first if the node was not binned
+    /// by its parent), partitions `refs` and bins the children on the way; `None` to make a
+    /// leaf (or cut in the middle if there are too many primitives for one).
+    fn split(
+        &self,
+        refs: &mut [PrimRef],
+        info: &Info,
+        depth: u32,
+        stack: &mut Stack,
+        level: usize,
+        side: usize,
+    ) -> Option<Split> {
+        let n = refs.len();
+        let (cur, next) = stack.pair(level);
+        let bins = &mut cur[side];
+        let map = match info.map {
+            Some(m) if m.any_usable() => m,
+            // Not binned yet, or binned with a predicted map that was empty on every axis.
+            _ => {
+                let map = BinMap::new(&info.cbounds, self.bins_for(n), self.all_axes);
+                if !map.any_usable() {
+                    return None;
+                }
+                self.bin(refs, &map, bins);
+                map
+            }
+        };
+        let k = map.k;
+
+        // Cost of splitting after each bin on each axis: right-to-left areas times counts,
+        // then left to right `A_L N_L + A_R N_R`. A side with no primitive prices its candidate
+        // at infinity; empty bins leave both sides unchanged (ties keep the first candidate).
         let mut best = (f32::INFINITY, 0usize, 0usize);
         let mut right_cost = [0f32; MAX_BINS];
-        for axis in (0..3).filter(|&a| usable(a)) {
-            let bins = &bins[axis][..k];
-            let mut acc = Box3::EMPTY;
+        for axis in (0..3).filter(|&a| map.usable(a)) {
+            let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
+            let mut acc = EMPTY8;
             let mut count = 0u32;
-            let mut cost = f32::INFINITY;
             for i in (1..k).rev() {
-                if bins[i].count > 0 {
-                    acc = acc.union(bins[i].b);
-                    count += bins[i].count;
-                    cost = acc.half_area() * count as f32;
-                }
-                right_cost[i - 1] = cost;
+                acc = acc.fast_min(bx[i]);
+                count += bn[i];
+                let c = half_area8(acc) * count as f32;
+                right_cost[i - 1] = if count == 0 { f32::INFINITY } else { c };
             }
-            let mut acc = Box3::EMPTY;
+            let mut acc = EMPTY8;
             let mut count = 0u32;
-            for (i, bin) in bins[..k - 1].iter().enumerate() {
-                if bin.count == 0 {
-                    continue;
-                }
-                acc = acc.union(bin.b);
-                count += bin.count;
-                let cost = acc.half_area() * count as f32 + right_cost[i];
-                if cost < best.0 {
-                    best = (cost, axis, i);
-                }
+            let (mut best_cost, mut best_bin) = (f32::INFINITY, 0);
+            for i in 0..k - 1 {
+                acc = acc.fast_min(bx[i]);
+                count += bn[i];
+                let c = half_area8(acc) * count as f32 + right_cost[i];
+                let c = if count == 0 { f32::INFINITY } else { c };
+                // Branch-free: which candidate wins is unpredictable.
+                let better = c < best_cost;
+                best_cost = if better { c } else { best_cost };
+                best_bin = if better { i } else { best_bin };
+            }
+            if best_cost < best.0 {
+                best = (best_cost, axis, best_bin);
             }
         }
         let (cost, axis, bin) = best;
         if !cost.is_finite() {
             return None;
         }
-        let area = rb.bounds.half_area();
+        let area = info.bounds.half_area();
         let split_cost = self.traversal_cost * area + self.intersection_cost * cost;
         let leaf_cost = self.intersection_cost * area * n as f32;
         if split_cost >= leaf_cost && n <= self.max_leaf_size {
             return None;
         }
-        // Both sides' boxes are the unions of their bins; centroid bounds are gathered while
-        // partitioning by the bins noted during binning.
-        let bins = &bins[axis][..k];
-        let union = |b: &[Bin]| b.iter().fold(Box3::EMPTY, |acc, b| acc.union(b.b));
-        let (lb, rb) = (union(&bins[..=bin]), union(&bins[bin + 1..]));
+
+        // The children: boxes and counts from the bins, predicted maps, then the partition
+        // bins them.
+        let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
+        let union = |b: &[f32x8]| unpack(b.iter().fold(EMPTY8, |acc, b| acc.fast_min(*b)));
+        let (lb, rb) = (union(&bx[..=bin]), union(&bx[bin + 1..]));
+        let nl = bn[..=bin].iter().sum::<u32>() as usize;
+        let nr = n - nl;
+        // The centroid boundary between the two sides on the split axis (its bins are noted in
+        // each primitive, so the partition does not depend on rounding here).
+        let cut = map.origin[axis] + (bin + 1) as f32 / map.scale[axis];
+        let child_map = |bounds: &Box3, count: usize, left: bool| {
+            // Children at the depth limit, and single primitives, are never split by SAH.
+            if count < 2 || depth + 1 >= SAH_DEPTH_LIMIT {
+                return None;
+            }
+            let mut cb = Box3 {
+                min: info.cbounds.min.max(bounds.min * 2.0),
+                max: info.cbounds.max.min(bounds.max * 2.0),
+            };
+            if left {
+                cb.max[axis] = cb.max[axis].min(cut);
+            } else {
+                cb.min[axis] = cb.min[axis].max(cut);
+            }
+            Some(BinMap::new(&cb, self.bins_for(count), self.all_axes))
+        };
+        let lmap = child_map(&lb, nl, true);
+        let rmap = child_map(&rb, nr, false);
+        if let Some(m) = &lmap {
+            next[0].clear(m.k);
+        }
+        if let Some(m) = &rmap {
+            next[1].clear(m.k);
+        }
+        let [lbins, rbins] = next;
         let shift = 8 * axis as u32;
         let bin = bin as u32;
-        let mut split = partition(refs, |r| (r.bins >> shift) & 0xff <= bin);
-        split.left.bounds = lb;
-        split.right.bounds = rb;
-        Some(split)
+        let (mid, lcb, rcb) = partition_bin(
+            refs,
+            |r| (r.bins() >> shift) & 0xff <= bin,
+            (lmap.as_ref(), lbins),
+            (rmap.as_ref(), rbins),
+        );
+        debug_assert_eq!(mid, nl);
+        Some(Split {
+            mid,
+            left: Info {
+                bounds: lb,
+                cbounds: lcb,
+                map: lmap,
+            },
+            right: Info {
+                bounds: rb,
+                cbounds: rcb,
+                map: rmap,
+            },
+        })
+    }
+
+    /// Bins `refs` with `map` into `bins` (in parallel chunks for large nodes).
+    fn bin(&self, refs: &mut [PrimRef], map: &BinMap, bins: &mut Bins) {
+        let k = map.k;
+        if refs.len() >= self.parallel_threshold.saturating_mul(8) {
+            *bins = refs
+                .par_chunks_mut(self.parallel_threshold)
+                .map(|c| {
+                    let mut b = EMPTY_BINS;
+                    for r in c {
+                        b.add(r, map);
+                    }
+                    b
+                })
+                .reduce(|| EMPTY_BINS, |a, b| a.merge(&b, k));
+        } else {
+            bins.clear(k);
+            for r in refs {
+                bins.add(r, map);
+            }
+        }
     }
 }
 
-/// Partitions `refs` in place by `goes_left`, gathering both sides' centroid bounds on the way
-/// (the boxes are left empty for the caller to fill).
-fn partition(refs: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> Split {
-    let mut left = RangeBounds::EMPTY;
-    let mut right = RangeBounds::EMPTY;
+/// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified and binned
+/// once, into its side's bins with its side's map), gathering both sides' doubled
+/// centroid bounds. Returns the left count and the two centroid bounds.
+fn partition_bin(
+    refs: &mut [PrimRef],
+    goes_left: impl Fn(&PrimRef) -> bool,
+    left: (Option<&BinMap>, &mut Bins),
+    right: (Option<&BinMap>, &mut Bins),
+) -> (usize, Box3, Box3) {
+    // A side that is not binned is binned anyway, into bin 0 of bins nobody reads: the loop
+    // then has no branch but the partition's, and keeps both maps in registers.
+    let (lmap, lbins) = left;
+    let (rmap, rbins) = right;
+    let (lmap, rmap) = (*lmap.unwrap_or(&NO_MAP), *rmap.unwrap_or(&NO_MAP));
+    let mut lcb = Box3::EMPTY;
+    let mut rcb = Box3::EMPTY;
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && goes_left(&refs[i]) {
-            left.add_centroid(&refs[i]);
+            lcb.grow_point(lbins.add(&mut refs[i], &lmap));
             i += 1;
         }
         while i < j && !goes_left(&refs[j - 1]) {
-            right.add_centroid(&refs[j - 1]);
+            rcb.grow_point(rbins.add(&mut refs[j - 1], &rmap));
             j -= 1;
         }
         if i >= j {
@@ -268,9 +540,13 @@ fn partition(refs: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> Spli
         }
         refs.swap(i, j - 1);
     }
-    Split {
-        mid: i,
-        left,
-        right,
-    }
+    (i, lcb, rcb)
 }
+
+/// The map of a side that is not binned: everything into bin 0.
+const NO_MAP: BinMap = BinMap {
+    origin: Vec3A::ZERO,
+    scale: Vec3A::ZERO,
+    last: Vec3A::ZERO,
+    k: 1,
+};

@@ -14,6 +14,7 @@ use super::{Bvh, MAX_DEPTH, Node};
 use crate::geom::Aabb;
 use glam::Vec3A;
 use rayon::prelude::*;
+use wide::f32x8;
 
 /// Which split strategy a build uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,12 +54,13 @@ pub const MAX_BINS: usize = 64;
 impl BuildParams {
     /// Binned SAH with the default bin count: the builder dynbvh uses for rebuilds.
     ///
-    /// Why 16 bins on all three axes (`dynbvh build-bench` on the shared inputs, one thread):
-    /// on sphere_100k, 8 / 16 / 32 bins gave SAH 42.01 / 41.74 / 41.51 (full sweep 41.26) in
-    /// 40.3 / 38.8 / 41.8 ms, and on sphere_1m 49.66 / 49.33 / 49.12 (sweep 48.80): 16 bins
-    /// stay within 1.2% of the sweep at no measurable extra cost over 8. Binning only the widest
-    /// axis saved 14% of the time (33.4 ms) for a 3.5% worse SAH (43.20), which costs more in
-    /// tracing than it saves in building.
+    /// Why 16 bins on all three axes (`examples/prof_build.rs`, one thread, CPU time of a warm
+    /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 189 / 194 / 204 /
+    /// 208 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
+    /// the bin count changes the time by a few per cent only, and 16 bins stay within 1.2% of
+    /// the sweep on every shared input (8 bins: 1.8% at 1M and on sphere_100k). Binning only the
+    /// widest axis saved 10% of the time (184 ms) for a 4.3% worse SAH (51.47), which costs
+    /// more in tracing than it saves in building.
     pub const BINNED: BuildParams = BuildParams::binned(16);
     /// Full-sweep SAH: slowest, best quality.
     pub const SWEEP: BuildParams = BuildParams {
@@ -98,36 +100,62 @@ impl BuildParams {
     }
 }
 
-/// A primitive as builders see it: its box, its id, and scratch room for the binned builder
-/// (the bin of its centroid on each axis, one byte each), in 32 bytes.
+/// A primitive as builders see it, in one 32-byte vector: `[min.x, min.y, min.z, id, -max.x,
+/// -max.y, -max.z, bins]` (`id` and `bins` as bit patterns). `bins` is scratch room for the
+/// binned builder (the bin of its centroid on each axis, one byte each). With the upper corner
+/// negated, the box of two such vectors is one lane-wise minimum (the id and bins lanes carry
+/// junk through it and are never read as floats).
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 pub(crate) struct PrimRef {
-    pub min: [f32; 3],
-    pub id: u32,
-    pub max: [f32; 3],
-    pub bins: u32,
+    v: f32x8,
 }
 
 impl PrimRef {
+    /// The reference to box `b` ([`Aabb::sanitized`], in vector form).
+    #[inline(always)]
     fn new(b: &Aabb, id: u32) -> Self {
-        let b = b.sanitized();
+        let m = Vec3A::splat(f32::MAX);
+        let fix = |v: Vec3A, if_nan: Vec3A| Vec3A::select(v.is_nan_mask(), if_nan, v.clamp(-m, m));
+        let (lo, hi) = (fix(b.min.into(), m), -fix(b.max.into(), -m));
         Self {
-            min: b.min.into(),
-            id,
-            max: b.max.into(),
-            bins: 0,
+            v: f32x8::new([lo.x, lo.y, lo.z, f32::from_bits(id), hi.x, hi.y, hi.z, 0.0]),
         }
+    }
+
+    /// The primitive's index.
+    #[inline(always)]
+    pub fn id(&self) -> u32 {
+        self.v.as_array()[3].to_bits()
+    }
+
+    /// The binned builder's scratch word.
+    #[inline(always)]
+    pub fn bins(&self) -> u32 {
+        self.v.as_array()[7].to_bits()
+    }
+
+    #[inline(always)]
+    pub fn set_bins(&mut self, bins: u32) {
+        self.v.as_mut_array()[7] = f32::from_bits(bins);
+    }
+
+    /// `[min, -max]` as one vector.
+    #[inline(always)]
+    pub fn packed(&self) -> f32x8 {
+        self.v
     }
 
     #[inline(always)]
     pub fn lo(&self) -> Vec3A {
-        Vec3A::from(self.min)
+        let a = self.v.as_array();
+        Vec3A::new(a[0], a[1], a[2])
     }
 
     #[inline(always)]
     pub fn hi(&self) -> Vec3A {
-        Vec3A::from(self.max)
+        let a = self.v.as_array();
+        -Vec3A::new(a[4], a[5], a[6])
     }
 
     /// Twice the centroid: builders compare centroids, and the factor 2 changes no order.
@@ -194,11 +222,6 @@ impl RangeBounds {
     };
 
     #[inline(always)]
-    pub fn add_centroid(&mut self, r: &PrimRef) {
-        self.cbounds.grow_point(r.c2());
-    }
-
-    #[inline(always)]
     pub fn add(&mut self, r: &PrimRef) {
         let (lo, hi) = (r.lo(), r.hi());
         self.bounds.grow(lo, hi);
@@ -235,7 +258,8 @@ pub(crate) struct Split {
     pub right: RangeBounds,
 }
 
-/// A split strategy over references kept in one array (binned SAH, median).
+/// A split strategy over references kept in one array (the median split; binned SAH has a
+/// recursion of its own that bins the children while partitioning).
 pub(crate) trait Splitter: Sync {
     /// Working memory a task reuses from node to node.
     type Scratch: Send;
@@ -304,36 +328,39 @@ impl Bvh {
         // Every reference is written below and every used slot is written before it is read,
         // so old contents are kept: only growth initialises memory.
         refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
-        if n >= params.parallel_threshold.saturating_mul(8) {
+        // The references, and the root's bounds gathered on the way.
+        let fill = |refs: &mut [PrimRef], boxes: &[Aabb], base: usize| {
+            let mut rb = RangeBounds::EMPTY;
+            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
+                *r = PrimRef::new(b, (base + i) as u32);
+                rb.add(r);
+            }
+            rb
+        };
+        let rb = if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
                 .zip(boxes.par_chunks(params.parallel_threshold))
                 .enumerate()
-                .for_each(|(c, (r, b))| {
-                    let base = c * params.parallel_threshold;
-                    for (i, (r, b)) in r.iter_mut().zip(b).enumerate() {
-                        *r = PrimRef::new(b, (base + i) as u32);
-                    }
-                });
+                .map(|(c, (r, b))| fill(r, b, c * params.parallel_threshold))
+                .reduce(|| RangeBounds::EMPTY, RangeBounds::merge)
         } else {
-            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
-                *r = PrimRef::new(b, i as u32);
-            }
-        }
+            fill(refs, boxes, 0)
+        };
         let slots = &mut ws.slots;
         if slots.len() < 2 * n - 1 {
             slots.resize(2 * n - 1, Node::default());
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         root[0] = match params.method {
-            Method::Binned => build_range(&binned::Binned::new(params), params, refs, desc),
+            Method::Binned => binned::build(params, refs, rb, desc),
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                build_range(&m, params, refs, desc)
+                build_range(&m, params, refs, rb, desc)
             }
             Method::Sweep => sweep::build(params, refs, desc),
         };
-        self.prim_indices.extend(refs.iter().map(|r| r.id));
-        compact(slots, &mut self.nodes);
+        self.prim_indices.extend(refs.iter().map(PrimRef::id));
+        compact(&slots[..2 * n - 1], &mut self.nodes);
     }
 }
 
@@ -343,9 +370,9 @@ fn build_range<S: Splitter>(
     splitter: &S,
     params: &BuildParams,
     refs: &mut [PrimRef],
+    rb: RangeBounds,
     desc: &mut [Node],
 ) -> Node {
-    let rb = RangeBounds::of(refs, params.parallel_threshold);
     let mut scratch = splitter.scratch();
     let b = Recursion { splitter, params };
     b.node(
@@ -457,11 +484,13 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
 /// child's descendants", so a pre-order walk over pairs emits the nodes in slot order: the
 /// order, and with it every invariant, is kept.
 fn compact(slots: &[Node], out: &mut Vec<Node>) {
-    // Grow with 1/8 headroom: rebuilds of a deforming mesh vary in node count by a few per
-    // cent, and then fit without reallocating.
+    // Grow with 1/8 headroom plus a few nodes, but never past the most a tree over these
+    // primitives can have (`slots.len()`): rebuilds of a deforming mesh vary in node count by
+    // a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
+    // and then fit without reallocating.
     let count = count_nodes(slots, 0);
     if count > out.capacity() {
-        out.reserve_exact(count + count / 8);
+        out.reserve_exact((count + count / 8 + 8).min(slots.len()).max(count));
     }
     out.push(slots[0]);
     if !slots[0].is_leaf() {

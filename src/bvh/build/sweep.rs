@@ -12,7 +12,7 @@ fn cmp_on(refs: &[PrimRef], axis: usize, a: u32, b: u32) -> Ordering {
     let (ra, rb) = (&refs[a as usize], &refs[b as usize]);
     ra.c2()[axis]
         .total_cmp(&rb.c2()[axis])
-        .then(ra.id.cmp(&rb.id))
+        .then(ra.id().cmp(&rb.id()))
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
