@@ -2,7 +2,7 @@
 //! agreement with brute force.
 
 use super::rays::RaySet;
-use crate::bvh::{BuildParams, MeshBvh, brute_force_closest};
+use crate::bvh::{BuildParams, MeshBvh, PACKET_TILE, brute_force_closest};
 use crate::geom::{Hit, TriMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -33,6 +33,11 @@ pub struct Row {
     pub mrays: f64,
     /// Any-hit rays per second, millions.
     pub any_mrays: f64,
+    /// Closest-hit rays per second traced as packets (8x8 tiles of a square camera image,
+    /// else runs of 64 consecutive rays), millions.
+    pub packet_mrays: f64,
+    /// Any-hit rays per second traced as packets, millions.
+    pub packet_any_mrays: f64,
     /// Sampled rays whose closest hit differs from brute force (ties at the same t aside).
     pub mismatches: usize,
     /// How many rays were compared with brute force.
@@ -100,6 +105,75 @@ fn trace_mrays(rays: &RaySet, f: impl Fn(&crate::geom::Ray) -> bool + Sync) -> f
     rays.rays.len() as f64 / (ms * 1e3)
 }
 
+/// Side of the square image a ray set is, if it is one (camera sets are rows of pixels).
+fn image_side(rays: &[crate::geom::Ray]) -> Option<usize> {
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    (side * side == rays.len() && side > 0).then_some(side)
+}
+
+/// Closest hits of the whole set through packets, in parallel bands of tiles.
+fn packet_closest(set: &RaySet, bvh: &MeshBvh) -> Vec<Option<Hit>> {
+    let mut hits = vec![None; set.rays.len()];
+    let width = image_side(&set.rays).unwrap_or(set.rays.len().max(1));
+    let band = PACKET_TILE * width;
+    hits.par_chunks_mut(band)
+        .zip(set.rays.par_chunks(band))
+        .for_each(|(h, r)| bvh.trace_image_closest(r, width.min(r.len()), h));
+    hits
+}
+
+/// Traces the set as packets (8x8 tiles of a square image, else runs of 64 rays) in parallel
+/// and returns Mrays/s; `any`: any hit, else closest hit.
+fn packet_mrays(set: &RaySet, bvh: &MeshBvh, any: bool) -> f64 {
+    let ms = time_ms(|| {
+        if any {
+            let mut out = vec![false; set.rays.len()];
+            let width = image_side(&set.rays);
+            match width {
+                Some(w) => {
+                    // Tiles gathered row by row into packets, as for closest hits.
+                    let band = PACKET_TILE * w;
+                    out.par_chunks_mut(band)
+                        .zip(set.rays.par_chunks(band))
+                        .for_each(|(o, r)| any_tiles(bvh, r, w, o));
+                }
+                None => out
+                    .par_chunks_mut(4096)
+                    .zip(set.rays.par_chunks(4096))
+                    .for_each(|(o, r)| bvh.any_hit_packet(r, o)),
+            }
+            std::hint::black_box(&out);
+        } else {
+            std::hint::black_box(packet_closest(set, bvh));
+        }
+    });
+    set.rays.len() as f64 / (ms * 1e3)
+}
+
+/// Any hits of a band of image rows, as tiles.
+fn any_tiles(bvh: &MeshBvh, rays: &[crate::geom::Ray], width: usize, out: &mut [bool]) {
+    let height = rays.len().div_ceil(width);
+    let mut buf = Vec::with_capacity(PACKET_TILE * PACKET_TILE);
+    let mut idx = Vec::with_capacity(PACKET_TILE * PACKET_TILE);
+    let mut res = [false; PACKET_TILE * PACKET_TILE];
+    for tx in (0..width).step_by(PACKET_TILE) {
+        buf.clear();
+        idx.clear();
+        for y in 0..height {
+            for x in tx..(tx + PACKET_TILE).min(width) {
+                if let Some(r) = rays.get(y * width + x) {
+                    buf.push(*r);
+                    idx.push(y * width + x);
+                }
+            }
+        }
+        bvh.any_hit_packet(&buf, &mut res[..buf.len()]);
+        for (&i, &o) in idx.iter().zip(&res) {
+            out[i] = o;
+        }
+    }
+}
+
 /// Runs the whole comparison; `progress` is told each method as it starts.
 pub fn run(
     mesh: &TriMesh,
@@ -143,9 +217,19 @@ pub fn run(
             let any = (0..opts.trace_runs.max(1))
                 .map(|_| trace_mrays(set, |r| bvh.any_hit(r)))
                 .collect();
+            let packet = (0..opts.trace_runs.max(1))
+                .map(|_| packet_mrays(set, &bvh, false))
+                .collect();
+            let packet_any = (0..opts.trace_runs.max(1))
+                .map(|_| packet_mrays(set, &bvh, true))
+                .collect();
+            let packet_hits = packet_closest(set, &bvh);
             let mismatches = sample
                 .iter()
-                .filter(|(i, want)| !same_hit(*want, bvh.closest_hit(&set.rays[*i])))
+                .filter(|(i, want)| {
+                    !same_hit(*want, bvh.closest_hit(&set.rays[*i]))
+                        || !same_hit(*want, packet_hits[*i])
+                })
                 .count();
             rows.push(Row {
                 method: name.clone(),
@@ -159,6 +243,8 @@ pub fn run(
                 ray_count: set.rays.len(),
                 mrays: median(closest),
                 any_mrays: median(any),
+                packet_mrays: median(packet),
+                packet_any_mrays: median(packet_any),
                 mismatches,
                 checked: sample.len(),
             });
