@@ -17,20 +17,48 @@
 
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
-use crate::simd::packet::{LANES, RayLanes};
+use crate::simd::packet::{LANES, RayLanes, prefetch};
 use glam::{Vec3, Vec3A};
 
-/// Most rays in one packet (bits of a `u64` mask).
-pub const MAX_PACKET: usize = 64;
+/// Most rays in one packet (one bit each in a [`Mask`]).
+pub const MAX_PACKET: usize = 128;
+/// A bit per ray of a packet.
+pub type Mask = u128;
 /// Fewer rays than this are traced one by one.
 pub const MIN_PACKET: usize = 4;
 /// A packet whose unit directions are not all within this cosine of their mean direction
 /// (about 25 degrees) is traced one ray at a time.
 pub const COHERENT_COS: f32 = 0.9;
-/// Side of the square image tiles [`MeshBvh::trace_image_closest`] makes packets of.
-pub const TILE: usize = 8;
+/// Width of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
+pub const TILE_W: usize = 16;
+/// Height of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
+pub const TILE_H: usize = 8;
+
+/// Calls `f` with the pixel indices of each tile of a `width` x `height` image (row-major
+/// pixels), tile by tile ([`TILE_W`] x [`TILE_H`], smaller at the right and bottom edges), each
+/// tile's pixels in 4x4 blocks so that every 16-ray SIMD group of a packet is a compact square.
+pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
+    let mut idx = Vec::with_capacity(TILE_W * TILE_H);
+    for ty in (0..height).step_by(TILE_H) {
+        for tx in (0..width).step_by(TILE_W) {
+            idx.clear();
+            let (ye, xe) = ((ty + TILE_H).min(height), (tx + TILE_W).min(width));
+            for by in (ty..ye).step_by(4) {
+                for bx in (tx..xe).step_by(4) {
+                    for y in by..(by + 4).min(ye) {
+                        for x in bx..(bx + 4).min(xe) {
+                            idx.push(y * width + x);
+                        }
+                    }
+                }
+            }
+            f(&idx);
+        }
+    }
+}
 
 const GROUPS: usize = MAX_PACKET / LANES;
+const LEAF_IA: bool = false;
 
 /// Whether the packet queries trace a group of rays as a packet.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -59,7 +87,7 @@ pub struct RayPacket {
     lanes: [RayLanes; GROUPS],
     rays: [Ray; MAX_PACKET],
     /// Rays still traversing (any hit clears a ray's bit at its first hit).
-    active: u64,
+    active: Mask,
     /// The `(kx, ky, kz)` of the watertight test when every ray shares it.
     uniform: Option<[usize; 3]>,
     /// Per-axis bounds of the origins and reciprocal directions of the rays.
@@ -73,7 +101,7 @@ pub struct RayPacket {
     /// Sum of the unit directions: orders children near to far.
     dir: Vec3,
     /// Rays whose closest hit has been found so far, with its slot and barycentrics.
-    found: u64,
+    found: Mask,
     slot: [u32; MAX_PACKET],
     u: [f32; MAX_PACKET],
     v: [f32; MAX_PACKET],
@@ -132,16 +160,16 @@ impl RayPacket {
         );
         let n = rays.len();
         let all = if n == MAX_PACKET {
-            u64::MAX
+            Mask::MAX
         } else {
-            (1u64 << n) - 1
+            ((1 as Mask) << n) - 1
         };
         self.load_with(n, all, |i| rays[i]);
     }
 
     /// Loads the rays of the mask `which` among `n` lanes, ray `i` being `ray(i)`; the other
     /// lanes are left inactive.
-    pub(crate) fn load_with(&mut self, n: usize, which: u64, mut ray: impl FnMut(usize) -> Ray) {
+    pub(crate) fn load_with(&mut self, n: usize, which: Mask, mut ray: impl FnMut(usize) -> Ray) {
         debug_assert!(n <= MAX_PACKET);
         self.n = n;
         self.active = which;
@@ -247,17 +275,30 @@ impl RayPacket {
 
     /// Index of the first ray of `live` whose slab test touches the box.
     #[inline(always)]
-    fn first_hit(&self, n: &Node, live: u64) -> Option<u8> {
+    fn first_hit(&self, n: &Node, live: Mask) -> Option<u8> {
         let mut g = live.trailing_zeros() as usize / LANES;
+        // The group of the first live ray usually hits: test it before anything else.
+        let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
+        let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+        if m != 0 {
+            return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
+        }
+        // Then cull the node for the whole packet before testing the other groups.
+        if !self.may_hit(n) {
+            return None;
+        }
+        g += 1;
         while g < GROUPS {
-            let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
+            let rest = live >> (g * LANES);
+            if rest == 0 {
+                break;
+            }
+            let bits = rest as u32 & 0xFFFF;
             if bits != 0 {
                 let m = self.lanes[g].hit_box(n.min, n.max) & bits;
                 if m != 0 {
                     return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
                 }
-            } else if live >> (g * LANES) == 0 {
-                break;
             }
             g += 1;
         }
@@ -266,13 +307,13 @@ impl RayPacket {
 
     /// Every ray of `live` whose slab test touches the box.
     #[inline(always)]
-    fn hit_mask(&self, n: &Node, live: u64) -> u64 {
-        let mut mask = 0u64;
+    fn hit_mask(&self, n: &Node, live: Mask) -> Mask {
+        let mut mask: Mask = 0;
         let mut g = live.trailing_zeros() as usize / LANES;
         while g < GROUPS && live >> (g * LANES) != 0 {
             let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
             if bits != 0 {
-                mask |= u64::from(self.lanes[g].hit_box(n.min, n.max) & bits) << (g * LANES);
+                mask |= Mask::from(self.lanes[g].hit_box(n.min, n.max) & bits) << (g * LANES);
             }
             g += 1;
         }
@@ -283,7 +324,7 @@ impl RayPacket {
     /// (`ANY == false`): shortens each ray that hits it and records the hit; returns true when
     /// some ray was shortened. Any hit: retires the rays that hit it.
     #[inline(always)]
-    fn test_triangle<const ANY: bool>(&mut self, tri: &[Vec3; 3], slot: u32, rays: u64) -> bool {
+    fn test_triangle<const ANY: bool>(&mut self, tri: &[Vec3; 3], slot: u32, rays: Mask) -> bool {
         let uniform = self.uniform.map(|k| RayLanes::permute_uniform(tri, k));
         let mut changed = false;
         for g in 0..GROUPS {
@@ -306,10 +347,10 @@ impl RayPacket {
                 hit &= hit - 1;
                 let i = g * LANES + l;
                 if ANY {
-                    self.active &= !(1u64 << i);
+                    self.active &= !((1 as Mask) << i);
                 } else {
                     lanes.tmax.as_mut_array()[l] = h.t.as_array()[l];
-                    self.found |= 1u64 << i;
+                    self.found |= (1 as Mask) << i;
                     self.slot[i] = slot;
                     self.u[i] = h.u.as_array()[l];
                     self.v[i] = h.v.as_array()[l];
@@ -326,10 +367,10 @@ impl RayPacket {
                 let tmax = self.lanes[g].tmax.as_array()[l];
                 if let Some((t, u, v)) = intersect_triangle(r, &pre, tri[0], tri[1], tri[2], tmax) {
                     if ANY {
-                        self.active &= !(1u64 << i);
+                        self.active &= !((1 as Mask) << i);
                     } else {
                         self.lanes[g].tmax.as_mut_array()[l] = t;
-                        self.found |= 1u64 << i;
+                        self.found |= (1 as Mask) << i;
                         self.slot[i] = slot;
                         self.u[i] = u;
                         self.v[i] = v;
@@ -364,19 +405,19 @@ impl RayPacket {
 
     /// Rays that found a closest hit.
     #[inline]
-    pub(crate) fn found(&self) -> u64 {
+    pub(crate) fn found(&self) -> Mask {
         self.found
     }
 
     /// Marks every ray of `done` as finished (any-hit).
     #[inline]
-    pub(crate) fn retire(&mut self, done: u64) {
+    pub(crate) fn retire(&mut self, done: Mask) {
         self.active &= !done;
     }
 
     /// Rays still active.
     #[inline]
-    pub(crate) fn active(&self) -> u64 {
+    pub(crate) fn active(&self) -> Mask {
         self.active
     }
 
@@ -395,7 +436,8 @@ impl Bvh {
     pub(crate) fn traverse_packet<const ANY: bool>(
         &self,
         p: &mut RayPacket,
-        mut leaf: impl FnMut(&mut RayPacket, usize, u64) -> bool,
+        prefetch_leaf: impl Fn(usize),
+        mut leaf: impl FnMut(&mut RayPacket, usize, Mask) -> bool,
     ) {
         let nodes = self.nodes.as_slice();
         if nodes.is_empty() || p.active == 0 {
@@ -406,15 +448,15 @@ impl Bvh {
         while sp > 0 {
             sp -= 1;
             let (ni, first) = stack[sp];
-            let live = p.active & (u64::MAX << first);
+            let live = p.active & (Mask::MAX << first);
             if live == 0 {
                 continue;
             }
             let node = &nodes[ni as usize];
-            if !p.may_hit(node) {
-                continue;
-            }
             if node.is_leaf() {
+                if LEAF_IA && !p.may_hit(node) {
+                    continue;
+                }
                 let rays = p.hit_mask(node, live);
                 if rays == 0 {
                     continue;
@@ -440,6 +482,15 @@ impl Bvh {
                 };
                 let l = &nodes[node.first as usize];
                 let r = &nodes[node.first as usize + 1];
+                // Start loading the grandchildren (and the leaves' primitives) now: the walk is
+                // bound by memory latency on large trees.
+                for c in [l, r] {
+                    if c.is_leaf() {
+                        prefetch_leaf(c.first as usize);
+                    } else if let Some(n) = nodes.get(c.first as usize) {
+                        prefetch(n);
+                    }
+                }
                 // The child whose centre lies further along the packet's direction is the far one.
                 let cl = Vec3::from(l.min) + Vec3::from(l.max);
                 let cr = Vec3::from(r.min) + Vec3::from(r.max);
@@ -458,7 +509,7 @@ impl Bvh {
 
 impl MeshBvh {
     /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
-    /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. an 8x8 tile
+    /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
     /// of a camera image; [`MeshBvh::trace_image_closest`] does the tiling). Exactly the hits of
     /// [`MeshBvh::closest_hit`]; packets that are not coherent are traced ray by ray.
     ///
@@ -532,46 +583,61 @@ impl MeshBvh {
     }
 
     /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
-    /// packets of [`TILE`] x [`TILE`] pixels. `hits[i]` answers `rays[i]`.
+    /// packets of [`TILE_W`] x [`TILE_H`] pixels ([`image_tiles`]). `hits[i]` answers `rays[i]`.
     ///
     /// # Panics
-    /// When the lengths differ or `width` is 0 while there are rays.
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
         if rays.is_empty() {
             return;
         }
-        assert!(width > 0, "image width 0");
-        let height = rays.len().div_ceil(width);
-        let mut buf = Vec::with_capacity(TILE * TILE);
-        let mut out = vec![None; TILE * TILE];
-        let mut idx = Vec::with_capacity(TILE * TILE);
-        for ty in (0..height).step_by(TILE) {
-            for tx in (0..width).step_by(TILE) {
-                buf.clear();
-                idx.clear();
-                for y in ty..(ty + TILE).min(height) {
-                    for x in tx..(tx + TILE).min(width) {
-                        let i = y * width + x;
-                        if i < rays.len() {
-                            buf.push(rays[i]);
-                            idx.push(i);
-                        }
-                    }
-                }
-                self.closest_hit_packet(&buf, &mut out[..buf.len()]);
-                for (&i, h) in idx.iter().zip(&out) {
-                    hits[i] = *h;
-                }
+        assert!(width > 0 && rays.len().is_multiple_of(width), "rows of {width} rays");
+        let mut buf = Vec::with_capacity(MAX_PACKET);
+        let mut out = vec![None; MAX_PACKET];
+        image_tiles(width, rays.len() / width, |idx| {
+            buf.clear();
+            buf.extend(idx.iter().map(|&i| rays[i]));
+            self.closest_hit_packet(&buf, &mut out[..buf.len()]);
+            for (&i, h) in idx.iter().zip(&out) {
+                hits[i] = *h;
             }
+        });
+    }
+
+    /// Any-hit answers of an image's rays given row by row, as packets of [`TILE_W`] x
+    /// [`TILE_H`] pixels (e.g. shadow rays from the points the camera rays hit).
+    ///
+    /// # Panics
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+    pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        if rays.is_empty() {
+            return;
         }
+        assert!(width > 0 && rays.len().is_multiple_of(width), "rows of {width} rays");
+        let mut buf = Vec::with_capacity(MAX_PACKET);
+        let mut res = vec![false; MAX_PACKET];
+        image_tiles(width, rays.len() / width, |idx| {
+            buf.clear();
+            buf.extend(idx.iter().map(|&i| rays[i]));
+            self.any_hit_packet(&buf, &mut res[..buf.len()]);
+            for (&i, o) in idx.iter().zip(&res) {
+                out[i] = *o;
+            }
+        });
     }
 
     /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are
     /// recorded in the packet (slots of this tree).
     pub(crate) fn closest_packet(&self, p: &mut RayPacket) {
         let tris = self.tris.as_slice();
-        self.bvh.traverse_packet::<false>(p, |p, slot, rays| {
+        let pf = |slot: usize| {
+            if let Some(t) = tris.get(slot) {
+                prefetch(t);
+            }
+        };
+        self.bvh.traverse_packet::<false>(p, pf, |p, slot, rays| {
             p.test_triangle::<false>(&tris[slot], slot as u32, rays)
         });
     }
@@ -579,7 +645,12 @@ impl MeshBvh {
     /// Packet any-hit traversal: retires every ray that hits something.
     pub(crate) fn any_packet(&self, p: &mut RayPacket) {
         let tris = self.tris.as_slice();
-        self.bvh.traverse_packet::<true>(p, |p, slot, rays| {
+        let pf = |slot: usize| {
+            if let Some(t) = tris.get(slot) {
+                prefetch(t);
+            }
+        };
+        self.bvh.traverse_packet::<true>(p, pf, |p, slot, rays| {
             p.test_triangle::<true>(&tris[slot], slot as u32, rays)
         });
     }

@@ -2,7 +2,7 @@
 //! agreement with brute force.
 
 use super::rays::RaySet;
-use crate::bvh::{BuildParams, MeshBvh, PACKET_TILE, brute_force_closest};
+use crate::bvh::{BuildParams, MeshBvh, TILE_H, brute_force_closest};
 use crate::geom::{Hit, TriMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -33,8 +33,8 @@ pub struct Row {
     pub mrays: f64,
     /// Any-hit rays per second, millions.
     pub any_mrays: f64,
-    /// Closest-hit rays per second traced as packets (8x8 tiles of a square camera image,
-    /// else runs of 64 consecutive rays), millions.
+    /// Closest-hit rays per second traced as packets (16x8 tiles of a square camera image,
+    /// else runs of 128 consecutive rays, each traced ray by ray unless coherent), millions.
     pub packet_mrays: f64,
     /// Any-hit rays per second traced as packets, millions.
     pub packet_any_mrays: f64,
@@ -111,67 +111,49 @@ fn image_side(rays: &[crate::geom::Ray]) -> Option<usize> {
     (side * side == rays.len() && side > 0).then_some(side)
 }
 
-/// Closest hits of the whole set through packets, in parallel bands of tiles.
+/// Closest hits of the whole set through packets, in parallel bands of tiles (a square image
+/// in tiles, else runs of `MAX_PACKET` consecutive rays).
 fn packet_closest(set: &RaySet, bvh: &MeshBvh) -> Vec<Option<Hit>> {
     let mut hits = vec![None; set.rays.len()];
-    let width = image_side(&set.rays).unwrap_or(set.rays.len().max(1));
-    let band = PACKET_TILE * width;
-    hits.par_chunks_mut(band)
-        .zip(set.rays.par_chunks(band))
-        .for_each(|(h, r)| bvh.trace_image_closest(r, width.min(r.len()), h));
+    match image_side(&set.rays) {
+        Some(w) => hits
+            .par_chunks_mut(TILE_H * w)
+            .zip(set.rays.par_chunks(TILE_H * w))
+            .for_each(|(h, r)| bvh.trace_image_closest(r, w, h)),
+        None => hits
+            .par_chunks_mut(4096)
+            .zip(set.rays.par_chunks(4096))
+            .for_each(|(h, r)| bvh.closest_hit_packet(r, h)),
+    }
     hits
 }
 
-/// Traces the set as packets (8x8 tiles of a square image, else runs of 64 rays) in parallel
-/// and returns Mrays/s; `any`: any hit, else closest hit.
+/// Any-hit answers of the whole set through packets, as [`packet_closest`].
+fn packet_any(set: &RaySet, bvh: &MeshBvh) -> Vec<bool> {
+    let mut out = vec![false; set.rays.len()];
+    match image_side(&set.rays) {
+        Some(w) => out
+            .par_chunks_mut(TILE_H * w)
+            .zip(set.rays.par_chunks(TILE_H * w))
+            .for_each(|(o, r)| bvh.trace_image_any(r, w, o)),
+        None => out
+            .par_chunks_mut(4096)
+            .zip(set.rays.par_chunks(4096))
+            .for_each(|(o, r)| bvh.any_hit_packet(r, o)),
+    }
+    out
+}
+
+/// Traces the set as packets in parallel and returns Mrays/s; `any`: any hit, else closest.
 fn packet_mrays(set: &RaySet, bvh: &MeshBvh, any: bool) -> f64 {
     let ms = time_ms(|| {
         if any {
-            let mut out = vec![false; set.rays.len()];
-            let width = image_side(&set.rays);
-            match width {
-                Some(w) => {
-                    // Tiles gathered row by row into packets, as for closest hits.
-                    let band = PACKET_TILE * w;
-                    out.par_chunks_mut(band)
-                        .zip(set.rays.par_chunks(band))
-                        .for_each(|(o, r)| any_tiles(bvh, r, w, o));
-                }
-                None => out
-                    .par_chunks_mut(4096)
-                    .zip(set.rays.par_chunks(4096))
-                    .for_each(|(o, r)| bvh.any_hit_packet(r, o)),
-            }
-            std::hint::black_box(&out);
+            std::hint::black_box(packet_any(set, bvh));
         } else {
             std::hint::black_box(packet_closest(set, bvh));
         }
     });
     set.rays.len() as f64 / (ms * 1e3)
-}
-
-/// Any hits of a band of image rows, as tiles.
-fn any_tiles(bvh: &MeshBvh, rays: &[crate::geom::Ray], width: usize, out: &mut [bool]) {
-    let height = rays.len().div_ceil(width);
-    let mut buf = Vec::with_capacity(PACKET_TILE * PACKET_TILE);
-    let mut idx = Vec::with_capacity(PACKET_TILE * PACKET_TILE);
-    let mut res = [false; PACKET_TILE * PACKET_TILE];
-    for tx in (0..width).step_by(PACKET_TILE) {
-        buf.clear();
-        idx.clear();
-        for y in 0..height {
-            for x in tx..(tx + PACKET_TILE).min(width) {
-                if let Some(r) = rays.get(y * width + x) {
-                    buf.push(*r);
-                    idx.push(y * width + x);
-                }
-            }
-        }
-        bvh.any_hit_packet(&buf, &mut res[..buf.len()]);
-        for (&i, &o) in idx.iter().zip(&res) {
-            out[i] = o;
-        }
-    }
 }
 
 /// Runs the whole comparison; `progress` is told each method as it starts.
@@ -220,15 +202,17 @@ pub fn run(
             let packet = (0..opts.trace_runs.max(1))
                 .map(|_| packet_mrays(set, &bvh, false))
                 .collect();
-            let packet_any = (0..opts.trace_runs.max(1))
+            let packet_any_runs = (0..opts.trace_runs.max(1))
                 .map(|_| packet_mrays(set, &bvh, true))
                 .collect();
             let packet_hits = packet_closest(set, &bvh);
+            let packet_occluded = packet_any(set, &bvh);
             let mismatches = sample
                 .iter()
                 .filter(|(i, want)| {
                     !same_hit(*want, bvh.closest_hit(&set.rays[*i]))
                         || !same_hit(*want, packet_hits[*i])
+                        || packet_occluded[*i] != want.is_some()
                 })
                 .count();
             rows.push(Row {
@@ -244,7 +228,7 @@ pub fn run(
                 mrays: median(closest),
                 any_mrays: median(any),
                 packet_mrays: median(packet),
-                packet_any_mrays: median(packet_any),
+                packet_any_mrays: median(packet_any_runs),
                 mismatches,
                 checked: sample.len(),
             });

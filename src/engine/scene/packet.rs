@@ -41,8 +41,10 @@ impl Engine {
                 continue;
             }
             o.fill(None);
-            self.tlas
-                .traverse_packet::<false>(&mut world, |wp, slot, lanes| {
+            self.tlas.traverse_packet::<false>(
+                &mut world,
+                |_| {},
+                |wp, slot, lanes| {
                     let k = self.tlas_instances[prims[slot] as usize];
                     let inst = &self.instances[k as usize];
                     if !inst.visible {
@@ -68,7 +70,8 @@ impl Engine {
                         }
                     }
                     changed
-                });
+                },
+            );
         }
     }
 
@@ -98,8 +101,10 @@ impl Engine {
                 }
                 continue;
             }
-            self.tlas
-                .traverse_packet::<true>(&mut world, |wp, slot, lanes| {
+            self.tlas.traverse_packet::<true>(
+                &mut world,
+                |_| {},
+                |wp, slot, lanes| {
                     let k = self.tlas_instances[prims[slot] as usize];
                     let inst = &self.instances[k as usize];
                     if !inst.visible {
@@ -110,7 +115,8 @@ impl Engine {
                     let hit = lanes & !local.active();
                     wp.retire(hit);
                     hit != 0
-                });
+                },
+            );
             for (i, o) in o.iter_mut().enumerate() {
                 *o = world.occluded(i);
             }
