@@ -592,7 +592,10 @@ impl MeshBvh {
         if rays.is_empty() {
             return;
         }
-        assert!(width > 0 && rays.len().is_multiple_of(width), "rows of {width} rays");
+        assert!(
+            width > 0 && rays.len().is_multiple_of(width),
+            "rows of {width} rays"
+        );
         let mut buf = Vec::with_capacity(MAX_PACKET);
         let mut out = vec![None; MAX_PACKET];
         image_tiles(width, rays.len() / width, |idx| {
@@ -615,7 +618,10 @@ impl MeshBvh {
         if rays.is_empty() {
             return;
         }
-        assert!(width > 0 && rays.len().is_multiple_of(width), "rows of {width} rays");
+        assert!(
+            width > 0 && rays.len().is_multiple_of(width),
+            "rows of {width} rays"
+        );
         let mut buf = Vec::with_capacity(MAX_PACKET);
         let mut res = vec![false; MAX_PACKET];
         image_tiles(width, rays.len() / width, |idx| {
