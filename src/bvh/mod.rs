@@ -22,7 +22,9 @@ pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
-pub use packet::{MAX_PACKET, Mask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles};
+pub use packet::{
+    MAX_PACKET, Mask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
+};
 pub use traverse::{Counters, TraversalStats};
 
 /// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.

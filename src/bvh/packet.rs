@@ -72,12 +72,30 @@ pub enum PacketMode {
 
 impl PacketMode {
     #[inline]
-    pub(crate) fn use_packet(self, p: &RayPacket) -> bool {
+    pub(crate) fn use_packet(self, rays: &[Ray]) -> bool {
         match self {
-            PacketMode::Auto => p.is_coherent(),
-            PacketMode::Always => !p.is_empty(),
+            PacketMode::Auto => is_coherent(rays),
+            PacketMode::Always => !rays.is_empty(),
         }
     }
+}
+
+/// True when `rays` are worth tracing as a packet: at least [`MIN_PACKET`] of them, all unit
+/// directions within [`COHERENT_COS`] of their mean. Cheap next to tracing them.
+#[must_use]
+pub fn is_coherent(rays: &[Ray]) -> bool {
+    if rays.len() < MIN_PACKET {
+        return false;
+    }
+    let mean = rays
+        .iter()
+        .map(|r| r.dir.normalize_or_zero())
+        .sum::<Vec3>()
+        .normalize_or_zero();
+    mean != Vec3::ZERO
+        && rays
+            .iter()
+            .all(|r| r.dir.normalize_or_zero().dot(mean) >= COHERENT_COS)
 }
 
 /// Up to [`MAX_PACKET`] rays in SIMD form, with what traversal learns about them.
@@ -214,26 +232,10 @@ impl RayPacket {
         self.dir = dir;
     }
 
-    /// True when the loaded rays are worth tracing as a packet: at least [`MIN_PACKET`] of them,
-    /// all unit directions within [`COHERENT_COS`] of their mean.
+    /// True when the loaded rays are worth tracing as a packet ([`is_coherent`]).
     #[must_use]
     pub fn is_coherent(&self) -> bool {
-        if self.n < MIN_PACKET {
-            return false;
-        }
-        let mean = self.dir.normalize_or_zero();
-        if mean == Vec3::ZERO {
-            return false;
-        }
-        let mut bits = self.active;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if self.rays[i].dir.normalize_or_zero().dot(mean) < COHERENT_COS {
-                return false;
-            }
-        }
-        true
+        is_coherent(&self.rays[..self.n])
     }
 
     /// The current `tmax` of ray `i`: its closest hit so far, or its own `tmax`.
@@ -532,8 +534,8 @@ impl MeshBvh {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-            p.load(r);
-            if mode.use_packet(&p) {
+            if mode.use_packet(r) {
+                p.load(r);
                 self.closest_packet(&mut p);
                 for (i, h) in h.iter_mut().enumerate() {
                     *h = p.closest(i).map(|(t, u, v, slot)| Hit {
@@ -568,8 +570,8 @@ impl MeshBvh {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            p.load(r);
-            if mode.use_packet(&p) {
+            if mode.use_packet(r) {
+                p.load(r);
                 self.any_packet(&mut p);
                 for (i, o) in o.iter_mut().enumerate() {
                     *o = p.occluded(i);
