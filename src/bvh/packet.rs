@@ -19,6 +19,7 @@ use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
 use crate::simd::packet::{LANES, RayLanes, prefetch};
 use glam::{Vec3, Vec3A};
+use wide::f32x16 as F;
 
 /// Most rays in one packet (one bit each in a [`Mask`]).
 pub const MAX_PACKET: usize = 128;
@@ -120,9 +121,10 @@ pub struct RayPacket {
     dir: Vec3,
     /// Rays whose closest hit has been found so far, with its slot and barycentrics.
     found: Mask,
-    slot: [u32; MAX_PACKET],
-    u: [f32; MAX_PACKET],
-    v: [f32; MAX_PACKET],
+    /// Per group: the slot (as the bits of an f32), and the barycentrics.
+    slot: [F; GROUPS],
+    u: [F; GROUPS],
+    v: [F; GROUPS],
 }
 
 impl Default for RayPacket {
@@ -149,9 +151,9 @@ impl RayPacket {
             tmax_hi: 0.0,
             dir: Vec3::ZERO,
             found: 0,
-            slot: [0; MAX_PACKET],
-            u: [0.0; MAX_PACKET],
-            v: [0.0; MAX_PACKET],
+            slot: [F::splat(0.0); GROUPS],
+            u: [F::splat(0.0); GROUPS],
+            v: [F::splat(0.0); GROUPS],
         }
     }
 
@@ -343,21 +345,30 @@ impl RayPacket {
                 None => lanes.permute(tri),
             };
             let h = lanes.hit_triangle(&perm, bits);
-            let mut hit = h.hit;
-            while hit != 0 {
-                let l = hit.trailing_zeros() as usize;
-                hit &= hit - 1;
-                let i = g * LANES + l;
-                if ANY {
-                    self.active &= !((1 as Mask) << i);
-                } else {
-                    lanes.tmax.as_mut_array()[l] = h.t.as_array()[l];
-                    self.found |= (1 as Mask) << i;
-                    self.slot[i] = slot;
-                    self.u[i] = h.u.as_array()[l];
-                    self.v[i] = h.v.as_array()[l];
-                }
+            if h.hit != 0 {
                 changed = true;
+                if ANY {
+                    self.active &= !(Mask::from(h.hit) << (g * LANES));
+                } else if h.exact {
+                    lanes.tmax = h.mask.select(h.t, lanes.tmax);
+                    self.u[g] = h.mask.select(h.u, self.u[g]);
+                    self.v[g] = h.mask.select(h.v, self.v[g]);
+                    let s = F::splat(f32::from_bits(slot));
+                    self.slot[g] = h.mask.select(s, self.slot[g]);
+                    self.found |= Mask::from(h.hit) << (g * LANES);
+                } else {
+                    let mut hit = h.hit;
+                    while hit != 0 {
+                        let l = hit.trailing_zeros() as usize;
+                        hit &= hit - 1;
+                        self.record(
+                            g,
+                            l,
+                            slot,
+                            (h.t.as_array()[l], h.u.as_array()[l], h.v.as_array()[l]),
+                        );
+                    }
+                }
             }
             let mut redo = h.redo;
             while redo != 0 {
@@ -371,11 +382,7 @@ impl RayPacket {
                     if ANY {
                         self.active &= !((1 as Mask) << i);
                     } else {
-                        self.lanes[g].tmax.as_mut_array()[l] = t;
-                        self.found |= (1 as Mask) << i;
-                        self.slot[i] = slot;
-                        self.u[i] = u;
-                        self.v[i] = v;
+                        self.record(g, l, slot, (t, u, v));
                     }
                     changed = true;
                 }
@@ -385,11 +392,29 @@ impl RayPacket {
     }
 }
 
-/// What a packet's closest-hit traversal found for ray `i`: `(t, u, v, slot)`.
 impl RayPacket {
+    /// Records a closest hit `(t, u, v)` in `slot` for lane `l` of group `g`.
+    #[inline]
+    fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
+        self.lanes[g].tmax.as_mut_array()[l] = t;
+        self.found |= (1 as Mask) << (g * LANES + l);
+        self.slot[g].as_mut_array()[l] = f32::from_bits(slot);
+        self.u[g].as_mut_array()[l] = u;
+        self.v[g].as_mut_array()[l] = v;
+    }
+
+    /// What a packet's closest-hit traversal found for ray `i`: `(t, u, v, slot)`.
     #[inline]
     pub(crate) fn closest(&self, i: usize) -> Option<(f32, f32, f32, u32)> {
-        (self.found >> i & 1 != 0).then(|| (self.tmax(i), self.u[i], self.v[i], self.slot[i]))
+        let (g, l) = (i / LANES, i % LANES);
+        (self.found >> i & 1 != 0).then(|| {
+            (
+                self.tmax(i),
+                self.u[g].as_array()[l],
+                self.v[g].as_array()[l],
+                self.slot[g].as_array()[l].to_bits(),
+            )
+        })
     }
 
     /// True when ray `i` found a hit (any-hit traversal).

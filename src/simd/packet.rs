@@ -62,6 +62,10 @@ pub struct TriHits {
     pub hit: u32,
     /// Lanes with an edge function of exactly zero: repeat them with the scalar test.
     pub redo: u32,
+    /// The lanes of a hit as a vector mask: exactly `hit` when `exact` is true.
+    pub mask: F,
+    /// True when `mask` holds exactly the lanes of `hit` (none outside `ask`, none redone).
+    pub exact: bool,
     /// Distance of each hit lane.
     pub t: F,
     /// Barycentric weight of the second vertex.
@@ -162,11 +166,14 @@ impl RayLanes {
         let redo = (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask() & ask;
         let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
         let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
-        let inside = !(neg & pos).to_bitmask() & ask & !redo;
+        let outside = neg & pos;
+        let inside = !outside.to_bitmask() & ask & !redo;
         if inside == 0 {
             return TriHits {
                 hit: 0,
                 redo,
+                mask: zero,
+                exact: true,
                 t: zero,
                 u: zero,
                 v: zero,
@@ -180,9 +187,14 @@ impl RayLanes {
         let rcp = F::splat(1.0) / det;
         let t = t_scaled * rcp;
         let ok = det.simd_ne(zero) & det.is_finite() & t.simd_ge(self.tmin) & t.simd_lt(self.tmax);
+        let mask = ok & !outside;
+        let all = mask.to_bitmask();
+        let hit = all & inside;
         TriHits {
-            hit: ok.to_bitmask() & inside,
+            hit,
             redo,
+            mask,
+            exact: all == hit,
             t,
             u: v * rcp,
             v: w * rcp,
