@@ -511,11 +511,14 @@ impl Bvh {
                 let r = &nodes[node.first as usize + 1];
                 // Start loading the grandchildren (and the leaves' primitives) now: the walk is
                 // bound by memory latency on large trees.
+                // A pair of 32-byte nodes may straddle two cache lines: fetch both halves.
                 for c in [l, r] {
                     if c.is_leaf() {
                         prefetch_leaf(c.first as usize);
-                    } else if let Some(n) = nodes.get(c.first as usize) {
-                        prefetch(n);
+                        prefetch_leaf((c.first + c.count - 1) as usize);
+                    } else if let Some(n) = nodes.get(c.first as usize..c.first as usize + 2) {
+                        prefetch(&n[0]);
+                        prefetch(&n[1]);
                     }
                 }
                 // The child whose centre lies further along the packet's direction is the far one.
