@@ -81,6 +81,13 @@ fn main() {
     let w = (rays.len() as f64).sqrt() as usize;
     assert_eq!(w * w, rays.len(), "a square image of rays");
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    // Where the node array starts within a cache line: a child pair (64 bytes) fits one line
+    // only when the pair starts on a 64-byte boundary.
+    println!(
+        "nodes start at {} mod 64; the first child pair (node 1) at {} mod 64",
+        bvh.bvh().nodes().as_ptr() as usize % 64,
+        (bvh.bvh().nodes().as_ptr() as usize + 32) % 64
+    );
     if single {
         let (m, hits) = mrays(rays.len(), || {
             rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count()
