@@ -51,14 +51,19 @@ fn morton(x: u32, y: u32) -> u64 {
     spread(x) | (spread(y) << 1)
 }
 
-/// Median CPU Mrays/s of 3 runs of `f` over `n` rays.
+/// Median CPU Mrays/s of 3 measurements of `f` over `n` rays, each repeating `f` for at least
+/// 0.3 s of CPU time (the process's CPU clock ticks coarsely on some machines).
 fn mrays(n: usize, mut f: impl FnMut() -> usize) -> (f64, usize) {
     let mut v = Vec::new();
     let mut hits = 0;
     for _ in 0..3 {
         let c = cpu_s();
-        hits = f();
-        v.push(n as f64 / ((cpu_s() - c) * 1e6));
+        let mut runs = 0;
+        while runs == 0 || cpu_s() - c < 0.3 {
+            hits = f();
+            runs += 1;
+        }
+        v.push((runs * n) as f64 / ((cpu_s() - c) * 1e6));
     }
     v.sort_by(f64::total_cmp);
     (v[1], hits)
