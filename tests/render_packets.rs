@@ -21,7 +21,7 @@ fn packets_render_the_same_pixels_as_single_rays() {
         ("swap.glb", 9),
         ("wave.glb", 3),
     ] {
-        let (scene, _) = Scene::load(&dir.join(file)).unwrap();
+        let (scene, _) = Scene::load(dir.join(file)).unwrap();
         let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(12)).unwrap();
         let bounds = animation_bounds(&scene, Some(0), src.times()).unwrap();
         // An image whose sides are not multiples of the 16-pixel tile.
