@@ -60,6 +60,8 @@ pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
 
 const GROUPS: usize = MAX_PACKET / LANES;
 const LEAF_IA: bool = false;
+/// A subtree that at most this many rays of a packet still need is walked ray by ray.
+const SINGLE_BELOW: u32 = 4;
 
 /// Whether the packet queries trace a group of rays as a packet.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -504,6 +506,24 @@ impl Bvh {
                     p.update_tmax_hi();
                 }
             } else {
+                if live.count_ones() <= SINGLE_BELOW {
+                    // Too few rays left for the packet to pay: each goes on alone.
+                    let mut changed = false;
+                    let mut bits = live;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        changed |= self.walk_single::<ANY>(p, i, ni, &mut leaf);
+                    }
+                    if ANY {
+                        if p.active == 0 {
+                            return;
+                        }
+                    } else if changed {
+                        p.update_tmax_hi();
+                    }
+                    continue;
+                }
                 let Some(f) = p.first_hit(node, live) else {
                     continue;
                 };
@@ -532,6 +552,84 @@ impl Bvh {
                 stack[sp] = (far, f);
                 stack[sp + 1] = (near, f);
                 sp += 2;
+            }
+        }
+    }
+}
+
+impl Bvh {
+    /// Walks the subtree at `root` with ray `i` of the packet alone, as a single ray walks the
+    /// tree (both children tested, the nearer first, the farther skipped when it starts beyond
+    /// the ray's closest hit); leaves go to `leaf` with that ray's bit. Returns true when `leaf`
+    /// did.
+    fn walk_single<const ANY: bool>(
+        &self,
+        p: &mut RayPacket,
+        i: usize,
+        root: u32,
+        leaf: &mut impl FnMut(&mut RayPacket, usize, Mask) -> bool,
+    ) -> bool {
+        let nodes = self.nodes.as_slice();
+        let bit = (1 as Mask) << i;
+        let ray = p.rays[i];
+        let mut changed = false;
+        let node = &nodes[root as usize];
+        if ray
+            .hit_box(Vec3::from(node.min), Vec3::from(node.max), p.tmax(i))
+            .is_none()
+        {
+            return false;
+        }
+        let mut stack = [(0u32, 0f32); MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = node;
+        loop {
+            if node.is_leaf() {
+                for slot in node.first as usize..(node.first + node.count) as usize {
+                    changed |= leaf(p, slot, bit);
+                    if ANY && p.active & bit == 0 {
+                        return true;
+                    }
+                }
+            } else {
+                let tmax = p.tmax(i);
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
+                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
+                match (tl, tr) {
+                    (Some(a), Some(b)) => {
+                        let (near, far, tfar) = if a <= b {
+                            (l, node.first + 1, b)
+                        } else {
+                            (r, node.first, a)
+                        };
+                        stack[sp] = (far, tfar);
+                        sp += 1;
+                        node = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = l;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = r;
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            }
+            loop {
+                if sp == 0 {
+                    return changed;
+                }
+                sp -= 1;
+                let (n, tnear) = stack[sp];
+                if tnear <= p.tmax(i) * FAR_SCALE {
+                    node = &nodes[n as usize];
+                    break;
+                }
             }
         }
     }
