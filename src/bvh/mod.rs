@@ -23,7 +23,7 @@ pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
 pub use packet::{
-    MAX_PACKET, Mask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
+    MAX_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
 };
 pub use traverse::{Counters, TraversalStats};
 
