@@ -311,11 +311,41 @@ fn bench_traversal(c: &mut Criterion, input: &Input) {
     }
 }
 
+/// The camera rays as packets: `MeshBvh::trace_image_closest` / `trace_image_any` over the
+/// square image (16x8 tiles), one thread.
+fn bench_packets(c: &mut Criterion, input: &Input) {
+    let mut g = c.benchmark_group(format!("packets/{}", input.name));
+    configure(&mut g, input);
+    g.throughput(Throughput::Elements(RAYS_PER_ITER as u64));
+    g.bench_function(BenchmarkId::from_parameter("closest-camera"), |b| {
+        let l = input.get();
+        let bvh = l.bvh();
+        let width = (l.camera.len() as f64).sqrt() as usize;
+        let mut hits = vec![None; l.camera.len()];
+        b.iter(|| {
+            bvh.trace_image_closest(black_box(&l.camera), width, &mut hits);
+            hits.iter().flatten().fold(0.0f32, |s, h| s + h.t)
+        });
+    });
+    g.bench_function(BenchmarkId::from_parameter("any-camera"), |b| {
+        let l = input.get();
+        let bvh = l.bvh();
+        let width = (l.camera.len() as f64).sqrt() as usize;
+        let mut out = vec![false; l.camera.len()];
+        b.iter(|| {
+            bvh.trace_image_any(black_box(&l.camera), width, &mut out);
+            out.iter().filter(|&&o| o).count()
+        });
+    });
+    g.finish();
+}
+
 fn all(c: &mut Criterion) {
     for input in inputs() {
         bench_build(c, &input);
         bench_refit(c, &input);
         bench_traversal(c, &input);
+        bench_packets(c, &input);
     }
 }
 

@@ -13,6 +13,7 @@ pub mod build;
 mod cost;
 mod mesh;
 mod node;
+mod packet;
 mod refit;
 mod traverse;
 mod validate;
@@ -21,6 +22,9 @@ pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
+pub use packet::{
+    MAX_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
+};
 pub use traverse::{Counters, TraversalStats};
 
 /// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.

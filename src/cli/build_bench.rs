@@ -167,7 +167,7 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
 
 fn print_table(rows: &[Row]) {
     println!(
-        "{:<16} {:>10} {:>9} {:>8} {:>9} {:>6} {:>9} {:<14} {:>8} {:>8} {:>9}",
+        "{:<16} {:>10} {:>9} {:>8} {:>9} {:>6} {:>9} {:<14} {:>8} {:>8} {:>8} {:>8} {:>9}",
         "method",
         "build ms",
         "refit ms",
@@ -178,11 +178,13 @@ fn print_table(rows: &[Row]) {
         "rays",
         "Mrays/s",
         "any Mr/s",
+        "pkt Mr/s",
+        "pkt any",
         "mismatch"
     );
     for r in rows {
         println!(
-            "{:<16} {:>10.1} {:>9.2} {:>8.2} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            "{:<16} {:>10.1} {:>9.2} {:>8.2} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>5}/{:<3}",
             r.method,
             r.build_ms,
             r.refit_ms,
@@ -193,6 +195,8 @@ fn print_table(rows: &[Row]) {
             r.rays,
             r.mrays,
             r.any_mrays,
+            r.packet_mrays,
+            r.packet_any_mrays,
             r.mismatches,
             r.checked
         );

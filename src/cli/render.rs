@@ -8,8 +8,8 @@ use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{Action, Engine, EngineConfig, Policy};
 use dynbvh::render::{
-    Camera, EngineShading, FrameCounts, GltfCamera, Renderer, Settings, Stage, animation_bounds,
-    font, gltf_cameras,
+    Camera, EngineShading, FrameCounts, GltfCamera, PacketUse, Renderer, Settings, Stage,
+    animation_bounds, font, gltf_cameras,
 };
 use image::RgbImage;
 use image::codecs::gif::{GifEncoder, Repeat};
@@ -73,6 +73,29 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
+    #[arg(long, value_name = "WHICH", default_value = "both")]
+    pub packets: String,
+}
+
+/// Parses `--packets`.
+fn parse_packets(s: &str) -> Result<PacketUse> {
+    Ok(match s {
+        "both" => PacketUse {
+            primary: true,
+            shadow: true,
+        },
+        "primary" => PacketUse {
+            primary: true,
+            shadow: false,
+        },
+        "shadow" => PacketUse {
+            primary: false,
+            shadow: true,
+        },
+        "none" => PacketUse::NONE,
+        _ => anyhow::bail!("--packets {s:?}: expected both, primary, shadow or none"),
+    })
 }
 
 /// Timings of one rendered frame of one policy, ms.
@@ -202,6 +225,7 @@ struct Pipeline<'s> {
     renderer: Renderer,
     img: RgbImage,
     timings: Vec<FrameTiming>,
+    packets: PacketUse,
 }
 
 impl<'s> Pipeline<'s> {
@@ -220,6 +244,7 @@ impl<'s> Pipeline<'s> {
             renderer: Renderer::new(settings),
             img: RgbImage::new(settings.width, settings.height),
             timings: Vec::new(),
+            packets: PacketUse::DEFAULT,
         })
     }
 
@@ -267,9 +292,11 @@ impl<'s> Pipeline<'s> {
     fn render(&mut self, stage: &Stage, mut timing: FrameTiming) {
         let engine = self.engine.as_ref().expect("stepped first");
         let t = Instant::now();
-        timing.counts = self
-            .renderer
-            .render(&self.shading.tracer(engine), stage, &mut self.img);
+        timing.counts = self.renderer.render(
+            &self.shading.tracer(engine).with_packets(self.packets),
+            stage,
+            &mut self.img,
+        );
         timing.trace_ms = ms(t);
         timing.total_ms += timing.trace_ms;
         self.timings.push(timing);
@@ -382,6 +409,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         None if scene.animations.is_empty() => None,
         None => Some(0),
     };
+    let packets = parse_packets(&a.packets)?;
     let settings = Settings {
         width: w,
         height: h,
@@ -391,7 +419,12 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     };
     let mut pipes: Vec<Pipeline<'_>> = policies
         .iter()
-        .map(|&p| Pipeline::new(&scene, anim, times, p, settings))
+        .map(|&p| {
+            Pipeline::new(&scene, anim, times, p, settings).map(|mut pl| {
+                pl.packets = packets;
+                pl
+            })
+        })
         .collect::<Result<_>>()?;
     // The last timeline entry is the animation's end: the same pose as its start when it
     // loops, so a full run stops before it; a range may include it.

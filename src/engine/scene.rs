@@ -29,6 +29,8 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod packet;
+
 /// A mesh of an [`Engine`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct MeshId(pub u32);

@@ -12,12 +12,12 @@ use glam::Vec3;
 /// Per-ray constants of the watertight test: the axis permutation and the shear.
 #[derive(Clone, Copy, Debug)]
 pub struct RayTriPrecomp {
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    pub(crate) kx: usize,
+    pub(crate) ky: usize,
+    pub(crate) kz: usize,
+    pub(crate) sx: f32,
+    pub(crate) sy: f32,
+    pub(crate) sz: f32,
 }
 
 impl RayTriPrecomp {

@@ -3,7 +3,7 @@
 
 use super::font::{draw_label, text_height, text_width};
 use super::shade::{Stage, heat_color, highlight, irradiance, smoothstep, to_srgb};
-use super::trace::Tracer;
+use super::trace::{Surface, Tracer};
 use crate::bvh::TraversalStats;
 use crate::geom::Ray;
 use glam::Vec3;
@@ -123,8 +123,21 @@ impl Renderer {
             .map(|(i, tile)| {
                 let (x0, y0) = ((i as u32 % ntx) * TILE, (i as u32 / ntx) * TILE);
                 let mut c = FrameCounts::default();
-                for py in 0..TILE.min(h - y0) {
-                    for px in 0..TILE.min(w - x0) {
+                let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
+                if s.heatmap.is_none() {
+                    tile_batched(
+                        tracer,
+                        stage,
+                        &s,
+                        tile,
+                        (tw, th),
+                        |px, py| rays.ray(x0 + px, y0 + py),
+                        &mut c,
+                    );
+                    return c;
+                }
+                for py in 0..th {
+                    for px in 0..tw {
                         let ray = rays.ray(x0 + px, y0 + py);
                         tile[(py * TILE + px) as usize] = pixel(tracer, stage, &s, &ray, &mut c);
                     }
@@ -152,19 +165,26 @@ impl Renderer {
     }
 }
 
-/// Traces and shades one pixel.
+/// What a primary ray sees, before its shadow ray is answered.
+#[derive(Clone, Copy)]
+enum Seen {
+    /// The ground plane at `p`, faded out by `fade`, checkered with squares of side `tile`.
+    Ground { p: Vec3, fade: f32, tile: f32 },
+    /// A triangle: the hit, its geometric and shading normals turned toward the ray, and
+    /// whether both face the light.
+    Surface {
+        h: Surface,
+        ng: Vec3,
+        n: Vec3,
+        facing: bool,
+    },
+    /// Nothing: the sky.
+    Sky,
+}
+
+/// Classifies what `ray` sees given its closest triangle hit.
 #[inline]
-fn pixel<T: Tracer>(
-    tracer: &T,
-    stage: &Stage,
-    s: &Settings,
-    ray: &Ray,
-    c: &mut FrameCounts,
-) -> [u8; 3] {
-    c.primary += 1;
-    let mut work = TraversalStats::default();
-    let counting = s.heatmap.is_some();
-    let hit = tracer.closest(ray, s.smooth, counting.then_some(&mut work));
+fn see(stage: &Stage, ray: &Ray, hit: Option<Surface>) -> Seen {
     let d = ray.dir;
     // The ground, when it is nearer than any triangle.
     let ground = stage.ground.and_then(|g| {
@@ -180,27 +200,9 @@ fn pixel<T: Tracer>(
         let fade = smoothstep(g.inner, g.outer, r);
         (fade < 1.0).then_some((p, fade, g.tile))
     });
-    let mut shadow = |from: Vec3, work: &mut TraversalStats| -> f32 {
-        c.shadow += 1;
-        let r = Ray::new(from, stage.light);
-        if tracer.occluded(&r, counting.then_some(work)) {
-            0.0
-        } else {
-            1.0
-        }
-    };
-    let color = if let Some((p, fade, tile)) = ground {
-        let lit = if s.shadows {
-            shadow(p + Vec3::Y * stage.offset, &mut work)
-        } else {
-            1.0
-        };
-        let check = ((p.x / tile).floor() + (p.z / tile).floor()).rem_euclid(2.0);
-        let albedo = if check < 0.5 { 0.50 } else { 0.40 };
-        let lit_color = irradiance(Vec3::Y, stage.light, lit) * albedo;
-        lit_color.lerp(stage.background(d), fade)
+    if let Some((p, fade, tile)) = ground {
+        Seen::Ground { p, fade, tile }
     } else if let Some(h) = hit {
-        c.hits += 1;
         let mut ng = h.geometric.normalize_or_zero();
         if ng.dot(d) > 0.0 {
             ng = -ng;
@@ -210,18 +212,85 @@ fn pixel<T: Tracer>(
             n = -n;
         }
         let facing = ng.dot(stage.light) > 0.0 && n.dot(stage.light) > 0.0;
-        let lit = if !facing {
-            0.0
-        } else if s.shadows {
-            shadow(ray.at(h.t) + ng * stage.offset, &mut work)
-        } else {
-            1.0
-        };
-        stage.albedo(h.instance) * irradiance(n, stage.light, lit)
-            + Vec3::splat(highlight(n, d, stage.light, lit))
+        Seen::Surface { h, ng, n, facing }
     } else {
-        stage.background(d)
+        Seen::Sky
+    }
+}
+
+/// The origin of the shadow ray `seen` needs, if any; and the light it gets without one.
+#[inline]
+fn shadow_origin(stage: &Stage, s: &Settings, ray: &Ray, seen: &Seen) -> (Option<Vec3>, f32) {
+    match *seen {
+        Seen::Ground { p, .. } => {
+            if s.shadows {
+                (Some(p + Vec3::Y * stage.offset), 1.0)
+            } else {
+                (None, 1.0)
+            }
+        }
+        Seen::Surface { h, ng, facing, .. } => {
+            if !facing {
+                (None, 0.0)
+            } else if s.shadows {
+                (Some(ray.at(h.t) + ng * stage.offset), 1.0)
+            } else {
+                (None, 1.0)
+            }
+        }
+        Seen::Sky => (None, 1.0),
+    }
+}
+
+/// The linear colour of what `ray` sees, lit by `lit` (0 in shadow, 1 in the light).
+#[inline]
+fn color(stage: &Stage, ray: &Ray, seen: &Seen, lit: f32) -> Vec3 {
+    let d = ray.dir;
+    match *seen {
+        Seen::Ground { p, fade, tile } => {
+            let check = ((p.x / tile).floor() + (p.z / tile).floor()).rem_euclid(2.0);
+            let albedo = if check < 0.5 { 0.50 } else { 0.40 };
+            let lit_color = irradiance(Vec3::Y, stage.light, lit) * albedo;
+            lit_color.lerp(stage.background(d), fade)
+        }
+        Seen::Surface { h, n, .. } => {
+            stage.albedo(h.instance) * irradiance(n, stage.light, lit)
+                + Vec3::splat(highlight(n, d, stage.light, lit))
+        }
+        Seen::Sky => stage.background(d),
+    }
+}
+
+/// Traces and shades one pixel.
+#[inline]
+fn pixel<T: Tracer>(
+    tracer: &T,
+    stage: &Stage,
+    s: &Settings,
+    ray: &Ray,
+    c: &mut FrameCounts,
+) -> [u8; 3] {
+    c.primary += 1;
+    let mut work = TraversalStats::default();
+    let counting = s.heatmap.is_some();
+    let hit = tracer.closest(ray, s.smooth, counting.then_some(&mut work));
+    let seen = see(stage, ray, hit);
+    if matches!(seen, Seen::Surface { .. }) {
+        c.hits += 1;
+    }
+    let lit = match shadow_origin(stage, s, ray, &seen) {
+        (Some(from), _) => {
+            c.shadow += 1;
+            let r = Ray::new(from, stage.light);
+            if tracer.occluded(&r, counting.then_some(&mut work)) {
+                0.0
+            } else {
+                1.0
+            }
+        }
+        (None, lit) => lit,
     };
+    let color = color(stage, ray, &seen, lit);
     match s.heatmap {
         Some(max) => {
             c.work += work;
@@ -231,6 +300,74 @@ fn pixel<T: Tracer>(
             heat_color(w as f32, max as f32)
         }
         None => to_srgb(color),
+    }
+}
+
+/// Pixels of a tile.
+const TILE_PIXELS: usize = (TILE * TILE) as usize;
+
+/// Traces and shades a `tw` x `th` tile with its rays in batches ([`Tracer::closest_batch`],
+/// [`Tracer::occluded_batch`]): the camera rays in 16x8 halves of 4x4 blocks, then the shadow
+/// rays of the lit points in the same order. The same pixels as [`pixel`], one by one.
+fn tile_batched<T: Tracer>(
+    tracer: &T,
+    stage: &Stage,
+    s: &Settings,
+    tile: &mut [[u8; 3]],
+    (tw, th): (u32, u32),
+    ray_at: impl Fn(u32, u32) -> Ray,
+    c: &mut FrameCounts,
+) {
+    let blank = Ray::new(Vec3::ZERO, Vec3::X);
+    let mut pix = [0u16; TILE_PIXELS];
+    let mut rays = [blank; TILE_PIXELS];
+    let mut n = 0;
+    for half in 0..TILE / 8 {
+        for by in 0..2 {
+            for bx in 0..TILE / 4 {
+                for y in 0..4 {
+                    for x in 0..4 {
+                        let (px, py) = (bx * 4 + x, half * 8 + by * 4 + y);
+                        if px < tw && py < th {
+                            pix[n] = (py * TILE + px) as u16;
+                            rays[n] = ray_at(px, py);
+                            n += 1;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut hits = [None; TILE_PIXELS];
+    tracer.closest_batch(&rays[..n], s.smooth, &mut hits[..n]);
+    let mut seen = [Seen::Sky; TILE_PIXELS];
+    let mut lit = [1.0f32; TILE_PIXELS];
+    let mut shadow_rays = [blank; TILE_PIXELS];
+    let mut shadow_of = [0u16; TILE_PIXELS];
+    let mut m = 0;
+    for k in 0..n {
+        seen[k] = see(stage, &rays[k], hits[k]);
+        if matches!(seen[k], Seen::Surface { .. }) {
+            c.hits += 1;
+        }
+        match shadow_origin(stage, s, &rays[k], &seen[k]) {
+            (Some(from), _) => {
+                shadow_rays[m] = Ray::new(from, stage.light);
+                shadow_of[m] = k as u16;
+                m += 1;
+            }
+            (None, l) => lit[k] = l,
+        }
+    }
+    c.primary += n as u64;
+    c.shadow += m as u64;
+    let mut occluded = [false; TILE_PIXELS];
+    tracer.occluded_batch(&shadow_rays[..m], &mut occluded[..m]);
+    for j in 0..m {
+        lit[shadow_of[j] as usize] = if occluded[j] { 0.0 } else { 1.0 };
+    }
+    for k in 0..n {
+        tile[pix[k] as usize] = to_srgb(color(stage, &rays[k], &seen[k], lit[k]));
     }
 }
 

@@ -44,7 +44,9 @@ pub use camera::{
 };
 pub use frame::{FrameCounts, Renderer, Settings, TILE, draw_heat_legend};
 pub use shade::{Ground, Stage, heat_color, srgb_to_linear, to_srgb};
-pub use trace::{BruteForce, EngineShading, EngineTracer, Surface, Tracer, vertex_normals};
+pub use trace::{
+    BruteForce, EngineShading, EngineTracer, PacketUse, Surface, Tracer, vertex_normals,
+};
 
 use crate::anim::Scene;
 use crate::error::Result;

@@ -2,8 +2,8 @@
 //! whether anything blocks a ray. Two answers: the engine's two-level trees, and brute force
 //! over a flat triangle list (the reference the engine's pictures are checked against).
 
-use crate::bvh::TraversalStats;
-use crate::engine::{Engine, MeshId};
+use crate::bvh::{MAX_PACKET, TraversalStats};
+use crate::engine::{Engine, MeshId, SceneHit};
 use crate::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::{Mat3A, Vec3, Vec3A};
 use std::ops::Range;
@@ -34,6 +34,21 @@ pub trait Tracer: Sync {
     ) -> Option<Surface>;
     /// True when something lies along `ray` in `[ray.tmin, ray.tmax)`.
     fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool;
+
+    /// [`Tracer::closest`] of many rays (`out[i]` for `rays[i]`), coherent ones next to each
+    /// other: a tracer may trace them as packets. The same answers as one by one.
+    fn closest_batch(&self, rays: &[Ray], smooth: bool, out: &mut [Option<Surface>]) {
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.closest(r, smooth, None);
+        }
+    }
+
+    /// [`Tracer::occluded`] of many rays, as [`Tracer::closest_batch`].
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.occluded(r, None);
+        }
+    }
 }
 
 /// Area-weighted vertex normals of the triangles, unit length (zero for vertices of no
@@ -147,6 +162,7 @@ impl EngineShading {
         EngineTracer {
             engine,
             shading: self,
+            packets: PacketUse::DEFAULT,
         }
     }
 }
@@ -155,6 +171,7 @@ impl EngineShading {
 pub struct EngineTracer<'a> {
     engine: &'a Engine,
     shading: &'a EngineShading,
+    packets: PacketUse,
 }
 
 impl Tracer for EngineTracer<'_> {
@@ -165,11 +182,62 @@ impl Tracer for EngineTracer<'_> {
         smooth: bool,
         work: Option<&mut TraversalStats>,
     ) -> Option<Surface> {
-        let e = self.engine;
         let h = match work {
-            Some(w) => e.closest_hit_counted(ray, w),
-            None => e.closest_hit(ray),
+            Some(w) => self.engine.closest_hit_counted(ray, w),
+            None => self.engine.closest_hit(ray),
         }?;
+        Some(self.surface(&h, smooth))
+    }
+
+    #[inline]
+    fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool {
+        match work {
+            Some(w) => self.engine.any_hit_counted(ray, w),
+            None => self.engine.any_hit(ray),
+        }
+    }
+
+    fn closest_batch(&self, rays: &[Ray], smooth: bool, out: &mut [Option<Surface>]) {
+        if !self.packets.primary {
+            for (r, o) in rays.iter().zip(out) {
+                *o = self.closest(r, smooth, None);
+            }
+            return;
+        }
+        let mut hits = [None; MAX_PACKET];
+        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+            let hits = &mut hits[..r.len()];
+            self.engine.closest_hit_packet(r, hits);
+            for (h, o) in hits.iter().zip(o) {
+                *o = h.map(|h| self.surface(&h, smooth));
+            }
+        }
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        if self.packets.shadow {
+            self.engine.any_hit_packet(rays, out);
+        } else {
+            for (r, o) in rays.iter().zip(out) {
+                *o = self.engine.any_hit(r);
+            }
+        }
+    }
+}
+
+impl EngineTracer<'_> {
+    /// Which rays this tracer traces as packets in [`Tracer::closest_batch`] and
+    /// [`Tracer::occluded_batch`] (default: [`PacketUse::DEFAULT`]).
+    #[must_use]
+    pub fn with_packets(mut self, packets: PacketUse) -> Self {
+        self.packets = packets;
+        self
+    }
+
+    /// The surface of a scene hit: normals from the hit triangle, moved to world space.
+    #[inline]
+    fn surface(&self, h: &SceneHit, smooth: bool) -> Surface {
+        let e = self.engine;
         let mesh = e.instance_mesh(h.instance);
         let tri = e.indices(mesh)[h.prim as usize];
         let (ng, ns) = local_normals(
@@ -193,20 +261,41 @@ impl Tracer for EngineTracer<'_> {
             ),
             None => (ng, ns),
         };
-        Some(Surface {
+        Surface {
             t: h.t,
             geometric,
             shading,
             instance: h.instance.0,
-        })
-    }
-
-    #[inline]
-    fn occluded(&self, ray: &Ray, work: Option<&mut TraversalStats>) -> bool {
-        match work {
-            Some(w) => self.engine.any_hit_counted(ray, w),
-            None => self.engine.any_hit(ray),
         }
+    }
+}
+
+/// Which rays an [`EngineTracer`] traces as packets (the rest one by one; the answers are the
+/// same either way).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PacketUse {
+    /// Camera rays.
+    pub primary: bool,
+    /// Shadow rays toward the key light.
+    pub shadow: bool,
+}
+
+impl PacketUse {
+    /// What measured faster (`dynbvh render --bench`): packets for both.
+    pub const DEFAULT: PacketUse = PacketUse {
+        primary: true,
+        shadow: true,
+    };
+    /// Every ray one by one.
+    pub const NONE: PacketUse = PacketUse {
+        primary: false,
+        shadow: false,
+    };
+}
+
+impl Default for PacketUse {
+    fn default() -> Self {
+        Self::DEFAULT
     }
 }
 

@@ -2,7 +2,7 @@
 //! agreement with brute force.
 
 use super::rays::RaySet;
-use crate::bvh::{BuildParams, MeshBvh, brute_force_closest};
+use crate::bvh::{BuildParams, MeshBvh, TILE_H, brute_force_closest};
 use crate::geom::{Hit, TriMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -33,6 +33,11 @@ pub struct Row {
     pub mrays: f64,
     /// Any-hit rays per second, millions.
     pub any_mrays: f64,
+    /// Closest-hit rays per second traced as packets (16x8 tiles of a square camera image,
+    /// else runs of 128 consecutive rays, each traced ray by ray unless coherent), millions.
+    pub packet_mrays: f64,
+    /// Any-hit rays per second traced as packets, millions.
+    pub packet_any_mrays: f64,
     /// Sampled rays whose closest hit differs from brute force (ties at the same t aside).
     pub mismatches: usize,
     /// How many rays were compared with brute force.
@@ -100,6 +105,57 @@ fn trace_mrays(rays: &RaySet, f: impl Fn(&crate::geom::Ray) -> bool + Sync) -> f
     rays.rays.len() as f64 / (ms * 1e3)
 }
 
+/// Side of the square image a ray set is, if it is one (camera sets are rows of pixels).
+fn image_side(rays: &[crate::geom::Ray]) -> Option<usize> {
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    (side * side == rays.len() && side > 0).then_some(side)
+}
+
+/// Closest hits of the whole set through packets, in parallel bands of tiles (a square image
+/// in tiles, else runs of `MAX_PACKET` consecutive rays).
+fn packet_closest(set: &RaySet, bvh: &MeshBvh) -> Vec<Option<Hit>> {
+    let mut hits = vec![None; set.rays.len()];
+    match image_side(&set.rays) {
+        Some(w) => hits
+            .par_chunks_mut(TILE_H * w)
+            .zip(set.rays.par_chunks(TILE_H * w))
+            .for_each(|(h, r)| bvh.trace_image_closest(r, w, h)),
+        None => hits
+            .par_chunks_mut(4096)
+            .zip(set.rays.par_chunks(4096))
+            .for_each(|(h, r)| bvh.closest_hit_packet(r, h)),
+    }
+    hits
+}
+
+/// Any-hit answers of the whole set through packets, as [`packet_closest`].
+fn packet_any(set: &RaySet, bvh: &MeshBvh) -> Vec<bool> {
+    let mut out = vec![false; set.rays.len()];
+    match image_side(&set.rays) {
+        Some(w) => out
+            .par_chunks_mut(TILE_H * w)
+            .zip(set.rays.par_chunks(TILE_H * w))
+            .for_each(|(o, r)| bvh.trace_image_any(r, w, o)),
+        None => out
+            .par_chunks_mut(4096)
+            .zip(set.rays.par_chunks(4096))
+            .for_each(|(o, r)| bvh.any_hit_packet(r, o)),
+    }
+    out
+}
+
+/// Traces the set as packets in parallel and returns Mrays/s; `any`: any hit, else closest.
+fn packet_mrays(set: &RaySet, bvh: &MeshBvh, any: bool) -> f64 {
+    let ms = time_ms(|| {
+        if any {
+            std::hint::black_box(packet_any(set, bvh));
+        } else {
+            std::hint::black_box(packet_closest(set, bvh));
+        }
+    });
+    set.rays.len() as f64 / (ms * 1e3)
+}
+
 /// Runs the whole comparison; `progress` is told each method as it starts.
 pub fn run(
     mesh: &TriMesh,
@@ -143,9 +199,21 @@ pub fn run(
             let any = (0..opts.trace_runs.max(1))
                 .map(|_| trace_mrays(set, |r| bvh.any_hit(r)))
                 .collect();
+            let packet = (0..opts.trace_runs.max(1))
+                .map(|_| packet_mrays(set, &bvh, false))
+                .collect();
+            let packet_any_runs = (0..opts.trace_runs.max(1))
+                .map(|_| packet_mrays(set, &bvh, true))
+                .collect();
+            let packet_hits = packet_closest(set, &bvh);
+            let packet_occluded = packet_any(set, &bvh);
             let mismatches = sample
                 .iter()
-                .filter(|(i, want)| !same_hit(*want, bvh.closest_hit(&set.rays[*i])))
+                .filter(|(i, want)| {
+                    !same_hit(*want, bvh.closest_hit(&set.rays[*i]))
+                        || !same_hit(*want, packet_hits[*i])
+                        || packet_occluded[*i] != want.is_some()
+                })
                 .count();
             rows.push(Row {
                 method: name.clone(),
@@ -159,6 +227,8 @@ pub fn run(
                 ray_count: set.rays.len(),
                 mrays: median(closest),
                 any_mrays: median(any),
+                packet_mrays: median(packet),
+                packet_any_mrays: median(packet_any_runs),
                 mismatches,
                 checked: sample.len(),
             });

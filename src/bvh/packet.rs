@@ -1,0 +1,791 @@
+//! Packet traversal: up to [`MAX_PACKET`] coherent rays walk the binary tree together.
+//!
+//! - **First active ray** (Wald, Boulos & Shirley 2007): each node on the stack carries the
+//!   index of the first ray that may still need it; a node is entered when some ray from that
+//!   one on hits its box (16 rays per SIMD test, stopping at the first group with a hit), and
+//!   its children inherit that index. Leaves test their triangles against the rays of every
+//!   group with a ray that hits the leaf's box.
+//! - **Interval arithmetic**: the packet's origins and reciprocal directions are bounded per
+//!   axis; a node whose slab intervals, computed from those bounds, cannot overlap for any ray
+//!   (or lie beyond every ray's current `tmax`) is skipped for the whole packet with one test.
+//!   Rounding is monotone, so the bounds hold for every ray's own rounded slab distances.
+//! - The triangle test is the watertight one of [`crate::geom::intersect_triangle`], run for 16
+//!   rays at once by [`crate::simd::packet`]; it reports bit for bit what the single-ray test
+//!   does, so a packet's hits are exactly the single-ray (and brute-force) hits.
+//! - Rays that are not coherent (directions spread wider than [`COHERENT_COS`], or fewer than
+//!   [`MIN_PACKET`] rays) are traced one by one, which is faster for them.
+
+use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
+use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
+use crate::simd::packet::{LANES, RayLanes, prefetch};
+use glam::{Vec3, Vec3A};
+use wide::f32x16 as F;
+
+/// Most rays in one packet (one bit each in a [`Mask`]).
+pub const MAX_PACKET: usize = 128;
+/// A bit per ray of a packet.
+pub type Mask = u128;
+/// Fewer rays than this are traced one by one.
+pub const MIN_PACKET: usize = 4;
+/// A packet whose unit directions are not all within this cosine of their mean direction
+/// (about 25 degrees) is traced one ray at a time.
+pub const COHERENT_COS: f32 = 0.9;
+/// Width of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
+pub const TILE_W: usize = 16;
+/// Height of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
+pub const TILE_H: usize = 8;
+
+/// Calls `f` with the pixel indices of each tile of a `width` x `height` image (row-major
+/// pixels), tile by tile ([`TILE_W`] x [`TILE_H`], smaller at the right and bottom edges), each
+/// tile's pixels in 4x4 blocks so that every 16-ray SIMD group of a packet is a compact square.
+pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
+    let mut idx = Vec::with_capacity(TILE_W * TILE_H);
+    for ty in (0..height).step_by(TILE_H) {
+        for tx in (0..width).step_by(TILE_W) {
+            idx.clear();
+            let (ye, xe) = ((ty + TILE_H).min(height), (tx + TILE_W).min(width));
+            for by in (ty..ye).step_by(4) {
+                for bx in (tx..xe).step_by(4) {
+                    for y in by..(by + 4).min(ye) {
+                        for x in bx..(bx + 4).min(xe) {
+                            idx.push(y * width + x);
+                        }
+                    }
+                }
+            }
+            f(&idx);
+        }
+    }
+}
+
+const GROUPS: usize = MAX_PACKET / LANES;
+const LEAF_IA: bool = false;
+/// A subtree that at most this many rays of a packet still need is walked ray by ray.
+const SINGLE_BELOW: u32 = 4;
+
+/// Whether the packet queries trace a group of rays as a packet.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PacketMode {
+    /// As a packet when it is coherent ([`RayPacket::is_coherent`]), else ray by ray.
+    #[default]
+    Auto,
+    /// Always as a packet, coherent or not (for tests and measurements).
+    Always,
+}
+
+impl PacketMode {
+    #[inline]
+    pub(crate) fn use_packet(self, rays: &[Ray]) -> bool {
+        match self {
+            PacketMode::Auto => is_coherent(rays),
+            PacketMode::Always => !rays.is_empty(),
+        }
+    }
+}
+
+/// True when `rays` are worth tracing as a packet: at least [`MIN_PACKET`] of them, all unit
+/// directions within [`COHERENT_COS`] of their mean. Cheap next to tracing them.
+#[must_use]
+pub fn is_coherent(rays: &[Ray]) -> bool {
+    if rays.len() < MIN_PACKET {
+        return false;
+    }
+    let mean = rays
+        .iter()
+        .map(|r| r.dir.normalize_or_zero())
+        .sum::<Vec3>()
+        .normalize_or_zero();
+    mean != Vec3::ZERO
+        && rays
+            .iter()
+            .all(|r| r.dir.normalize_or_zero().dot(mean) >= COHERENT_COS)
+}
+
+/// Up to [`MAX_PACKET`] rays in SIMD form, with what traversal learns about them.
+#[derive(Clone, Debug)]
+pub struct RayPacket {
+    n: usize,
+    lanes: [RayLanes; GROUPS],
+    rays: [Ray; MAX_PACKET],
+    /// Rays still traversing (any hit clears a ray's bit at its first hit).
+    active: Mask,
+    /// The `(kx, ky, kz)` of the watertight test when every ray shares it.
+    uniform: Option<[usize; 3]>,
+    /// Per-axis bounds of the origins and reciprocal directions of the rays.
+    o_lo: Vec3A,
+    o_hi: Vec3A,
+    i_lo: Vec3A,
+    i_hi: Vec3A,
+    tmin_lo: f32,
+    /// Largest `tmax` of an active ray.
+    tmax_hi: f32,
+    /// Sum of the unit directions: orders children near to far.
+    dir: Vec3,
+    /// Rays whose closest hit has been found so far, with its slot and barycentrics.
+    found: Mask,
+    /// Per group: the slot (as the bits of an f32), and the barycentrics.
+    slot: [F; GROUPS],
+    u: [F; GROUPS],
+    v: [F; GROUPS],
+}
+
+impl Default for RayPacket {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl RayPacket {
+    /// An empty packet (load rays with [`RayPacket::load`]).
+    #[must_use]
+    pub fn new() -> Self {
+        Self {
+            n: 0,
+            lanes: [RayLanes::default(); GROUPS],
+            rays: [Ray::new(Vec3::ZERO, Vec3::X); MAX_PACKET],
+            active: 0,
+            uniform: None,
+            o_lo: Vec3A::ZERO,
+            o_hi: Vec3A::ZERO,
+            i_lo: Vec3A::ZERO,
+            i_hi: Vec3A::ZERO,
+            tmin_lo: 0.0,
+            tmax_hi: 0.0,
+            dir: Vec3::ZERO,
+            found: 0,
+            slot: [F::splat(0.0); GROUPS],
+            u: [F::splat(0.0); GROUPS],
+            v: [F::splat(0.0); GROUPS],
+        }
+    }
+
+    /// Number of rays loaded.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// True when no ray is loaded.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Loads `rays` (at most [`MAX_PACKET`]); every ray becomes active with no hit.
+    ///
+    /// # Panics
+    /// When there are more than [`MAX_PACKET`] rays.
+    pub fn load(&mut self, rays: &[Ray]) {
+        assert!(
+            rays.len() <= MAX_PACKET,
+            "at most {MAX_PACKET} rays a packet"
+        );
+        let n = rays.len();
+        let all = if n == MAX_PACKET {
+            Mask::MAX
+        } else {
+            ((1 as Mask) << n) - 1
+        };
+        self.load_with(n, all, |i| rays[i]);
+    }
+
+    /// Loads the rays of the mask `which` among `n` lanes, ray `i` being `ray(i)`; the other
+    /// lanes are left inactive.
+    pub(crate) fn load_with(&mut self, n: usize, which: Mask, mut ray: impl FnMut(usize) -> Ray) {
+        debug_assert!(n <= MAX_PACKET);
+        self.n = n;
+        self.active = which;
+        self.found = 0;
+        let mut o_lo = Vec3A::splat(f32::INFINITY);
+        let mut o_hi = Vec3A::splat(f32::NEG_INFINITY);
+        let mut i_lo = o_lo;
+        let mut i_hi = o_hi;
+        let mut tmin_lo = f32::INFINITY;
+        let mut tmax_hi = f32::NEG_INFINITY;
+        let mut dir = Vec3::ZERO;
+        let mut uniform = None;
+        let mut mixed = false;
+        let mut bits = which;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let r = ray(i);
+            let pre = RayTriPrecomp::new(r.dir);
+            self.lanes[i / LANES].set(i % LANES, &r, &pre);
+            self.rays[i] = r;
+            let o = Vec3A::from(r.origin);
+            let inv = Vec3A::from(r.inv_dir);
+            o_lo = o_lo.min(o);
+            o_hi = o_hi.max(o);
+            i_lo = i_lo.min(inv);
+            i_hi = i_hi.max(inv);
+            tmin_lo = tmin_lo.min(r.tmin);
+            tmax_hi = tmax_hi.max(r.tmax);
+            dir += r.dir.normalize_or_zero();
+            let k = [pre.kx, pre.ky, pre.kz];
+            match uniform {
+                None => uniform = Some(k),
+                Some(u) if u != k => mixed = true,
+                _ => {}
+            }
+        }
+        self.uniform = if mixed { None } else { uniform };
+        (self.o_lo, self.o_hi, self.i_lo, self.i_hi) = (o_lo, o_hi, i_lo, i_hi);
+        self.tmin_lo = tmin_lo;
+        self.tmax_hi = tmax_hi;
+        self.dir = dir;
+    }
+
+    /// True when the loaded rays are worth tracing as a packet ([`is_coherent`]).
+    #[must_use]
+    pub fn is_coherent(&self) -> bool {
+        is_coherent(&self.rays[..self.n])
+    }
+
+    /// The current `tmax` of ray `i`: its closest hit so far, or its own `tmax`.
+    #[inline]
+    pub(crate) fn tmax(&self, i: usize) -> f32 {
+        self.lanes[i / LANES].tmax.as_array()[i % LANES]
+    }
+
+    fn update_tmax_hi(&mut self) {
+        let mut hi = wide::f32x16::splat(f32::NEG_INFINITY);
+        for l in &self.lanes[..self.n.div_ceil(LANES)] {
+            hi = hi.fast_max(l.tmax);
+        }
+        // Lanes past `n` hold stale values: they only make the bound looser.
+        self.tmax_hi = hi
+            .as_array()
+            .iter()
+            .fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+    }
+
+    /// Interval-arithmetic test: false when no ray of the packet can touch the box.
+    #[inline(always)]
+    fn may_hit(&self, n: &Node) -> bool {
+        let bmin = Vec3A::from(n.min);
+        let bmax = Vec3A::from(n.max);
+        let corners = |d_lo: Vec3A, d_hi: Vec3A| {
+            let a = d_lo * self.i_lo;
+            let b = d_lo * self.i_hi;
+            let c = d_hi * self.i_lo;
+            let d = d_hi * self.i_hi;
+            (a.min(b).min(c.min(d)), a.max(b).max(c.max(d)))
+        };
+        let (t0_lo, t0_hi) = corners(bmin - self.o_hi, bmin - self.o_lo);
+        let (t1_lo, t1_hi) = corners(bmax - self.o_hi, bmax - self.o_lo);
+        let near = t0_lo.min(t1_lo).max_element().max(self.tmin_lo);
+        let far = t0_hi.max(t1_hi).min_element().min(self.tmax_hi) * FAR_SCALE;
+        near <= far
+    }
+
+    /// Index of the first ray of `live` whose slab test touches the box.
+    #[inline(always)]
+    fn first_hit(&self, n: &Node, live: Mask) -> Option<u8> {
+        let mut g = live.trailing_zeros() as usize / LANES;
+        // The group of the first live ray usually hits: test it before anything else.
+        let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
+        let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+        if m != 0 {
+            return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
+        }
+        // Then cull the node for the whole packet before testing the other groups.
+        if !self.may_hit(n) {
+            return None;
+        }
+        g += 1;
+        while g < GROUPS {
+            let rest = live >> (g * LANES);
+            if rest == 0 {
+                break;
+            }
+            let bits = rest as u32 & 0xFFFF;
+            if bits != 0 {
+                let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+                if m != 0 {
+                    return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
+                }
+            }
+            g += 1;
+        }
+        None
+    }
+
+    /// Every ray of `live` whose slab test touches the box.
+    #[inline(always)]
+    fn hit_mask(&self, n: &Node, live: Mask) -> Mask {
+        let mut mask: Mask = 0;
+        let mut g = live.trailing_zeros() as usize / LANES;
+        while g < GROUPS && live >> (g * LANES) != 0 {
+            let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
+            if bits != 0 {
+                mask |= Mask::from(self.lanes[g].hit_box(n.min, n.max) & bits) << (g * LANES);
+            }
+            g += 1;
+        }
+        mask
+    }
+
+    /// Tests triangle `tri` (in leaf slot `slot`) against the rays of `rays`. Closest hit
+    /// (`ANY == false`): shortens each ray that hits it and records the hit; returns true when
+    /// some ray was shortened. Any hit: retires the rays that hit it.
+    #[inline(always)]
+    fn test_triangle<const ANY: bool>(&mut self, tri: &[Vec3; 3], slot: u32, rays: Mask) -> bool {
+        let uniform = self.uniform.map(|k| RayLanes::permute_uniform(tri, k));
+        let mut changed = false;
+        for g in 0..GROUPS {
+            let bits = (rays >> (g * LANES)) as u32 & 0xFFFF;
+            if bits == 0 {
+                if rays >> (g * LANES) == 0 {
+                    break;
+                }
+                continue;
+            }
+            let lanes = &mut self.lanes[g];
+            let perm = match &uniform {
+                Some(p) => *p,
+                None => lanes.permute(tri),
+            };
+            let h = lanes.hit_triangle(&perm, bits);
+            if h.hit != 0 {
+                changed = true;
+                if ANY {
+                    self.active &= !(Mask::from(h.hit) << (g * LANES));
+                } else if h.exact {
+                    lanes.tmax = h.mask.select(h.t, lanes.tmax);
+                    self.u[g] = h.mask.select(h.u, self.u[g]);
+                    self.v[g] = h.mask.select(h.v, self.v[g]);
+                    let s = F::splat(f32::from_bits(slot));
+                    self.slot[g] = h.mask.select(s, self.slot[g]);
+                    self.found |= Mask::from(h.hit) << (g * LANES);
+                } else {
+                    let mut hit = h.hit;
+                    while hit != 0 {
+                        let l = hit.trailing_zeros() as usize;
+                        hit &= hit - 1;
+                        self.record(
+                            g,
+                            l,
+                            slot,
+                            (h.t.as_array()[l], h.u.as_array()[l], h.v.as_array()[l]),
+                        );
+                    }
+                }
+            }
+            let mut redo = h.redo;
+            while redo != 0 {
+                let l = redo.trailing_zeros() as usize;
+                redo &= redo - 1;
+                let i = g * LANES + l;
+                let r = &self.rays[i];
+                let pre = RayTriPrecomp::new(r.dir);
+                let tmax = self.lanes[g].tmax.as_array()[l];
+                if let Some((t, u, v)) = intersect_triangle(r, &pre, tri[0], tri[1], tri[2], tmax) {
+                    if ANY {
+                        self.active &= !((1 as Mask) << i);
+                    } else {
+                        self.record(g, l, slot, (t, u, v));
+                    }
+                    changed = true;
+                }
+            }
+        }
+        changed
+    }
+}
+
+impl RayPacket {
+    /// Records a closest hit `(t, u, v)` in `slot` for lane `l` of group `g`.
+    #[inline]
+    fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
+        self.lanes[g].tmax.as_mut_array()[l] = t;
+        self.found |= (1 as Mask) << (g * LANES + l);
+        self.slot[g].as_mut_array()[l] = f32::from_bits(slot);
+        self.u[g].as_mut_array()[l] = u;
+        self.v[g].as_mut_array()[l] = v;
+    }
+
+    /// What a packet's closest-hit traversal found for ray `i`: `(t, u, v, slot)`.
+    #[inline]
+    pub(crate) fn closest(&self, i: usize) -> Option<(f32, f32, f32, u32)> {
+        let (g, l) = (i / LANES, i % LANES);
+        (self.found >> i & 1 != 0).then(|| {
+            (
+                self.tmax(i),
+                self.u[g].as_array()[l],
+                self.v[g].as_array()[l],
+                self.slot[g].as_array()[l].to_bits(),
+            )
+        })
+    }
+
+    /// True when ray `i` found a hit (any-hit traversal).
+    #[inline]
+    pub(crate) fn occluded(&self, i: usize) -> bool {
+        i < self.n && self.active >> i & 1 == 0
+    }
+
+    /// Sets the `tmax` of ray `i` (e.g. to the best hit found in another tree); the traversal
+    /// refreshes its bounds when the leaf callback that did this returns true.
+    #[inline]
+    pub(crate) fn set_tmax(&mut self, i: usize, t: f32) {
+        self.lanes[i / LANES].tmax.as_mut_array()[i % LANES] = t;
+    }
+
+    /// Rays that found a closest hit.
+    #[inline]
+    pub(crate) fn found(&self) -> Mask {
+        self.found
+    }
+
+    /// Marks every ray of `done` as finished (any-hit).
+    #[inline]
+    pub(crate) fn retire(&mut self, done: Mask) {
+        self.active &= !done;
+    }
+
+    /// Rays still active.
+    #[inline]
+    pub(crate) fn active(&self) -> Mask {
+        self.active
+    }
+
+    /// Ray `i` as loaded.
+    #[inline]
+    pub(crate) fn ray(&self, i: usize) -> &Ray {
+        &self.rays[i]
+    }
+}
+
+impl Bvh {
+    /// Walks the tree with the packet's active rays. `leaf(packet, slot, rays)` tests the
+    /// primitive in `slot` for the rays of the mask `rays` (all hit the leaf's box); closest hit
+    /// (`ANY == false`): it shortens rays' `tmax` and returns true when it did; any hit: it
+    /// retires rays ([`RayPacket::retire`]), and traversal stops once every ray is retired.
+    pub(crate) fn traverse_packet<const ANY: bool>(
+        &self,
+        p: &mut RayPacket,
+        prefetch_leaf: impl Fn(usize),
+        mut leaf: impl FnMut(&mut RayPacket, usize, Mask) -> bool,
+    ) {
+        let nodes = self.nodes.as_slice();
+        if nodes.is_empty() || p.active == 0 {
+            return;
+        }
+        let mut stack = [(0u32, 0u8); MAX_DEPTH + 2];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (ni, first) = stack[sp];
+            let live = p.active & (Mask::MAX << first);
+            if live == 0 {
+                continue;
+            }
+            let node = &nodes[ni as usize];
+            if node.is_leaf() {
+                if LEAF_IA && !p.may_hit(node) {
+                    continue;
+                }
+                let rays = p.hit_mask(node, live);
+                if rays == 0 {
+                    continue;
+                }
+                let mut changed = false;
+                for slot in node.first as usize..(node.first + node.count) as usize {
+                    let rays = rays & p.active;
+                    if rays == 0 {
+                        break;
+                    }
+                    changed |= leaf(p, slot, rays);
+                }
+                if ANY {
+                    if p.active == 0 {
+                        return;
+                    }
+                } else if changed {
+                    p.update_tmax_hi();
+                }
+            } else {
+                if live.count_ones() <= SINGLE_BELOW {
+                    // Too few rays left for the packet to pay: each goes on alone.
+                    let mut changed = false;
+                    let mut bits = live;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        changed |= self.walk_single::<ANY>(p, i, ni, &mut leaf);
+                    }
+                    if ANY {
+                        if p.active == 0 {
+                            return;
+                        }
+                    } else if changed {
+                        p.update_tmax_hi();
+                    }
+                    continue;
+                }
+                let Some(f) = p.first_hit(node, live) else {
+                    continue;
+                };
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                // Start loading the grandchildren (and the leaves' primitives) now: the walk is
+                // bound by memory latency on large trees.
+                // A pair of 32-byte nodes may straddle two cache lines: fetch both halves.
+                for c in [l, r] {
+                    if c.is_leaf() {
+                        prefetch_leaf(c.first as usize);
+                        prefetch_leaf((c.first + c.count - 1) as usize);
+                    } else if let Some(n) = nodes.get(c.first as usize..c.first as usize + 2) {
+                        prefetch(&n[0]);
+                        prefetch(&n[1]);
+                    }
+                }
+                // The child whose centre lies further along the packet's direction is the far one.
+                let cl = Vec3::from(l.min) + Vec3::from(l.max);
+                let cr = Vec3::from(r.min) + Vec3::from(r.max);
+                let (near, far) = if (cr - cl).dot(p.dir) >= 0.0 {
+                    (node.first, node.first + 1)
+                } else {
+                    (node.first + 1, node.first)
+                };
+                stack[sp] = (far, f);
+                stack[sp + 1] = (near, f);
+                sp += 2;
+            }
+        }
+    }
+}
+
+impl Bvh {
+    /// Walks the subtree at `root` with ray `i` of the packet alone, as a single ray walks the
+    /// tree (both children tested, the nearer first, the farther skipped when it starts beyond
+    /// the ray's closest hit); leaves go to `leaf` with that ray's bit. Returns true when `leaf`
+    /// did.
+    fn walk_single<const ANY: bool>(
+        &self,
+        p: &mut RayPacket,
+        i: usize,
+        root: u32,
+        leaf: &mut impl FnMut(&mut RayPacket, usize, Mask) -> bool,
+    ) -> bool {
+        let nodes = self.nodes.as_slice();
+        let bit = (1 as Mask) << i;
+        let ray = p.rays[i];
+        let mut changed = false;
+        let node = &nodes[root as usize];
+        if ray
+            .hit_box(Vec3::from(node.min), Vec3::from(node.max), p.tmax(i))
+            .is_none()
+        {
+            return false;
+        }
+        let mut stack = [(0u32, 0f32); MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = node;
+        loop {
+            if node.is_leaf() {
+                for slot in node.first as usize..(node.first + node.count) as usize {
+                    changed |= leaf(p, slot, bit);
+                    if ANY && p.active & bit == 0 {
+                        return true;
+                    }
+                }
+            } else {
+                let tmax = p.tmax(i);
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
+                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
+                match (tl, tr) {
+                    (Some(a), Some(b)) => {
+                        let (near, far, tfar) = if a <= b {
+                            (l, node.first + 1, b)
+                        } else {
+                            (r, node.first, a)
+                        };
+                        stack[sp] = (far, tfar);
+                        sp += 1;
+                        node = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = l;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = r;
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            }
+            loop {
+                if sp == 0 {
+                    return changed;
+                }
+                sp -= 1;
+                let (n, tnear) = stack[sp];
+                if tnear <= p.tmax(i) * FAR_SCALE {
+                    node = &nodes[n as usize];
+                    break;
+                }
+            }
+        }
+    }
+}
+
+impl MeshBvh {
+    /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
+    /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
+    /// of a camera image; [`MeshBvh::trace_image_closest`] does the tiling). Exactly the hits of
+    /// [`MeshBvh::closest_hit`]; packets that are not coherent are traced ray by ray.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.closest_hit_packet_mode(rays, hits, PacketMode::Auto);
+    }
+
+    /// [`MeshBvh::closest_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet_mode(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mode: PacketMode,
+    ) {
+        assert_eq!(rays.len(), hits.len(), "one output per ray");
+        let mut p = RayPacket::new();
+        for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
+            if mode.use_packet(r) {
+                p.load(r);
+                self.closest_packet(&mut p);
+                for (i, h) in h.iter_mut().enumerate() {
+                    *h = p.closest(i).map(|(t, u, v, slot)| Hit {
+                        t,
+                        u,
+                        v,
+                        prim: self.bvh.prim_indices()[slot as usize],
+                    });
+                }
+            } else {
+                for (r, h) in r.iter().zip(h) {
+                    *h = self.closest_hit(r);
+                }
+            }
+        }
+    }
+
+    /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
+    /// consecutive rays; exactly the answers of [`MeshBvh::any_hit`].
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet(&self, rays: &[Ray], out: &mut [bool]) {
+        self.any_hit_packet_mode(rays, out, PacketMode::Auto);
+    }
+
+    /// [`MeshBvh::any_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let mut p = RayPacket::new();
+        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+            if mode.use_packet(r) {
+                p.load(r);
+                self.any_packet(&mut p);
+                for (i, o) in o.iter_mut().enumerate() {
+                    *o = p.occluded(i);
+                }
+            } else {
+                for (r, o) in r.iter().zip(o) {
+                    *o = self.any_hit(r);
+                }
+            }
+        }
+    }
+
+    /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
+    /// packets of [`TILE_W`] x [`TILE_H`] pixels ([`image_tiles`]). `hits[i]` answers `rays[i]`.
+    ///
+    /// # Panics
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+    pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len(), "one output per ray");
+        if rays.is_empty() {
+            return;
+        }
+        assert!(
+            width > 0 && rays.len().is_multiple_of(width),
+            "rows of {width} rays"
+        );
+        let mut buf = Vec::with_capacity(MAX_PACKET);
+        let mut out = vec![None; MAX_PACKET];
+        image_tiles(width, rays.len() / width, |idx| {
+            buf.clear();
+            buf.extend(idx.iter().map(|&i| rays[i]));
+            self.closest_hit_packet(&buf, &mut out[..buf.len()]);
+            for (&i, h) in idx.iter().zip(&out) {
+                hits[i] = *h;
+            }
+        });
+    }
+
+    /// Any-hit answers of an image's rays given row by row, as packets of [`TILE_W`] x
+    /// [`TILE_H`] pixels (e.g. shadow rays from the points the camera rays hit).
+    ///
+    /// # Panics
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+    pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        if rays.is_empty() {
+            return;
+        }
+        assert!(
+            width > 0 && rays.len().is_multiple_of(width),
+            "rows of {width} rays"
+        );
+        let mut buf = Vec::with_capacity(MAX_PACKET);
+        let mut res = vec![false; MAX_PACKET];
+        image_tiles(width, rays.len() / width, |idx| {
+            buf.clear();
+            buf.extend(idx.iter().map(|&i| rays[i]));
+            self.any_hit_packet(&buf, &mut res[..buf.len()]);
+            for (&i, o) in idx.iter().zip(&res) {
+                out[i] = *o;
+            }
+        });
+    }
+
+    /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are
+    /// recorded in the packet (slots of this tree).
+    pub(crate) fn closest_packet(&self, p: &mut RayPacket) {
+        let tris = self.tris.as_slice();
+        let pf = |slot: usize| {
+            if let Some(t) = tris.get(slot) {
+                prefetch(t);
+            }
+        };
+        self.bvh.traverse_packet::<false>(p, pf, |p, slot, rays| {
+            p.test_triangle::<false>(&tris[slot], slot as u32, rays)
+        });
+    }
+
+    /// Packet any-hit traversal: retires every ray that hits something.
+    pub(crate) fn any_packet(&self, p: &mut RayPacket) {
+        let tris = self.tris.as_slice();
+        let pf = |slot: usize| {
+            if let Some(t) = tris.get(slot) {
+                prefetch(t);
+            }
+        };
+        self.bvh.traverse_packet::<true>(p, pf, |p, slot, rays| {
+            p.test_triangle::<true>(&tris[slot], slot as u32, rays)
+        });
+    }
+}

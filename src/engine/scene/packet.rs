@@ -1,0 +1,125 @@
+//! Packets through the two-level scene: the top-level tree is walked by the world packet; each
+//! instance leaf reached runs the packet's rays that reach it, moved into the instance's space
+//! exactly as a single ray is, through the instance's mesh tree as a packet of their own.
+
+use super::{Engine, InstanceId, SceneHit, local_ray};
+use crate::bvh::{MAX_PACKET, PacketMode, RayPacket};
+use crate::geom::Ray;
+
+impl Engine {
+    /// Closest hits of `rays` (`out[i]` for `rays[i]`), traced as packets of up to
+    /// [`MAX_PACKET`] consecutive rays on the calling thread; give coherent rays next to each
+    /// other (e.g. 8x8 tiles of an image). Exactly the hits of [`Engine::closest_hit`];
+    /// packets that are not coherent are traced ray by ray.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
+        self.closest_hit_packet_mode(rays, out, PacketMode::Auto);
+    }
+
+    /// [`Engine::closest_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet_mode(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<SceneHit>],
+        mode: PacketMode,
+    ) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let mut world = RayPacket::new();
+        let mut local = RayPacket::new();
+        let prims = self.tlas.prim_indices();
+        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+            if !mode.use_packet(r) {
+                for (r, o) in r.iter().zip(o.iter_mut()) {
+                    *o = self.closest_hit(r);
+                }
+                continue;
+            }
+            world.load(r);
+            o.fill(None);
+            self.tlas.traverse_packet::<false>(
+                &mut world,
+                |_| {},
+                |wp, slot, lanes| {
+                    let k = self.tlas_instances[prims[slot] as usize];
+                    let inst = &self.instances[k as usize];
+                    if !inst.visible {
+                        return false;
+                    }
+                    local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
+                    let mesh = &self.meshes[inst.mesh as usize].bvh;
+                    mesh.closest_packet(&mut local);
+                    let mut found = local.found();
+                    let changed = found != 0;
+                    while found != 0 {
+                        let i = found.trailing_zeros() as usize;
+                        found &= found - 1;
+                        if let Some((t, u, v, s)) = local.closest(i) {
+                            wp.set_tmax(i, t);
+                            o[i] = Some(SceneHit {
+                                t,
+                                u,
+                                v,
+                                prim: mesh.bvh().prim_indices()[s as usize],
+                                instance: InstanceId(k),
+                            });
+                        }
+                    }
+                    changed
+                },
+            );
+        }
+    }
+
+    /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
+    /// consecutive rays; exactly the answers of [`Engine::any_hit`].
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet(&self, rays: &[Ray], out: &mut [bool]) {
+        self.any_hit_packet_mode(rays, out, PacketMode::Auto);
+    }
+
+    /// [`Engine::any_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let mut world = RayPacket::new();
+        let mut local = RayPacket::new();
+        let prims = self.tlas.prim_indices();
+        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+            if !mode.use_packet(r) {
+                for (r, o) in r.iter().zip(o.iter_mut()) {
+                    *o = self.any_hit(r);
+                }
+                continue;
+            }
+            world.load(r);
+            self.tlas.traverse_packet::<true>(
+                &mut world,
+                |_| {},
+                |wp, slot, lanes| {
+                    let k = self.tlas_instances[prims[slot] as usize];
+                    let inst = &self.instances[k as usize];
+                    if !inst.visible {
+                        return false;
+                    }
+                    local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
+                    self.meshes[inst.mesh as usize].bvh.any_packet(&mut local);
+                    let hit = lanes & !local.active();
+                    wp.retire(hit);
+                    hit != 0
+                },
+            );
+            for (i, o) in o.iter_mut().enumerate() {
+                *o = world.occluded(i);
+            }
+        }
+    }
+}
