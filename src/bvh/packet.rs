@@ -111,7 +111,9 @@ pub struct RayPacket {
     active: Mask,
     /// The `(kx, ky, kz)` of the watertight test when every ray shares it.
     uniform: Option<[usize; 3]>,
-    /// Per-axis bounds of the origins and reciprocal directions of the rays.
+    /// Per-axis bounds of the origins and reciprocal directions of the rays. With a zero
+    /// direction component among them (an infinite reciprocal) the
+    /// interval test is skipped: its corner products could be `0 * inf`.
     o_lo: Vec3A,
     o_hi: Vec3A,
     i_lo: Vec3A,
@@ -263,6 +265,9 @@ impl RayPacket {
     /// Interval-arithmetic test: false when no ray of the packet can touch the box.
     #[inline(always)]
     fn may_hit(&self, n: &Node) -> bool {
+        if !(self.i_lo.is_finite() && self.i_hi.is_finite()) {
+            return true;
+        }
         let bmin = Vec3A::from(n.min);
         let bmax = Vec3A::from(n.max);
         let corners = |d_lo: Vec3A, d_hi: Vec3A| {

@@ -8,9 +8,16 @@ pub struct Ray {
     pub origin: Vec3,
     /// Direction (need not be normalised; `t` is measured in its units).
     pub dir: Vec3,
-    /// Reciprocal direction. A zero component becomes `±f32::MAX` (never infinite), so that the
-    /// slab test never computes `0 * inf` and never produces NaN.
+    /// Reciprocal direction; a zero component (either sign) becomes `+inf`.
     pub inv_dir: Vec3,
+    /// Origin the slab test subtracts from a box's lower corner: the origin, except on an axis
+    /// along which the ray does not move, where it is one ulp above. With [`Ray::slab_hi`] one
+    /// ulp below, a ray whose origin lies on a box face of such an axis (it runs inside the
+    /// face's plane) gets distances of `-inf` and `+inf` for that slab, never `0 * inf`: it is
+    /// inside the slab, however close to zero the coordinates are. See [`Ray::hit_box`].
+    pub slab_lo: Vec3,
+    /// Origin the slab test subtracts from a box's upper corner (see [`Ray::slab_lo`]).
+    pub slab_hi: Vec3,
     /// Start of the valid interval.
     pub tmin: f32,
     /// End of the valid interval.
@@ -33,17 +40,20 @@ impl Ray {
     /// A ray over `[tmin, tmax]`.
     #[must_use]
     pub fn with_range(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
-        let inv = |d: f32| {
-            if d == 0.0 {
-                f32::MAX.copysign(d)
-            } else {
-                1.0 / d
-            }
+        let inv = |d: f32| if d == 0.0 { f32::INFINITY } else { 1.0 / d };
+        let o = origin.to_array();
+        let d = dir.to_array();
+        let nudge = |step: fn(f32) -> f32| {
+            Vec3::from(std::array::from_fn::<f32, 3, _>(|a| {
+                if d[a] == 0.0 { step(o[a]) } else { o[a] }
+            }))
         };
         Self {
             origin,
             dir,
             inv_dir: Vec3::new(inv(dir.x), inv(dir.y), inv(dir.z)),
+            slab_lo: nudge(f32::next_up),
+            slab_hi: nudge(f32::next_down),
             tmin,
             tmax,
         }
@@ -59,15 +69,22 @@ impl Ray {
     /// Slab test against the box `[bmin, bmax]` within `[tmin, tmax]`: the entry distance, or
     /// `None` when the ray misses. Conservative: a ray that touches the box is never rejected
     /// through rounding (the far distance, and `tmax` with it, is scaled up by `1 + 2γ(3)`).
+    ///
+    /// On an axis along which the ray does not move, the slab is `(-inf, +inf)` when the origin
+    /// lies within it, faces included (the nudged origins [`Ray::slab_lo`] and
+    /// [`Ray::slab_hi`] keep the differences non-zero), and `(+inf, +inf)` or `(-inf, -inf)`
+    /// when it lies outside by more than an ulp. Only a face exactly one ulp beyond the origin
+    /// gives `0 * inf = NaN`; the ray then misses the box, and either answer is right.
     #[must_use]
     #[inline(always)]
     pub fn hit_box(&self, bmin: Vec3, bmax: Vec3, tmax: f32) -> Option<f32> {
-        let t0 = (bmin - self.origin) * self.inv_dir;
-        let t1 = (bmax - self.origin) * self.inv_dir;
+        let t0 = (bmin - self.slab_lo) * self.inv_dir;
+        let t1 = (bmax - self.slab_hi) * self.inv_dir;
         let near = t0.min(t1);
         let far = t0.max(t1);
-        // No operand can be NaN here (finite reciprocals, sanitized boxes), so plain compares
-        // do: they compile to single min/max instructions, unlike f32::min/max.
+        // Plain compares compile to single min/max instructions, unlike f32::min/max. A NaN
+        // (see above) drops out of `near` and `far` unless both are NaN, and in the compares
+        // below it can only drop other candidates: the answer gets more conservative.
         let tn = fmax(fmax(near.x, near.y), fmax(near.z, self.tmin));
         let tf = fmin(fmin(far.x, far.y), fmin(far.z, tmax)) * FAR_SCALE;
         if tn <= tf { Some(tn) } else { None }
@@ -105,7 +122,6 @@ mod tests {
     fn axis_parallel_ray_on_box_face_has_no_nan() {
         // Origin exactly on the box's min-y plane, direction with zero y and z components.
         let r = Ray::new(Vec3::new(-5.0, 0.0, 0.5), Vec3::X);
-        assert!(r.inv_dir.is_finite());
         let hit = r.hit_box(
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(1.0, 1.0, 1.0),

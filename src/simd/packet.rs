@@ -23,9 +23,11 @@ const TRUE: f32 = f32::from_bits(u32::MAX);
 /// 16 rays in structure-of-arrays form, with the per-ray constants of the watertight test.
 #[derive(Clone, Copy, Debug)]
 pub struct RayLanes {
-    /// Origin, per axis.
-    pub o: [F; 3],
-    /// Reciprocal direction (zero components as `±f32::MAX`, as [`Ray`] keeps it).
+    /// Origin the slab test subtracts from a box's lower corner ([`Ray::slab_lo`]), per axis.
+    pub slab_lo: [F; 3],
+    /// Origin the slab test subtracts from a box's upper corner ([`Ray::slab_hi`]), per axis.
+    pub slab_hi: [F; 3],
+    /// Reciprocal direction (zero components as `+inf`, as [`Ray`] keeps it).
     pub inv: [F; 3],
     /// Start of each ray's interval.
     pub tmin: F,
@@ -44,7 +46,8 @@ impl Default for RayLanes {
         let z = F::splat(0.0);
         let one = F::splat(1.0);
         Self {
-            o: [z; 3],
+            slab_lo: [z; 3],
+            slab_hi: [z; 3],
             inv: [one; 3],
             tmin: z,
             tmax: F::splat(f32::NEG_INFINITY),
@@ -84,8 +87,10 @@ impl RayLanes {
     pub fn set(&mut self, lane: usize, ray: &Ray, pre: &RayTriPrecomp) {
         let o = ray.origin.to_array();
         let inv = ray.inv_dir.to_array();
+        let (lo, hi) = (ray.slab_lo.to_array(), ray.slab_hi.to_array());
         for a in 0..3 {
-            self.o[a].as_mut_array()[lane] = o[a];
+            self.slab_lo[a].as_mut_array()[lane] = lo[a];
+            self.slab_hi[a].as_mut_array()[lane] = hi[a];
             self.inv[a].as_mut_array()[lane] = inv[a];
         }
         self.tmin.as_mut_array()[lane] = ray.tmin;
@@ -111,8 +116,8 @@ impl RayLanes {
         let mut tn = self.tmin;
         let mut tf = self.tmax;
         for a in 0..3 {
-            let t0 = (F::splat(bmin[a]) - self.o[a]) * self.inv[a];
-            let t1 = (F::splat(bmax[a]) - self.o[a]) * self.inv[a];
+            let t0 = (F::splat(bmin[a]) - self.slab_lo[a]) * self.inv[a];
+            let t1 = (F::splat(bmax[a]) - self.slab_hi[a]) * self.inv[a];
             tn = tn.fast_max(t0.fast_min(t1));
             tf = tf.fast_min(t0.fast_max(t1));
         }
