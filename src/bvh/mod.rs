@@ -16,12 +16,14 @@ mod node;
 mod refit;
 mod traverse;
 mod validate;
+pub mod wide;
 
 pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
 pub use traverse::{Counters, TraversalStats};
+pub use wide::{MeshBvh4, MeshBvh8, WideBvh, WideNode};
 
 /// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.
 pub const MAX_DEPTH: usize = 128;
