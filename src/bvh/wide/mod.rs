@@ -18,6 +18,8 @@ mod lanes;
 mod refit;
 mod traverse;
 
+pub use lanes::TriBlock;
+
 use super::{BuildParams, Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{Aabb, TriMesh};
 use glam::Vec3;
@@ -36,6 +38,9 @@ const FIRST_BITS: u32 = 27;
 /// Most triangles one leaf child holds (its count is stored in 4 bits); larger binary leaves
 /// are split into several.
 pub const MAX_WIDE_LEAF: u32 = 16;
+/// Binary subtrees of at most this many triangles that do not fit into their parent's lanes
+/// become one leaf lane instead of a nearly empty node of their own.
+const DEFAULT_MERGE: u32 = 8;
 /// Most triangles a wide tree holds (its leaves store the first slot in 27 bits).
 pub const MAX_WIDE_PRIMS: usize = 1 << FIRST_BITS;
 
@@ -139,19 +144,25 @@ fn encode_leaf(first: u32, count: u32) -> u32 {
 }
 
 /// A wide BVH (`K` = 4 or 8 children per node) over a triangle mesh, with the triangles copied
-/// in leaf order. Built by collapsing a binary [`MeshBvh`]; refitted in place.
+/// into blocks of four ([`TriBlock`]) in leaf order. Built by collapsing a binary [`MeshBvh`];
+/// refitted in place.
 #[derive(Clone, Debug, Default)]
 pub struct WideBvh<const K: usize> {
     nodes: Vec<WideNode<K>>,
-    prim_indices: Vec<u32>,
-    /// `tris[slot]` is triangle `prim_indices[slot]`.
-    tris: Vec<[Vec3; 3]>,
-    /// `leaf_indices[slot]` are that triangle's vertex indices, for refit.
-    leaf_indices: Vec<[u32; 3]>,
+    /// Each leaf owns a contiguous run of blocks; unused lanes are NaN.
+    blocks: Vec<TriBlock>,
+    /// The triangle index of each block lane (`NO_PRIM` for unused lanes).
+    block_prims: Vec<[u32; 4]>,
+    /// The vertex indices of each block lane, for refit.
+    block_indices: Vec<[[u32; 3]; 4]>,
+    prim_count: usize,
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
     /// path of each node's child count minus one).
     stack_need: usize,
 }
+
+/// The triangle index of an unused block lane.
+const NO_PRIM: u32 = u32::MAX;
 
 /// A collapse candidate: a binary node, or a range of triangle slots (a piece of a binary leaf
 /// too large for one wide leaf).
@@ -196,16 +207,16 @@ impl<const K: usize> WideBvh<K> {
             "a wide BVH holds at most {MAX_WIDE_PRIMS} triangles"
         );
         let mut w = Self {
-            nodes: Vec::with_capacity(bvh.nodes().len() / K + 1),
-            prim_indices: bvh.prim_indices().to_vec(),
-            tris: m.tris.clone(),
-            leaf_indices: m.leaf_indices.clone(),
-            stack_need: 0,
+            prim_count: bvh.prim_count(),
+            ..Self::default()
         };
         if bvh.nodes().is_empty() {
             return w;
         }
-        let c = Collapse { bvh, tris: &m.tris };
+        let merge = std::env::var("WIDE_MERGE")
+            .ok()
+            .map_or(DEFAULT_MERGE, |s| s.parse().unwrap());
+        let c = Collapse::new(bvh, &m.tris, merge);
         let root = Item::Node(0);
         let first = if c.fits_leaf(root) {
             vec![root]
@@ -213,27 +224,52 @@ impl<const K: usize> WideBvh<K> {
             c.open(root).to_vec()
         };
         c.node(first, &mut w.nodes);
+        // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
+        // subtree's blocks are contiguous too).
+        let prims = bvh.prim_indices();
+        for n in &mut w.nodes {
+            for k in 0..K {
+                if let Child::Leaf { first, count } = n.child(k) {
+                    let start = w.blocks.len() as u32;
+                    for chunk in (first..first + count).collect::<Vec<_>>().chunks(4) {
+                        let mut b = TriBlock::EMPTY;
+                        let mut p = [NO_PRIM; 4];
+                        let mut idx = [[0; 3]; 4];
+                        for (l, &slot) in chunk.iter().enumerate() {
+                            b.set(l, &m.tris[slot as usize]);
+                            p[l] = prims[slot as usize];
+                            idx[l] = m.leaf_indices[slot as usize];
+                        }
+                        w.blocks.push(b);
+                        w.block_prims.push(p);
+                        w.block_indices.push(idx);
+                    }
+                    n.child[k] = encode_leaf(start, w.blocks.len() as u32 - start);
+                }
+            }
+        }
         w.refit_boxes();
         w.stack_need = w.compute_stack_need();
         w
     }
 
-    /// The nodes; node 0 is the root (none for the empty mesh).
+    /// The nodes; node 0 is the root (none for the empty mesh). A leaf child's `first` and
+    /// `count` are a run of [`WideBvh::blocks`].
     #[must_use]
     pub fn nodes(&self) -> &[WideNode<K>] {
         &self.nodes
     }
 
-    /// The triangle in each slot; leaves own contiguous ranges of slots.
+    /// The triangles in blocks of four, in leaf order.
     #[must_use]
-    pub fn prim_indices(&self) -> &[u32] {
-        &self.prim_indices
+    pub fn blocks(&self) -> &[TriBlock] {
+        &self.blocks
     }
 
     /// Number of triangles.
     #[must_use]
     pub fn prim_count(&self) -> usize {
-        self.prim_indices.len()
+        self.prim_count
     }
 
     /// Box of the whole tree (empty for the empty tree).
@@ -242,13 +278,13 @@ impl<const K: usize> WideBvh<K> {
         self.nodes.first().map_or(Aabb::EMPTY, WideNode::bounds)
     }
 
-    /// Bytes held: nodes, triangle indices, and the leaf-ordered triangles and vertex indices.
+    /// Bytes held: nodes, triangle blocks, and each block lane's triangle and vertex indices.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.prim_indices.as_slice())
-            + std::mem::size_of_val(self.tris.as_slice())
-            + std::mem::size_of_val(self.leaf_indices.as_slice())
+            + std::mem::size_of_val(self.blocks.as_slice())
+            + std::mem::size_of_val(self.block_prims.as_slice())
+            + std::mem::size_of_val(self.block_indices.as_slice())
     }
 
     /// Depth of the deepest node (the root is at depth 0; 0 for the empty tree).
@@ -303,28 +339,43 @@ impl<const K: usize> WideBvh<K> {
     /// broken one.
     pub fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
         mesh.check()?;
-        let n = self.prim_indices.len();
-        if mesh.len() != n || self.tris.len() != n || self.leaf_indices.len() != n {
-            return Err(format!(
-                "tree has {n} triangles ({} copied), mesh has {}",
-                self.tris.len(),
-                mesh.len()
-            ));
+        let n = self.prim_count;
+        if mesh.len() != n
+            || self.block_prims.len() != self.blocks.len()
+            || self.block_indices.len() != self.blocks.len()
+        {
+            return Err(format!("tree has {n} triangles, mesh has {}", mesh.len()));
         }
         let mut seen = vec![false; n];
-        for &p in &self.prim_indices {
-            match seen.get_mut(p as usize) {
-                Some(s) if !*s => *s = true,
-                _ => return Err(format!("triangle index {p} repeated or out of range")),
+        for (b, (block, prims)) in self.blocks.iter().zip(&self.block_prims).enumerate() {
+            for (l, &p) in prims.iter().enumerate() {
+                if p == NO_PRIM {
+                    if block.get(l).iter().any(|v| !v.is_nan()) {
+                        return Err(format!("unused lane {l} of block {b} is not NaN"));
+                    }
+                    continue;
+                }
+                match seen.get_mut(p as usize) {
+                    Some(s) if !*s => *s = true,
+                    _ => return Err(format!("triangle index {p} repeated or out of range")),
+                }
+                let t = block.get(l);
+                let want = mesh.triangle(p as usize);
+                // Compare bits: NaN coordinates are copied as they are.
+                if t.map(|v| v.to_array().map(f32::to_bits))
+                    != want.map(|v| v.to_array().map(f32::to_bits))
+                {
+                    return Err(format!(
+                        "block {b} lane {l} holds a stale copy of triangle {p}"
+                    ));
+                }
+                if self.block_indices[b][l] != mesh.indices[p as usize] {
+                    return Err(format!("block {b} lane {l} has stale vertex indices"));
+                }
             }
         }
-        for (slot, &p) in self.prim_indices.iter().enumerate() {
-            if self.tris[slot] != mesh.triangle(p as usize) {
-                return Err(format!("slot {slot} holds a stale copy of triangle {p}"));
-            }
-            if self.leaf_indices[slot] != mesh.indices[p as usize] {
-                return Err(format!("slot {slot} has stale vertex indices"));
-            }
+        if seen.iter().any(|s| !s) {
+            return Err("some triangle is in no block".into());
         }
         if self.nodes.is_empty() {
             return if n == 0 {
@@ -333,16 +384,19 @@ impl<const K: usize> WideBvh<K> {
                 Err(format!("no nodes but {n} triangles"))
             };
         }
-        let mut next_slot = 0u32;
-        let end = self.check_node(0, 0, &mut next_slot, mesh)?;
+        let mut next_block = 0u32;
+        let end = self.check_node(0, 0, &mut next_block, mesh)?;
         if end != self.nodes.len() {
             return Err(format!(
                 "the root's subtree ends at {end}, not at the node count {}",
                 self.nodes.len()
             ));
         }
-        if next_slot as usize != n {
-            return Err(format!("leaves cover {next_slot} of {n} slots"));
+        if next_block as usize != self.blocks.len() {
+            return Err(format!(
+                "leaves cover {next_block} of {} blocks",
+                self.blocks.len()
+            ));
         }
         if self.stack_need != self.compute_stack_need() {
             return Err("stale stack bound".into());
@@ -351,18 +405,18 @@ impl<const K: usize> WideBvh<K> {
     }
 
     /// Checks node `i`'s subtree (which must start at `i`) and returns one past its end.
+    /// Leaves own runs of blocks in node order, lane order.
     fn check_node(
         &self,
         i: usize,
         depth: usize,
-        next_slot: &mut u32,
+        next_block: &mut u32,
         mesh: &TriMesh,
     ) -> Result<usize, String> {
         if depth >= MAX_DEPTH {
             return Err(format!("node {i} is deeper than {MAX_DEPTH}"));
         }
         let node = &self.nodes[i];
-        let mut end = i + 1;
         let mut used = 0;
         for k in 0..K {
             let b = node.lane_bounds(k);
@@ -374,41 +428,49 @@ impl<const K: usize> WideBvh<K> {
                 }
                 Child::Leaf { first, count } => {
                     used += 1;
-                    if first != *next_slot || (first + count) as usize > self.prim_count() {
+                    if first != *next_block || (first + count) as usize > self.blocks.len() {
                         return Err(format!(
-                            "leaf lane {k} of node {i} covers {first}+{count}, expected to start at {next_slot}"
+                            "leaf lane {k} of node {i} has blocks {first}+{count}, expected to start at {next_block}"
                         ));
                     }
-                    for slot in first..first + count {
-                        let p = self.prim_indices[slot as usize];
-                        let tb = mesh.triangle_bounds(p as usize).sanitized();
-                        if !b.contains(&tb) {
-                            return Err(format!(
-                                "leaf lane {k} of node {i} box {b:?} does not hold triangle {p} {tb:?}"
-                            ));
+                    for blk in first..first + count {
+                        for &p in &self.block_prims[blk as usize] {
+                            if p == NO_PRIM {
+                                continue;
+                            }
+                            let tb = mesh.triangle_bounds(p as usize).sanitized();
+                            if !b.contains(&tb) {
+                                return Err(format!(
+                                    "leaf lane {k} of node {i} box {b:?} does not hold triangle {p} {tb:?}"
+                                ));
+                            }
                         }
                     }
-                    *next_slot = first + count;
+                    *next_block = first + count;
                 }
-                Child::Node(c) => {
-                    used += 1;
-                    if c as usize != end || end >= self.nodes.len() {
-                        return Err(format!(
-                            "lane {k} of node {i} points at {c}, expected {end} (depth-first order)"
-                        ));
-                    }
-                    let inner = self.nodes[c as usize].bounds();
-                    if !b.contains(&inner) {
-                        return Err(format!(
-                            "lane {k} of node {i} box {b:?} does not hold its node's {inner:?}"
-                        ));
-                    }
-                    end = self.check_node(c as usize, depth + 1, next_slot, mesh)?;
-                }
+                Child::Node(_) => used += 1,
             }
         }
         if used == 0 {
             return Err(format!("node {i} has no child"));
+        }
+        // Then the interior children's subtrees, each right after the previous one.
+        let mut end = i + 1;
+        for k in 0..K {
+            if let Child::Node(c) = node.child(k) {
+                if c as usize != end || end >= self.nodes.len() {
+                    return Err(format!(
+                        "lane {k} of node {i} points at {c}, expected {end} (depth-first order)"
+                    ));
+                }
+                let (b, inner) = (node.lane_bounds(k), self.nodes[c as usize].bounds());
+                if !b.contains(&inner) {
+                    return Err(format!(
+                        "lane {k} of node {i} box {b:?} does not hold its node's {inner:?}"
+                    ));
+                }
+                end = self.check_node(c as usize, depth + 1, next_block, mesh)?;
+            }
         }
         Ok(end)
     }
@@ -418,25 +480,70 @@ impl<const K: usize> WideBvh<K> {
 struct Collapse<'a> {
     bvh: &'a Bvh,
     tris: &'a [[Vec3; 3]],
+    /// Triangle slots `(first, count)` under each binary node.
+    ranges: Vec<(u32, u32)>,
+    /// Binary subtrees with at most this many triangles may become one leaf lane.
+    merge: u32,
 }
 
-impl Collapse<'_> {
+impl<'a> Collapse<'a> {
+    fn new(bvh: &'a Bvh, tris: &'a [[Vec3; 3]], merge: u32) -> Self {
+        let nodes = bvh.nodes();
+        let mut ranges = vec![(0u32, 0u32); nodes.len()];
+        for (i, n) in nodes.iter().enumerate().rev() {
+            ranges[i] = if n.is_leaf() {
+                (n.first, n.count)
+            } else {
+                let (l, r) = (ranges[n.first as usize], ranges[n.first as usize + 1]);
+                (l.0, l.1 + r.1)
+            };
+        }
+        Self {
+            bvh,
+            tris,
+            ranges,
+            merge,
+        }
+    }
+
     fn binary(&self, i: u32) -> &Node {
         &self.bvh.nodes()[i as usize]
     }
 
-    /// True when the item becomes one leaf lane.
+    /// True when the item may become one leaf lane: a binary leaf or piece of one of at most
+    /// [`MAX_WIDE_LEAF`] triangles, or a binary subtree of at most `merge` triangles.
     fn fits_leaf(&self, it: Item) -> bool {
         match it {
             Item::Node(i) => {
-                let n = self.binary(i);
-                n.is_leaf() && n.count <= MAX_WIDE_LEAF
+                let count = self.ranges[i as usize].1;
+                if self.binary(i).is_leaf() {
+                    count <= MAX_WIDE_LEAF
+                } else {
+                    count <= self.merge.min(MAX_WIDE_LEAF)
+                }
             }
             Item::Range(_, count) => count <= MAX_WIDE_LEAF,
         }
     }
 
-    /// The two items an item that does not fit a leaf splits into.
+    /// True when the item can be split: a binary interior node, or a range of triangles too
+    /// large for one leaf lane.
+    fn can_open(&self, it: Item) -> bool {
+        match it {
+            Item::Node(i) => !self.binary(i).is_leaf() || self.binary(i).count > MAX_WIDE_LEAF,
+            Item::Range(_, count) => count > MAX_WIDE_LEAF,
+        }
+    }
+
+    /// The triangle slots of an item that fits a leaf.
+    fn slots(&self, it: Item) -> (u32, u32) {
+        match it {
+            Item::Node(i) => self.ranges[i as usize],
+            Item::Range(first, count) => (first, count),
+        }
+    }
+
+    /// The two items an openable item splits into.
     fn open(&self, it: Item) -> [Item; 2] {
         let halves = |first: u32, count: u32| {
             let h = count / 2;
@@ -466,13 +573,13 @@ impl Collapse<'_> {
     }
 
     /// Writes a wide node over `items` (1 ..= K of them) and its subtree, depth first; returns
-    /// its index. Opens the largest-area item that is not a leaf until there are `K` items.
+    /// its index. Opens the largest-area openable item until there are `K` items.
     fn node<const K: usize>(&self, mut items: Vec<Item>, out: &mut Vec<WideNode<K>>) -> u32 {
         while items.len() < K {
             let best = items
                 .iter()
                 .enumerate()
-                .filter(|(_, it)| !self.fits_leaf(**it))
+                .filter(|(_, it)| self.can_open(**it))
                 .map(|(k, it)| (k, self.area(*it)))
                 .max_by(|a, b| a.1.total_cmp(&b.1));
             let Some((k, _)) = best else { break };
@@ -484,13 +591,8 @@ impl Collapse<'_> {
         out.push(WideNode::EMPTY);
         for (k, it) in items.into_iter().enumerate() {
             let child = if self.fits_leaf(it) {
-                match it {
-                    Item::Node(i) => {
-                        let n = self.binary(i);
-                        encode_leaf(n.first, n.count)
-                    }
-                    Item::Range(first, count) => encode_leaf(first, count),
-                }
+                let (first, count) = self.slots(it);
+                encode_leaf(first, count)
             } else {
                 self.node(self.open(it).to_vec(), out)
             };

@@ -4,15 +4,16 @@
 //! lanes. Large trees are refitted as parallel subtrees (every subtree is a contiguous range of
 //! nodes and of triangle slots).
 
-use super::{Child, WideBvh, WideNode};
+use super::lanes::bound_lanes;
+use super::{Child, NO_PRIM, TriBlock, WideBvh, WideNode};
 use crate::geom::{Aabb, TriMesh};
 use glam::Vec3;
 use rayon::prelude::*;
 
 /// Subtrees with at least this many nodes are refitted as parallel tasks.
 const PARALLEL_NODES: usize = 1 << 11;
-/// Triangles gathered per parallel task.
-const GATHER_CHUNK: usize = 1 << 14;
+/// Blocks gathered per parallel task.
+const GATHER_CHUNK: usize = 1 << 12;
 
 impl<const K: usize> WideBvh<K> {
     /// Refits for new vertex positions of the same topology. No allocation.
@@ -31,97 +32,123 @@ impl<const K: usize> WideBvh<K> {
     pub fn refit_indexed(&mut self, positions: &[Vec3], indices: &[[u32; 3]]) {
         assert_eq!(
             indices.len(),
-            self.tris.len(),
+            self.prim_count,
             "refit needs the same triangles"
         );
         if rayon::current_num_threads() > 1 && self.nodes.len() >= PARALLEL_NODES {
-            gather(&self.leaf_indices, positions, &mut self.tris);
-            refit_par(&mut self.nodes, 0, Boxes { tris: &self.tris });
+            gather(
+                &mut self.blocks,
+                &self.block_indices,
+                &self.block_prims,
+                positions,
+            );
+            refit_par(
+                &mut self.nodes,
+                0,
+                Boxes {
+                    blocks: &self.blocks,
+                },
+            );
         } else {
             let mut leaf = Gather {
                 positions,
-                indices: &self.leaf_indices,
-                tris: &mut self.tris,
+                indices: &self.block_indices,
+                prims: &self.block_prims,
+                blocks: &mut self.blocks,
             };
             refit_sweep(&mut self.nodes, 0, &mut leaf);
         }
     }
 
-    /// Recomputes every box from the leaf-ordered triangles as they are.
+    /// Recomputes every box from the triangle blocks as they are.
     pub(super) fn refit_boxes(&mut self) {
-        refit_par(&mut self.nodes, 0, Boxes { tris: &self.tris });
+        refit_par(
+            &mut self.nodes,
+            0,
+            Boxes {
+                blocks: &self.blocks,
+            },
+        );
     }
 }
 
 /// How a leaf lane's box is found.
 trait LeafBox {
-    /// The box of triangle slots `first .. first + count`.
+    /// The box of the triangles in blocks `first .. first + count`.
     fn leaf(&mut self, first: u32, count: u32) -> Aabb;
 }
 
-/// Reads the leaf-ordered triangles.
+/// Reads the triangle blocks.
 #[derive(Clone, Copy)]
 struct Boxes<'a> {
-    tris: &'a [[Vec3; 3]],
+    blocks: &'a [TriBlock],
 }
 
 impl LeafBox for Boxes<'_> {
     #[inline]
     fn leaf(&mut self, first: u32, count: u32) -> Aabb {
-        bound(&self.tris[first as usize..(first + count) as usize])
+        bound(&self.blocks[first as usize..(first + count) as usize])
     }
 }
 
-/// Gathers the moved vertices into the leaf-ordered triangles and bounds them in the same pass.
+/// Gathers the moved vertices into the triangle blocks and bounds them in the same pass.
 struct Gather<'a> {
     positions: &'a [Vec3],
-    indices: &'a [[u32; 3]],
-    tris: &'a mut [[Vec3; 3]],
+    indices: &'a [[[u32; 3]; 4]],
+    prims: &'a [[u32; 4]],
+    blocks: &'a mut [TriBlock],
 }
 
 impl LeafBox for Gather<'_> {
     #[inline]
     fn leaf(&mut self, first: u32, count: u32) -> Aabb {
         let (s, e) = (first as usize, (first + count) as usize);
-        let local = &mut self.tris[s..e];
-        for (t, idx) in local.iter_mut().zip(&self.indices[s..e]) {
-            *t = idx.map(|v| self.positions[v as usize]);
-        }
+        let local = &mut self.blocks[s..e];
+        fill(
+            local,
+            &self.indices[s..e],
+            &self.prims[s..e],
+            self.positions,
+        );
         bound(local)
     }
 }
 
-/// The box of some triangles: plain min/max, or the binary tree's sanitized boxes when a
-/// coordinate is NaN or infinite.
+/// Writes the vertices of every used lane into `blocks`.
 #[inline(always)]
-fn bound(tris: &[[Vec3; 3]]) -> Aabb {
-    let mut lo = Vec3::INFINITY;
-    let mut hi = Vec3::NEG_INFINITY;
-    for t in tris {
-        for p in t {
-            // `if p < lo { p } else { lo }`: a NaN coordinate is skipped, never kept.
-            lo = Vec3::select(p.cmplt(lo), *p, lo);
-            hi = Vec3::select(p.cmpgt(hi), *p, hi);
+fn fill(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], prims: &[[u32; 4]], pos: &[Vec3]) {
+    for ((b, idx), p) in blocks.iter_mut().zip(indices).zip(prims) {
+        for l in 0..4 {
+            if p[l] != NO_PRIM {
+                b.set(l, &idx[l].map(|v| pos[v as usize]));
+            }
         }
-    }
-    let b = Aabb::new(lo, hi);
-    if b.is_finite() {
-        b
-    } else {
-        tris.iter()
-            .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
     }
 }
 
-/// Copies each triangle into its leaf slot, in parallel chunks.
-fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
-    tris.par_chunks_mut(GATHER_CHUNK)
-        .zip(leaf_indices.par_chunks(GATHER_CHUNK))
-        .for_each(|(t, i)| {
-            for (t, i) in t.iter_mut().zip(i) {
-                *t = i.map(|v| positions[v as usize]);
-            }
-        });
+/// The box of the triangles in some blocks: a NaN coordinate (unused lanes are all NaN) is
+/// skipped; when an infinite or all-NaN axis remains, the binary tree's sanitized boxes.
+#[inline(always)]
+fn bound(blocks: &[TriBlock]) -> Aabb {
+    let b = bound_lanes(blocks);
+    if b.is_finite() {
+        b
+    } else {
+        blocks
+            .iter()
+            .flat_map(|b| (0..4).map(|l| b.get(l)))
+            .filter(|t| !t.iter().all(|v| v.is_nan()))
+            .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(&t)))
+    }
+}
+
+/// Copies each used lane's triangle into its block, in parallel chunks.
+fn gather(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], prims: &[[u32; 4]], pos: &[Vec3]) {
+    blocks
+        .par_chunks_mut(GATHER_CHUNK)
+        .zip(indices.par_chunks(GATHER_CHUNK))
+        .zip(prims.par_chunks(GATHER_CHUNK))
+        .for_each(|((b, i), p)| fill(b, i, p, pos));
 }
 
 /// Refits the subtree whose root is `nodes[0]` (global index `base`) and which owns exactly the

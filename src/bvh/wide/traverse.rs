@@ -4,8 +4,8 @@
 //! beyond the closest hit so far). Leaf triangles use the crate's watertight test, so the tree
 //! reports exactly the binary tree's and brute force's distance.
 
-use super::lanes::{RayLanes, slab};
-use super::{LEAF_BIT, WideBvh, leaf_range};
+use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab};
+use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::Counters;
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
 
@@ -15,7 +15,7 @@ const SMALL_STACK: usize = 64;
 /// Enough for any tree: depth at most `MAX_DEPTH`, at most 7 pending siblings per level.
 const BIG_STACK: usize = crate::bvh::MAX_DEPTH * 8;
 
-/// The closest hit so far: slot, distance, barycentrics.
+/// The closest hit so far: block lane (`4 * block + lane`), distance, barycentrics.
 type Best = Option<(usize, f32, f32, f32)>;
 
 impl<const K: usize> WideBvh<K> {
@@ -39,7 +39,7 @@ impl<const K: usize> WideBvh<K> {
             t,
             u,
             v,
-            prim: self.prim_indices[slot],
+            prim: self.block_prims[slot / 4][slot % 4],
         })
     }
 
@@ -74,8 +74,9 @@ impl<const K: usize> WideBvh<K> {
         if nodes.is_empty() {
             return None;
         }
-        let tris = self.tris.as_slice();
+        let blocks = self.blocks.as_slice();
         let lanes = RayLanes::new(ray);
+        let tri_lanes = TriLanes::new(ray);
         let pre = RayTriPrecomp::new(ray.dir);
         let mut tmax = ray.tmax;
         let mut best: Best = None;
@@ -89,14 +90,40 @@ impl<const K: usize> WideBvh<K> {
             if cur & LEAF_BIT != 0 {
                 let (first, count) = leaf_range(cur);
                 let first = first as usize;
-                for (slot, &[a, b, c]) in (first..).zip(&tris[first..first + count as usize]) {
-                    counters.prim();
-                    if let Some((t, u, v)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
-                        if ANY {
-                            return Some((slot, t, u, v));
+                for (b, block) in (first..).zip(&blocks[first..first + count as usize]) {
+                    for l in 0..4 {
+                        if self.block_prims[b][l] != NO_PRIM {
+                            counters.prim();
                         }
-                        tmax = t;
-                        best = Some((slot, t, u, v));
+                    }
+                    let hit = match intersect4(block, &tri_lanes, tmax) {
+                        BlockHit::None => continue,
+                        BlockHit::Hit(l, t, u, v) => Some((b * 4 + l, t, u, v)),
+                        BlockHit::Scalar => {
+                            // Lane by lane, nearest first hit kept, as the scalar loop does.
+                            let mut found = None;
+                            for l in 0..4 {
+                                let [p, q, r] = block.get(l);
+                                if let Some((t, u, v)) = intersect_triangle(
+                                    ray,
+                                    &pre,
+                                    p,
+                                    q,
+                                    r,
+                                    found.map_or(tmax, |f: (usize, f32, f32, f32)| f.1),
+                                ) {
+                                    found = Some((b * 4 + l, t, u, v));
+                                }
+                            }
+                            found
+                        }
+                    };
+                    if let Some(h) = hit {
+                        if ANY {
+                            return Some(h);
+                        }
+                        tmax = h.1;
+                        best = Some(h);
                     }
                 }
             } else {
