@@ -35,5 +35,6 @@ pub mod geom;
 pub mod io;
 pub mod render;
 pub mod report;
+pub mod simd;
 
 pub use error::{Error, Result};

@@ -433,3 +433,38 @@ fn no_ray_slips_through_a_closed_mesh() {
         assert_eq!(misses, 0, "{}", params.name());
     }
 }
+
+#[test]
+fn large_trees_refit_in_parallel_and_on_one_thread() {
+    // Large enough for the parallel refit (gather, then subtrees as tasks) on two threads.
+    let rest = dynbvh::geom::shapes::bumpy_sphere(60_000);
+    let mut moved = rest.positions.clone();
+    dynbvh::geom::shapes::sine_deform(&rest.positions, &mut moved, 0.1, 0.3);
+    let deformed = TriMesh::new(moved, rest.indices.clone());
+    let bin = MeshBvh::build(&rest, &BuildParams::BINNED);
+    let mut bin_def = bin.clone();
+    bin_def.refit(&deformed);
+    let b = rest.bounds();
+    let rays = dynbvh::report::rays::random_rays(&b, 150, 42);
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+            let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+            assert!(w8.nodes().len() > 2048, "{} nodes", w8.nodes().len());
+            for (m, b) in [(&deformed, &bin_def), (&rest, &bin), (&deformed, &bin_def)] {
+                w4.refit(m);
+                w8.refit(m);
+                w4.validate(m).unwrap();
+                w8.validate(m).unwrap();
+                for ray in &rays {
+                    check_ray(m, b, &w4, ray).unwrap();
+                    check_ray(m, b, &w8, ray).unwrap();
+                }
+            }
+        });
+    }
+}

@@ -153,7 +153,7 @@ pub struct WideBvh<const K: usize> {
     blocks: Vec<TriBlock>,
     /// The triangle index of each block lane (`NO_PRIM` for unused lanes).
     block_prims: Vec<[u32; 4]>,
-    /// The vertex indices of each block lane, for refit.
+    /// The vertex indices of each block lane, for refit (`[UNUSED; 3]` for unused lanes).
     block_indices: Vec<[[u32; 3]; 4]>,
     prim_count: usize,
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
@@ -163,6 +163,8 @@ pub struct WideBvh<const K: usize> {
 
 /// The triangle index of an unused block lane.
 const NO_PRIM: u32 = u32::MAX;
+/// The vertex indices of an unused block lane.
+const UNUSED: u32 = u32::MAX;
 
 /// A collapse candidate: a binary node, or a range of triangle slots (a piece of a binary leaf
 /// too large for one wide leaf).
@@ -234,7 +236,7 @@ impl<const K: usize> WideBvh<K> {
                     for chunk in (first..first + count).collect::<Vec<_>>().chunks(4) {
                         let mut b = TriBlock::EMPTY;
                         let mut p = [NO_PRIM; 4];
-                        let mut idx = [[0; 3]; 4];
+                        let mut idx = [[UNUSED; 3]; 4];
                         for (l, &slot) in chunk.iter().enumerate() {
                             b.set(l, &m.tris[slot as usize]);
                             p[l] = prims[slot as usize];
@@ -350,7 +352,9 @@ impl<const K: usize> WideBvh<K> {
         for (b, (block, prims)) in self.blocks.iter().zip(&self.block_prims).enumerate() {
             for (l, &p) in prims.iter().enumerate() {
                 if p == NO_PRIM {
-                    if block.get(l).iter().any(|v| !v.is_nan()) {
+                    if block.get(l).iter().any(|v| !v.is_nan())
+                        || self.block_indices[b][l] != [UNUSED; 3]
+                    {
                         return Err(format!("unused lane {l} of block {b} is not NaN"));
                     }
                     continue;

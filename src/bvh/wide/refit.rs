@@ -5,13 +5,15 @@
 //! nodes and of triangle slots).
 
 use super::lanes::bound_lanes;
-use super::{Child, NO_PRIM, TriBlock, WideBvh, WideNode};
+use super::{Child, TriBlock, UNUSED, WideBvh, WideNode};
 use crate::geom::{Aabb, TriMesh};
 use glam::Vec3;
 use rayon::prelude::*;
 
 /// Subtrees with at least this many nodes are refitted as parallel tasks.
 const PARALLEL_NODES: usize = 1 << 11;
+/// How many blocks ahead refit prefetches vertex positions.
+const PREFETCH_BLOCKS: usize = 8;
 /// Blocks gathered per parallel task.
 const GATHER_CHUNK: usize = 1 << 12;
 
@@ -36,12 +38,7 @@ impl<const K: usize> WideBvh<K> {
             "refit needs the same triangles"
         );
         if rayon::current_num_threads() > 1 && self.nodes.len() >= PARALLEL_NODES {
-            gather(
-                &mut self.blocks,
-                &self.block_indices,
-                &self.block_prims,
-                positions,
-            );
+            gather(&mut self.blocks, &self.block_indices, positions);
             refit_par(
                 &mut self.nodes,
                 0,
@@ -53,10 +50,10 @@ impl<const K: usize> WideBvh<K> {
             let mut leaf = Gather {
                 positions,
                 indices: &self.block_indices,
-                prims: &self.block_prims,
                 blocks: &mut self.blocks,
+                prefetched: 0,
             };
-            refit_sweep(&mut self.nodes, 0, &mut leaf);
+            refit_two_pass(&mut self.nodes, &mut leaf);
         }
     }
 
@@ -95,32 +92,60 @@ impl LeafBox for Boxes<'_> {
 struct Gather<'a> {
     positions: &'a [Vec3],
     indices: &'a [[[u32; 3]; 4]],
-    prims: &'a [[u32; 4]],
     blocks: &'a mut [TriBlock],
+    /// Blocks below this one have had their vertices prefetched.
+    prefetched: usize,
 }
 
 impl LeafBox for Gather<'_> {
     #[inline]
     fn leaf(&mut self, first: u32, count: u32) -> Aabb {
         let (s, e) = (first as usize, (first + count) as usize);
+        // Leaves come in block order: ask for the vertices of the next few blocks now, so
+        // that their (scattered) loads overlap with this leaf's work.
+        let ahead = (e + PREFETCH_BLOCKS).min(self.indices.len());
+        for idx in &self.indices[self.prefetched.max(e).min(ahead)..ahead] {
+            for v in idx {
+                if v[0] != UNUSED {
+                    crate::simd::prefetch(&self.positions[v[0] as usize]);
+                    crate::simd::prefetch(&self.positions[v[2] as usize]);
+                }
+            }
+        }
+        self.prefetched = ahead;
         let local = &mut self.blocks[s..e];
-        fill(
-            local,
-            &self.indices[s..e],
-            &self.prims[s..e],
-            self.positions,
-        );
-        bound(local)
+        // Bound the vertices as they are loaded (reading the block back right after writing
+        // single lanes would stall on store forwarding).
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for (b, idx) in local.iter_mut().zip(&self.indices[s..e]) {
+            for (l, idx) in idx.iter().enumerate() {
+                if idx[0] == UNUSED {
+                    continue;
+                }
+                let t = idx.map(|v| self.positions[v as usize]);
+                for p in &t {
+                    for a in 0..3 {
+                        // Never keeps a NaN coordinate.
+                        lo[a] = if p[a] < lo[a] { p[a] } else { lo[a] };
+                        hi[a] = if p[a] > hi[a] { p[a] } else { hi[a] };
+                    }
+                }
+                b.set(l, &t);
+            }
+        }
+        let b = Aabb::new(Vec3::from(lo), Vec3::from(hi));
+        if b.is_finite() { b } else { bound(local) }
     }
 }
 
 /// Writes the vertices of every used lane into `blocks`.
 #[inline(always)]
-fn fill(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], prims: &[[u32; 4]], pos: &[Vec3]) {
-    for ((b, idx), p) in blocks.iter_mut().zip(indices).zip(prims) {
-        for l in 0..4 {
-            if p[l] != NO_PRIM {
-                b.set(l, &idx[l].map(|v| pos[v as usize]));
+fn fill(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], pos: &[Vec3]) {
+    for (b, idx) in blocks.iter_mut().zip(indices) {
+        for (l, idx) in idx.iter().enumerate() {
+            if idx[0] != UNUSED {
+                b.set(l, &idx.map(|v| pos[v as usize]));
             }
         }
     }
@@ -143,12 +168,11 @@ fn bound(blocks: &[TriBlock]) -> Aabb {
 }
 
 /// Copies each used lane's triangle into its block, in parallel chunks.
-fn gather(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], prims: &[[u32; 4]], pos: &[Vec3]) {
+fn gather(blocks: &mut [TriBlock], indices: &[[[u32; 3]; 4]], pos: &[Vec3]) {
     blocks
         .par_chunks_mut(GATHER_CHUNK)
         .zip(indices.par_chunks(GATHER_CHUNK))
-        .zip(prims.par_chunks(GATHER_CHUNK))
-        .for_each(|((b, i), p)| fill(b, i, p, pos));
+        .for_each(|(b, i)| fill(b, i, pos));
 }
 
 /// Refits the subtree whose root is `nodes[0]` (global index `base`) and which owns exactly the
@@ -209,6 +233,28 @@ fn refit_sweep<const K: usize>(nodes: &mut [WideNode<K>], base: u32, leaf: &mut 
                 Child::Node(c) => tail[(c - base) as usize - i - 1].bounds(),
             };
             node.set_lane(k, b);
+        }
+    }
+}
+
+/// The refit of the whole tree on one thread: first every leaf lane in node order (which is
+/// block order, so blocks and their vertex indices stream forward), then every interior lane in
+/// one reverse sweep.
+fn refit_two_pass<const K: usize>(nodes: &mut [WideNode<K>], leaf: &mut impl LeafBox) {
+    for node in nodes.iter_mut() {
+        for k in 0..K {
+            if let Child::Leaf { first, count } = node.child(k) {
+                node.set_lane(k, leaf.leaf(first, count));
+            }
+        }
+    }
+    for i in (0..nodes.len()).rev() {
+        let (head, tail) = nodes.split_at_mut(i + 1);
+        let node = &mut head[i];
+        for k in 0..K {
+            if let Child::Node(c) = node.child(k) {
+                node.set_lane(k, tail[c as usize - i - 1].bounds());
+            }
         }
     }
 }
