@@ -78,6 +78,13 @@ fn main() {
     };
     for f in ray_files {
         let rays = dynbvh::io::read_rays(f.as_ref()).unwrap();
+        if std::env::var_os("ONLY_BVH8").is_some() {
+            // For profilers: nothing but BVH8 closest hits.
+            for _ in 0..5 {
+                std::hint::black_box(rays.iter().filter(|r| w8.closest_hit(r).is_some()).count());
+            }
+            continue;
+        }
         let step = (rays.len() / 4096).max(1);
         let sample: Vec<Ray> = rays.iter().step_by(step).copied().collect();
         let mis4 = sample

@@ -127,18 +127,22 @@ pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
 }
 
 /// Four triangles as structure of arrays: rows `v0.x, v0.y, v0.z, v1.x, .., v2.z`, one lane
-/// per triangle. Unused lanes hold NaN, which the triangle test never hits.
+/// per triangle, and each lane's triangle index. Unused lanes hold NaN, which the triangle test
+/// never hits, and the index [`NO_PRIM`](super::NO_PRIM).
 #[repr(C, align(16))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriBlock {
     /// The nine coordinate rows.
     pub rows: [[f32; 4]; 9],
+    /// The triangle index of each lane (in the mesh's order).
+    pub prims: [u32; 4],
 }
 
 impl TriBlock {
     /// A block of four unused lanes.
     pub const EMPTY: Self = Self {
         rows: [[f32::NAN; 4]; 9],
+        prims: [super::NO_PRIM; 4],
     };
 
     /// The triangle in lane `l`.

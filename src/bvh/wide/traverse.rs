@@ -15,6 +15,9 @@ const SMALL_STACK: usize = 64;
 /// Enough for any tree: depth at most `MAX_DEPTH`, at most 7 pending siblings per level.
 const BIG_STACK: usize = crate::bvh::MAX_DEPTH * 8;
 
+/// Whether the children pushed on the stack are prefetched.
+const PREFETCH: bool = true;
+
 /// The closest hit so far: block lane (`4 * block + lane`), distance, barycentrics.
 type Best = Option<(usize, f32, f32, f32)>;
 
@@ -39,7 +42,7 @@ impl<const K: usize> WideBvh<K> {
             t,
             u,
             v,
-            prim: self.block_prims[slot / 4][slot % 4],
+            prim: self.blocks[slot / 4].prims[slot % 4],
         })
     }
 
@@ -60,6 +63,19 @@ impl<const K: usize> WideBvh<K> {
             self.traverse::<true, BIG_STACK>(ray, counters)
         }
         .is_some()
+    }
+
+    /// Asks for the first cache lines of a child that is likely visited soon.
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        if c & LEAF_BIT != 0 {
+            let (first, _) = leaf_range(c);
+            if let Some(b) = self.blocks.get(first as usize) {
+                crate::simd::prefetch(b);
+            }
+        } else if let Some(n) = self.nodes.get(c as usize) {
+            crate::simd::prefetch(n);
+        }
     }
 
     /// The traversal both queries share. `ANY` returns at the first hit and visits children in
@@ -92,7 +108,7 @@ impl<const K: usize> WideBvh<K> {
                 let first = first as usize;
                 for (b, block) in (first..).zip(&blocks[first..first + count as usize]) {
                     for l in 0..4 {
-                        if self.block_prims[b][l] != NO_PRIM {
+                        if block.prims[l] != NO_PRIM {
                             counters.prim();
                         }
                     }
@@ -143,6 +159,9 @@ impl<const K: usize> WideBvh<K> {
                             let k = mask.trailing_zeros() as usize;
                             mask &= mask - 1;
                             stack[sp] = (node.child[k], dist[k]);
+                            if PREFETCH {
+                                self.prefetch(stack[sp].0);
+                            }
                             sp += 1;
                         }
                         cur = node.child[first];
@@ -154,6 +173,9 @@ impl<const K: usize> WideBvh<K> {
                         let k = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
                         let e = (node.child[k], dist[k]);
+                        if PREFETCH {
+                            self.prefetch(e.0);
+                        }
                         let mut j = sp;
                         while j > base && stack[j - 1].1 < e.1 {
                             stack[j] = stack[j - 1];
