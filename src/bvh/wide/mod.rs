@@ -247,6 +247,7 @@ impl<const K: usize> WideBvh<K> {
         }
         w.refit_boxes();
         w.stack_need = w.compute_stack_need();
+        assert!(w.stack_need < traverse::BIG_STACK, "tree too deep");
         w
     }
 

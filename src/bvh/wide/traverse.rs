@@ -12,8 +12,9 @@ use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
 /// Stack entries of the traversal for trees whose bound fits (nearly all); deeper trees use
 /// [`BIG_STACK`].
 const SMALL_STACK: usize = 64;
-/// Enough for any tree: depth at most `MAX_DEPTH`, at most 7 pending siblings per level.
-const BIG_STACK: usize = crate::bvh::MAX_DEPTH * 8;
+/// Enough for any tree: the binary depth is at most `MAX_DEPTH`, splitting binary leaves too
+/// large for one lane adds at most 27 levels, and each level leaves at most 7 siblings pending.
+pub(super) const BIG_STACK: usize = (crate::bvh::MAX_DEPTH + 32) * 8;
 
 /// Whether the children pushed on the stack are prefetched.
 const PREFETCH: bool = true;
