@@ -1,5 +1,6 @@
-//! The crate's few `unsafe` operations, each behind a safe function. The SIMD kernels themselves
-//! use the safe `wide` crate (`src/bvh/wide/lanes.rs`); what is here has no safe equivalent.
+//! The crate's few `unsafe` operations, each behind a safe crate-private function. The SIMD
+//! kernels themselves use the safe `wide` crate (`src/bvh/wide/lanes.rs`); what is here has no
+//! safe equivalent.
 
 /// [`prefetch`] of every cache line `r` spans.
 #[inline(always)]
