@@ -9,7 +9,7 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use dynbvh::anim::Scene;
-use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh4, MeshBvh8};
 use dynbvh::geom::shapes::{bumpy_sphere, sine_deform};
 use dynbvh::geom::{Aabb, Ray, TriMesh};
 use dynbvh::io::{read_rays, read_tri};
@@ -48,12 +48,23 @@ struct Loaded {
     random: Vec<Ray>,
     /// Binned-16 tree over the rest pose: the one traversal and refit run on.
     bvh: OnceCell<MeshBvh>,
+    /// That tree collapsed into 4- and 8-wide trees.
+    wide: OnceCell<(MeshBvh4, MeshBvh8)>,
 }
 
 impl Loaded {
     fn bvh(&self) -> &MeshBvh {
         self.bvh
             .get_or_init(|| MeshBvh::build(&self.rest, &BuildParams::BINNED))
+    }
+
+    fn wide(&self) -> &(MeshBvh4, MeshBvh8) {
+        self.wide.get_or_init(|| {
+            (
+                MeshBvh4::from_mesh_bvh(self.bvh()),
+                MeshBvh8::from_mesh_bvh(self.bvh()),
+            )
+        })
     }
 }
 
@@ -118,6 +129,7 @@ impl Source {
                     rest,
                     deformed,
                     bvh: OnceCell::new(),
+                    wide: OnceCell::new(),
                 }
             }
         }
@@ -136,6 +148,7 @@ fn generated(rest: TriMesh) -> Loaded {
         rest,
         deformed,
         bvh: OnceCell::new(),
+        wide: OnceCell::new(),
     }
 }
 
@@ -340,12 +353,76 @@ fn bench_packets(c: &mut Criterion, input: &Input) {
     g.finish();
 }
 
+/// The wide trees (collapsed from the binned16 tree): refit to the other pose, and closest /
+/// any hit with ids `wide_closest/<input>/bvh8-camera` etc.
+fn bench_wide(c: &mut Criterion, input: &Input) {
+    let mut g = c.benchmark_group(format!("wide_refit/{}", input.name));
+    configure(&mut g, input);
+    for k in [4, 8] {
+        g.bench_function(BenchmarkId::from_parameter(format!("bvh{k}")), |b| {
+            let l = input.get();
+            let (w4, w8) = l.wide();
+            let (mut w4, mut w8) = (w4.clone(), w8.clone());
+            let mut to_deformed = false;
+            b.iter(|| {
+                to_deformed = !to_deformed;
+                let m = if to_deformed { &l.deformed } else { &l.rest };
+                if k == 4 {
+                    w4.refit(m);
+                    black_box(w4.bounds())
+                } else {
+                    w8.refit(m);
+                    black_box(w8.bounds())
+                }
+            });
+        });
+    }
+    g.finish();
+    for (kind, any) in [("wide_closest", false), ("wide_any", true)] {
+        let mut g = c.benchmark_group(format!("{kind}/{}", input.name));
+        configure(&mut g, input);
+        g.throughput(Throughput::Elements(RAYS_PER_ITER as u64));
+        for k in [4, 8] {
+            for set in ["camera", "random"] {
+                g.bench_function(BenchmarkId::from_parameter(format!("bvh{k}-{set}")), |b| {
+                    let l = input.get();
+                    let (w4, w8) = l.wide();
+                    let rays = if set == "camera" {
+                        &l.camera
+                    } else {
+                        &l.random
+                    };
+                    let closest = |r: &Ray| {
+                        if k == 4 {
+                            w4.closest_hit(r)
+                        } else {
+                            w8.closest_hit(r)
+                        }
+                    };
+                    let hit = |r: &Ray| if k == 4 { w4.any_hit(r) } else { w8.any_hit(r) };
+                    if any {
+                        b.iter(|| rays.iter().filter(|r| hit(black_box(r))).count());
+                    } else {
+                        b.iter(|| {
+                            rays.iter()
+                                .filter_map(|r| closest(black_box(r)))
+                                .fold(0.0f32, |s, h| s + h.t)
+                        });
+                    }
+                });
+            }
+        }
+        g.finish();
+    }
+}
+
 fn all(c: &mut Criterion) {
     for input in inputs() {
         bench_build(c, &input);
         bench_refit(c, &input);
         bench_traversal(c, &input);
         bench_packets(c, &input);
+        bench_wide(c, &input);
     }
 }
 

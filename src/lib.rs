@@ -35,6 +35,6 @@ pub mod geom;
 pub mod io;
 pub mod render;
 pub mod report;
-pub mod simd;
+mod simd;
 
 pub use error::{Error, Result};

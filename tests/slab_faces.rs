@@ -4,7 +4,9 @@
 //! top edge of a wall), and a slab test that multiplies a zero distance by a huge reciprocal
 //! gets a far distance of 0 there and drops the box.
 
-use dynbvh::bvh::{BuildParams, MeshBvh, PacketMode, brute_force_any, brute_force_closest};
+use dynbvh::bvh::{
+    BuildParams, MeshBvh, MeshBvh4, MeshBvh8, PacketMode, brute_force_any, brute_force_closest,
+};
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
 
@@ -66,6 +68,8 @@ fn rays_in_a_box_face_plane_reach_its_triangles() {
             ..params
         };
         let bvh = MeshBvh::build(&mesh, &params);
+        let bvh4 = MeshBvh4::from_mesh_bvh(&bvh);
+        let bvh8 = MeshBvh8::from_mesh_bvh(&bvh);
         let mut packet = vec![None; rays.len()];
         bvh.closest_hit_packet_mode(&rays, &mut packet, PacketMode::Always);
         let mut packet_any = vec![false; rays.len()];
@@ -77,6 +81,18 @@ fn rays_in_a_box_face_plane_reach_its_triangles() {
             assert_eq!(bvh.any_hit(r), brute_force_any(&mesh, r), "ray {r:?}");
             assert_eq!(packet[i].map(|h| (h.t, h.prim)), want, "packet: ray {r:?}");
             assert_eq!(packet_any[i], want.is_some(), "packet any: ray {r:?}");
+            assert_eq!(
+                bvh4.closest_hit(r).map(|h| (h.t, h.prim)),
+                want,
+                "bvh4: {r:?}"
+            );
+            assert_eq!(
+                bvh8.closest_hit(r).map(|h| (h.t, h.prim)),
+                want,
+                "bvh8: {r:?}"
+            );
+            assert_eq!(bvh4.any_hit(r), want.is_some(), "bvh4 any: {r:?}");
+            assert_eq!(bvh8.any_hit(r), want.is_some(), "bvh8 any: {r:?}");
         }
     }
 }

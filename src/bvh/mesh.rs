@@ -17,7 +17,7 @@ pub struct MeshBvh {
     pub(super) tris: Vec<[Vec3; 3]>,
     /// `leaf_indices[slot]` are that triangle's vertex indices: refit reads them in order
     /// instead of looking each triangle up through the mesh's index buffer.
-    leaf_indices: Vec<[u32; 3]>,
+    pub(super) leaf_indices: Vec<[u32; 3]>,
 }
 
 impl MeshBvh {

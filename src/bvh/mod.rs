@@ -17,6 +17,7 @@ mod packet;
 mod refit;
 mod traverse;
 mod validate;
+pub mod wide;
 
 pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
@@ -26,6 +27,7 @@ pub use packet::{
     MAX_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
 };
 pub use traverse::{Counters, TraversalStats};
+pub use wide::{MeshBvh4, MeshBvh8, WideBvh, WideNode};
 
 /// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.
 pub const MAX_DEPTH: usize = 128;

@@ -17,7 +17,8 @@
 
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
-use crate::simd::packet::{LANES, RayLanes, prefetch};
+use crate::simd::packet::{LANES, RayLanes};
+use crate::simd::prefetch;
 use glam::{Vec3, Vec3A};
 use wide::f32x16 as F;
 

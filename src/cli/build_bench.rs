@@ -6,6 +6,7 @@ use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
 use dynbvh::report::build_bench::{self, Options, Row};
 use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
+use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `build-bench`.
@@ -33,9 +34,14 @@ pub struct BuildBenchArgs {
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     json: bool,
-    /// Also write `build_bench.json` and the chart `build_bench.svg`/`.png` into this folder.
+    /// Also write `build_bench.json` and the chart `build_bench.svg`/`.png` into this folder
+    /// (and the wide trees' rows into `build_bench_wide.json`).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+    /// Skip the BVH4/BVH8 rows (wide trees collapsed from the binned16 tree). With `--json`
+    /// they are only written to `--out`, so stdout stays one JSON array.
+    #[arg(long)]
+    no_wide: bool,
 }
 
 fn parse_method(s: &str) -> Result<BuildParams> {
@@ -143,10 +149,21 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         ..Options::default()
     };
     let rows = build_bench::run(&mesh, &methods, &sets, opts, |m| eprintln!("  {m} ..."));
+    let wide_rows = if args.no_wide {
+        Vec::new()
+    } else {
+        wide_bench::run(&mesh, &BuildParams::BINNED, &sets, opts, |t| {
+            eprintln!("  {t} (collapsed from binned16) ...");
+        })
+    };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
         print_table(&rows);
+        if !wide_rows.is_empty() {
+            println!();
+            print_wide_table(&wide_rows);
+        }
     }
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -158,8 +175,14 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
             .save(&stem, 900, 600)
             .with_context(|| format!("writing {}.svg/.png", stem.display()))?;
         eprintln!("wrote {} and {}.svg/.png", json.display(), stem.display());
+        if !wide_rows.is_empty() {
+            let json = dir.join("build_bench_wide.json");
+            std::fs::write(&json, serde_json::to_string_pretty(&wide_rows)?)
+                .with_context(|| format!("writing {}", json.display()))?;
+            eprintln!("wrote {}", json.display());
+        }
     }
-    if rows.iter().any(|r| r.mismatches > 0) {
+    if rows.iter().any(|r| r.mismatches > 0) || wide_rows.iter().any(|r| r.mismatches > 0) {
         bail!("some rays disagree with brute force");
     }
     Ok(())
@@ -197,6 +220,40 @@ fn print_table(rows: &[Row]) {
             r.any_mrays,
             r.packet_mrays,
             r.packet_any_mrays,
+            r.mismatches,
+            r.checked
+        );
+    }
+}
+
+fn print_wide_table(rows: &[WideRow]) {
+    println!(
+        "{:<16} {:>11} {:>9} {:>8} {:>5} {:>6} {:>9} {:<14} {:>8} {:>8} {:>9}",
+        "wide tree",
+        "collapse ms",
+        "refit ms",
+        "nodes",
+        "fill",
+        "depth",
+        "MiB",
+        "rays",
+        "Mrays/s",
+        "any Mr/s",
+        "mismatch"
+    );
+    for r in rows {
+        println!(
+            "{:<16} {:>11.1} {:>9.2} {:>8} {:>5.2} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            format!("{} ({})", r.tree, r.from),
+            r.collapse_ms,
+            r.refit_ms,
+            r.nodes,
+            r.fill,
+            r.depth,
+            r.memory_bytes as f64 / (1 << 20) as f64,
+            r.rays,
+            r.mrays,
+            r.any_mrays,
             r.mismatches,
             r.checked
         );

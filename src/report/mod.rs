@@ -4,3 +4,4 @@ pub mod build_bench;
 pub mod charts;
 pub mod frame_bench;
 pub mod rays;
+pub mod wide_bench;

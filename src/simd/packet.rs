@@ -206,18 +206,3 @@ impl RayLanes {
         }
     }
 }
-
-/// Asks the CPU to start loading the cache line of `r` (a hint; nothing without SSE).
-#[inline(always)]
-pub fn prefetch<T>(r: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: `_mm_prefetch` only hints the cache: it never faults and reads nothing into the
-    // program, whatever the address; SSE is part of every x86_64 target.
-    unsafe {
-        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(
-            (r as *const T).cast(),
-        );
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = r;
-}

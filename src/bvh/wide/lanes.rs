@@ -1,0 +1,300 @@
+//! The SIMD kernels of the wide tree: the slab test of one ray against all `K` child boxes of a
+//! node at once, and the union of a node's child boxes. Written with the `wide` crate (AVX or
+//! SSE when the target has them, plain arrays otherwise), so there is no `unsafe` here.
+
+use crate::geom::{Aabb, FAR_SCALE, Ray};
+use glam::Vec3;
+use wide::{f32x4, f32x8};
+
+/// Per-ray constants of the slab test: which of a node's six bound rows is the near and the far
+/// plane on each axis (by the sign of the reciprocal direction), the origin subtracted from each
+/// (`Ray::slab_lo` from a min plane, `Ray::slab_hi` from a max plane) and the reciprocal.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RayLanes {
+    /// Origin subtracted from bound row `i` (rows min x, y, z, max x, y, z).
+    origin: [f32; 6],
+    inv: [f32; 3],
+    tmin: f32,
+    near: [usize; 3],
+    far: [usize; 3],
+}
+
+impl RayLanes {
+    #[inline(always)]
+    pub(super) fn new(ray: &Ray) -> Self {
+        let mut near = [0, 1, 2];
+        let mut far = [3, 4, 5];
+        for a in 0..3 {
+            // A negative reciprocal enters through the max plane (a zero component's is `+inf`:
+            // min plane first). For a box with min <= max this gives exactly the distances of
+            // `Ray::hit_box` (which takes min/max of the two); an inverted (empty) box misses.
+            if ray.inv_dir[a].is_sign_negative() {
+                near[a] = 3 + a;
+                far[a] = a;
+            }
+        }
+        Self {
+            origin: [
+                ray.slab_lo.x,
+                ray.slab_lo.y,
+                ray.slab_lo.z,
+                ray.slab_hi.x,
+                ray.slab_hi.y,
+                ray.slab_hi.z,
+            ],
+            inv: ray.inv_dir.into(),
+            tmin: ray.tmin,
+            near,
+            far,
+        }
+    }
+}
+
+/// Tests the ray against the `K` boxes `bounds` (rows min x, y, z, max x, y, z; one lane per
+/// child) within `[tmin, tmax]`. Returns the mask of hit lanes (bit `i` for lane `i`) and writes
+/// every lane's entry distance into `dist`. Lane by lane the same arithmetic as
+/// [`Ray::hit_box`], so just as conservative.
+#[inline(always)]
+pub(super) fn slab<const K: usize>(
+    bounds: &[[f32; K]; 6],
+    r: &RayLanes,
+    tmax: f32,
+    dist: &mut [f32; K],
+) -> u32 {
+    if K == 8 {
+        let row = |i: usize| -> f32x8 {
+            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
+            f32x8::from(*a)
+        };
+        let t = |a: usize, plane: usize| {
+            (row(plane) - f32x8::splat(r.origin[plane])) * f32x8::splat(r.inv[a])
+        };
+        let tn = t(0, r.near[0])
+            .fast_max(t(1, r.near[1]))
+            .fast_max(t(2, r.near[2]).fast_max(f32x8::splat(r.tmin)));
+        let tf = t(0, r.far[0])
+            .fast_min(t(1, r.far[1]))
+            .fast_min(t(2, r.far[2]).fast_min(f32x8::splat(tmax)))
+            * f32x8::splat(FAR_SCALE);
+        dist.as_mut_slice().copy_from_slice(&tn.to_array());
+        tn.simd_le(tf).to_bitmask()
+    } else if K == 4 {
+        let row = |i: usize| -> f32x4 {
+            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
+            f32x4::from(*a)
+        };
+        let t = |a: usize, plane: usize| {
+            (row(plane) - f32x4::splat(r.origin[plane])) * f32x4::splat(r.inv[a])
+        };
+        let tn = t(0, r.near[0])
+            .fast_max(t(1, r.near[1]))
+            .fast_max(t(2, r.near[2]).fast_max(f32x4::splat(r.tmin)));
+        let tf = t(0, r.far[0])
+            .fast_min(t(1, r.far[1]))
+            .fast_min(t(2, r.far[2]).fast_min(f32x4::splat(tmax)))
+            * f32x4::splat(FAR_SCALE);
+        dist.as_mut_slice().copy_from_slice(&tn.to_array());
+        tn.simd_le(tf).to_bitmask()
+    } else {
+        let mut mask = 0;
+        for i in 0..K {
+            let t = |a: usize, plane: usize| (bounds[plane][i] - r.origin[plane]) * r.inv[a];
+            let tn = fmax(
+                fmax(t(0, r.near[0]), t(1, r.near[1])),
+                fmax(t(2, r.near[2]), r.tmin),
+            );
+            let tf = fmin(
+                fmin(t(0, r.far[0]), t(1, r.far[1])),
+                fmin(t(2, r.far[2]), tmax),
+            ) * FAR_SCALE;
+            dist[i] = tn;
+            mask |= u32::from(tn <= tf) << i;
+        }
+        mask
+    }
+}
+
+#[inline(always)]
+fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The union of a node's `K` child boxes (empty lanes hold the empty box).
+#[inline(always)]
+pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
+    let lo = |i: usize| bounds[i].iter().fold(f32::INFINITY, |m, &v| fmin(m, v));
+    let hi = |i: usize| bounds[i].iter().fold(f32::NEG_INFINITY, |m, &v| fmax(m, v));
+    Aabb::new(
+        Vec3::new(lo(0), lo(1), lo(2)),
+        Vec3::new(hi(3), hi(4), hi(5)),
+    )
+}
+
+/// Four triangles as structure of arrays: rows `v0.x, v0.y, v0.z, v1.x, .., v2.z`, one lane
+/// per triangle, and each lane's triangle index. Unused lanes hold NaN, which the triangle test
+/// never hits, and the index [`NO_PRIM`](super::NO_PRIM).
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriBlock {
+    /// The nine coordinate rows.
+    pub rows: [[f32; 4]; 9],
+    /// The triangle index of each lane (in the mesh's order).
+    pub prims: [u32; 4],
+}
+
+impl TriBlock {
+    /// A block of four unused lanes.
+    pub const EMPTY: Self = Self {
+        rows: [[f32::NAN; 4]; 9],
+        prims: [super::NO_PRIM; 4],
+    };
+
+    /// The triangle in lane `l`.
+    #[must_use]
+    #[inline(always)]
+    pub fn get(&self, l: usize) -> [Vec3; 3] {
+        let r = &self.rows;
+        [0, 3, 6].map(|j| Vec3::new(r[j][l], r[j + 1][l], r[j + 2][l]))
+    }
+
+    /// Puts a triangle into lane `l`.
+    #[inline(always)]
+    pub fn set(&mut self, l: usize, t: &[Vec3; 3]) {
+        for (j, v) in t.iter().enumerate() {
+            self.rows[3 * j][l] = v.x;
+            self.rows[3 * j + 1][l] = v.y;
+            self.rows[3 * j + 2][l] = v.z;
+        }
+    }
+}
+
+/// Per-ray constants of the four-wide watertight triangle test: the rows holding each vertex's
+/// permuted coordinates, and the shear of [`RayTriPrecomp`](crate::geom::RayTriPrecomp).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct TriLanes {
+    k: [usize; 3],
+    origin: [f32; 3],
+    shear: [f32; 3],
+    tmin: f32,
+}
+
+impl TriLanes {
+    #[inline(always)]
+    pub(super) fn new(ray: &Ray) -> Self {
+        // The same permutation and shear as `RayTriPrecomp::new`.
+        let d = ray.dir;
+        let a = d.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / d[kz];
+        Self {
+            k: [kx, ky, kz],
+            origin: [ray.origin[kx], ray.origin[ky], ray.origin[kz]],
+            shear: [d[kx] * sz, d[ky] * sz, sz],
+            tmin: ray.tmin,
+        }
+    }
+}
+
+/// The outcome of testing a block.
+pub(super) enum BlockHit {
+    /// No lane is hit closer than `tmax`.
+    None,
+    /// Lane `.0` is hit at `t = .1` with barycentrics `.2`, `.3`: the nearest, and the first
+    /// lane among equally near ones.
+    Hit(usize, f32, f32, f32),
+    /// Some edge function is exactly zero: the caller must use the scalar test (which
+    /// redoes such edges in f64) on every lane, in order.
+    Scalar,
+}
+
+/// The watertight test of [`intersect_triangle`](crate::geom::intersect_triangle) on four
+/// triangles at once, lane by lane the same operations in the same order, so every distance and
+/// barycentric is bit for bit the scalar test's.
+#[inline(always)]
+pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
+    let row = |i: usize| f32x4::from(b.rows[i]);
+    let o = |a: usize| f32x4::splat(r.origin[a]);
+    let [kx, ky, kz] = r.k;
+    let (sx, sy, sz) = (
+        f32x4::splat(r.shear[0]),
+        f32x4::splat(r.shear[1]),
+        f32x4::splat(r.shear[2]),
+    );
+    // Vertex j translated to the ray origin, then sheared: (x, y) and the unsheared z.
+    let vert = |j: usize| {
+        let px = row(3 * j + kx) - o(0);
+        let py = row(3 * j + ky) - o(1);
+        let pz = row(3 * j + kz) - o(2);
+        (px - sx * pz, py - sy * pz, pz)
+    };
+    let (ax, ay, az) = vert(0);
+    let (bx, by, bz) = vert(1);
+    let (cx, cy, cz) = vert(2);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let zero = f32x4::ZERO;
+    if (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask() != 0 {
+        return BlockHit::Scalar;
+    }
+    let neg = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero)).to_bitmask();
+    let pos = (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero)).to_bitmask();
+    let det = u + v + w;
+    let bad_det = (det.simd_eq(zero) | !det.is_finite()).to_bitmask();
+    let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+    let rcp = f32x4::splat(1.0) / det;
+    let t = t_scaled * rcp;
+    let in_range = (t.simd_ge(f32x4::splat(r.tmin)) & t.simd_lt(f32x4::splat(tmax))).to_bitmask();
+    let mut mask = in_range & !(neg & pos) & !bad_det;
+    if mask == 0 {
+        return BlockHit::None;
+    }
+    let t = t.to_array();
+    let mut best = mask.trailing_zeros() as usize;
+    mask &= mask - 1;
+    while mask != 0 {
+        let l = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        if t[l] < t[best] {
+            best = l;
+        }
+    }
+    let (bu, bv) = ((v * rcp).to_array(), (w * rcp).to_array());
+    BlockHit::Hit(best, t[best], bu[best], bv[best])
+}
+
+/// The box of the triangles in `blocks`, skipping NaN coordinates (`if p < lo { p } else { lo }`
+/// never keeps a NaN `p`). Unused lanes are all NaN and so add nothing.
+#[inline(always)]
+pub(super) fn bound_lanes(blocks: &[TriBlock]) -> Aabb {
+    let mut lo = [f32x4::splat(f32::INFINITY); 3];
+    let mut hi = [f32x4::splat(f32::NEG_INFINITY); 3];
+    for b in blocks {
+        for j in 0..3 {
+            for a in 0..3 {
+                let p = f32x4::from(b.rows[3 * j + a]);
+                lo[a] = p.simd_lt(lo[a]).select(p, lo[a]);
+                hi[a] = p.simd_gt(hi[a]).select(p, hi[a]);
+            }
+        }
+    }
+    let lo = lo.map(|v| v.to_array().into_iter().fold(f32::INFINITY, fmin));
+    let hi = hi.map(|v| v.to_array().into_iter().fold(f32::NEG_INFINITY, fmax));
+    Aabb::new(Vec3::from(lo), Vec3::from(hi))
+}

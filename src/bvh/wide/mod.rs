@@ -1,0 +1,599 @@
+//! Wide BVHs (4 or 8 children per node) made from the binary BVH by collapsing, with the child
+//! boxes stored structure-of-arrays so that one SIMD operation tests a ray against all of them.
+//!
+//! Collapsing: a wide node starts from a binary node's two children and repeatedly replaces the
+//! child with the largest surface area by its own two children, until it has `K` children or
+//! only leaves are left. Binary leaves become wide leaves unchanged, so the triangles keep the
+//! binary tree's leaf order (and the [`MeshBvh`]'s leaf-ordered copy of them).
+//!
+//! Invariants (checked by [`WideBvh::validate`]):
+//! - node 0 is the root; every interior child index is greater than its parent's (children after
+//!   parents, so refit is one reverse sweep), and every subtree occupies a contiguous range of
+//!   nodes (depth-first order);
+//! - leaves own contiguous ranges of triangle slots covering every slot once, in order;
+//! - an empty child lane holds the empty box (`min = +inf`, `max = -inf`), which no ray hits;
+//! - every lane's box holds its subtree's triangles.
+
+mod lanes;
+mod refit;
+mod traverse;
+
+pub use lanes::TriBlock;
+
+use super::{BuildParams, Bvh, MAX_DEPTH, MeshBvh, Node};
+use crate::geom::{Aabb, TriMesh};
+use glam::Vec3;
+
+/// A BVH with four children per node (SSE width).
+pub type MeshBvh4 = WideBvh<4>;
+/// A BVH with eight children per node (AVX width).
+pub type MeshBvh8 = WideBvh<8>;
+
+/// Child value of an empty lane (the root is never anyone's child).
+const EMPTY_CHILD: u32 = 0;
+/// Set on leaf children.
+const LEAF_BIT: u32 = 1 << 31;
+/// Bits of a leaf child holding its first triangle slot.
+const FIRST_BITS: u32 = 27;
+/// Most triangles one leaf child holds (its count is stored in 4 bits); larger binary leaves
+/// are split into several.
+pub const MAX_WIDE_LEAF: u32 = 16;
+/// Binary subtrees of at most this many triangles that do not fit into their parent's lanes
+/// become one leaf lane (two blocks of four) instead of a nearly empty node of their own.
+/// On sphere_1m (BVH8, one thread) 6, 8 and 12 traced within noise of each other, and 4 about
+/// 15% slower on random rays; 8 fills nodes to 7.75 children of 8.
+const MERGE: u32 = 8;
+/// Most triangles a wide tree holds (its leaves store the first slot in 27 bits).
+pub const MAX_WIDE_PRIMS: usize = 1 << FIRST_BITS;
+
+/// One wide node: `K` child boxes as structure of arrays and `K` child references.
+///
+/// `bounds` rows are min x, min y, min z, max x, max y, max z, one lane per child. A child
+/// reference is `0` for an empty lane, a node index for an interior child, or a leaf:
+/// bit 31 set, bits 27..31 the triangle count minus one, bits 0..27 the first triangle slot.
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WideNode<const K: usize> {
+    /// Child boxes, one lane per child.
+    pub bounds: [[f32; K]; 6],
+    /// Child references (see the type's docs).
+    pub child: [u32; K],
+}
+
+impl<const K: usize> WideNode<K> {
+    /// A node whose lanes are all empty.
+    const EMPTY: Self = Self {
+        bounds: [
+            [f32::INFINITY; K],
+            [f32::INFINITY; K],
+            [f32::INFINITY; K],
+            [f32::NEG_INFINITY; K],
+            [f32::NEG_INFINITY; K],
+            [f32::NEG_INFINITY; K],
+        ],
+        child: [EMPTY_CHILD; K],
+    };
+
+    /// The box of lane `i`.
+    #[must_use]
+    pub fn lane_bounds(&self, i: usize) -> Aabb {
+        let b = &self.bounds;
+        Aabb::new(
+            Vec3::new(b[0][i], b[1][i], b[2][i]),
+            Vec3::new(b[3][i], b[4][i], b[5][i]),
+        )
+    }
+
+    /// Replaces the box of lane `i`.
+    #[inline(always)]
+    fn set_lane(&mut self, i: usize, b: Aabb) {
+        let v = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+        for (row, v) in self.bounds.iter_mut().zip(v) {
+            row[i] = v;
+        }
+    }
+
+    /// The union of the child boxes.
+    #[must_use]
+    pub fn bounds(&self) -> Aabb {
+        lanes::union_lanes(&self.bounds)
+    }
+
+    /// What lane `i` holds.
+    #[must_use]
+    #[inline(always)]
+    pub fn child(&self, i: usize) -> Child {
+        decode(self.child[i])
+    }
+}
+
+/// What a child lane of a [`WideNode`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Child {
+    /// Nothing: the lane's box is empty.
+    Empty,
+    /// The node at this index.
+    Node(u32),
+    /// Triangle slots `first .. first + count`.
+    Leaf {
+        /// First triangle slot.
+        first: u32,
+        /// Number of triangles (1 ..= [`MAX_WIDE_LEAF`]).
+        count: u32,
+    },
+}
+
+#[inline(always)]
+fn decode(c: u32) -> Child {
+    if c & LEAF_BIT != 0 {
+        let (first, count) = leaf_range(c);
+        Child::Leaf { first, count }
+    } else if c == EMPTY_CHILD {
+        Child::Empty
+    } else {
+        Child::Node(c)
+    }
+}
+
+#[inline(always)]
+fn leaf_range(c: u32) -> (u32, u32) {
+    (c & ((1 << FIRST_BITS) - 1), ((c >> FIRST_BITS) & 15) + 1)
+}
+
+fn encode_leaf(first: u32, count: u32) -> u32 {
+    debug_assert!((1..=MAX_WIDE_LEAF).contains(&count) && (first as usize) < MAX_WIDE_PRIMS);
+    LEAF_BIT | ((count - 1) << FIRST_BITS) | first
+}
+
+/// A wide BVH (`K` = 4 or 8 children per node) over a triangle mesh, with the triangles copied
+/// into blocks of four ([`TriBlock`]) in leaf order. Built by collapsing a binary [`MeshBvh`];
+/// refitted in place.
+#[derive(Clone, Debug, Default)]
+pub struct WideBvh<const K: usize> {
+    nodes: Vec<WideNode<K>>,
+    /// Each leaf owns a contiguous run of blocks; unused lanes are NaN.
+    blocks: Vec<TriBlock>,
+    /// The vertex indices of each block lane, for refit (`[UNUSED; 3]` for unused lanes).
+    block_indices: Vec<[[u32; 3]; 4]>,
+    prim_count: usize,
+    /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
+    /// path of each node's child count minus one).
+    stack_need: usize,
+}
+
+/// The triangle index of an unused block lane.
+pub const NO_PRIM: u32 = u32::MAX;
+/// The vertex indices of an unused block lane.
+const UNUSED: u32 = u32::MAX;
+
+/// A collapse candidate: a binary node, or a range of triangle slots (a piece of a binary leaf
+/// too large for one wide leaf).
+#[derive(Clone, Copy, Debug)]
+enum Item {
+    Node(u32),
+    Range(u32, u32),
+}
+
+impl<const K: usize> WideBvh<K> {
+    const WIDTH_OK: () = assert!(K == 4 || K == 8, "wide BVHs have 4 or 8 children per node");
+
+    /// Builds the binary tree with `params` and collapses it.
+    ///
+    /// # Panics
+    /// When a triangle's vertex index is out of range, or the mesh has more than
+    /// [`MAX_WIDE_PRIMS`] triangles.
+    #[must_use]
+    pub fn build(mesh: &TriMesh, params: &BuildParams) -> Self {
+        Self::build_indexed(&mesh.positions, &mesh.indices, params)
+    }
+
+    /// [`WideBvh::build`] from positions and triangle indices held elsewhere.
+    ///
+    /// # Panics
+    /// As [`WideBvh::build`].
+    #[must_use]
+    pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
+        Self::from_mesh_bvh(&MeshBvh::build_indexed(positions, indices, params))
+    }
+
+    /// Collapses a binary tree into a wide one (the binary tree is left as it is).
+    ///
+    /// # Panics
+    /// When the tree has more than [`MAX_WIDE_PRIMS`] triangles.
+    #[must_use]
+    pub fn from_mesh_bvh(m: &MeshBvh) -> Self {
+        let () = Self::WIDTH_OK;
+        let bvh = &m.bvh;
+        assert!(
+            bvh.prim_count() <= MAX_WIDE_PRIMS,
+            "a wide BVH holds at most {MAX_WIDE_PRIMS} triangles"
+        );
+        let mut w = Self {
+            prim_count: bvh.prim_count(),
+            ..Self::default()
+        };
+        if bvh.nodes().is_empty() {
+            return w;
+        }
+        let c = Collapse::new(bvh, &m.tris, MERGE);
+        let root = Item::Node(0);
+        let first = if c.fits_leaf(root) {
+            vec![root]
+        } else {
+            c.open(root).to_vec()
+        };
+        c.node(first, &mut w.nodes);
+        // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
+        // subtree's blocks are contiguous too).
+        let prims = bvh.prim_indices();
+        for n in &mut w.nodes {
+            for k in 0..K {
+                if let Child::Leaf { first, count } = n.child(k) {
+                    let start = w.blocks.len() as u32;
+                    for chunk in (first..first + count).collect::<Vec<_>>().chunks(4) {
+                        let mut b = TriBlock::EMPTY;
+                        let mut idx = [[UNUSED; 3]; 4];
+                        for (l, &slot) in chunk.iter().enumerate() {
+                            b.set(l, &m.tris[slot as usize]);
+                            b.prims[l] = prims[slot as usize];
+                            idx[l] = m.leaf_indices[slot as usize];
+                        }
+                        w.blocks.push(b);
+                        w.block_indices.push(idx);
+                    }
+                    n.child[k] = encode_leaf(start, w.blocks.len() as u32 - start);
+                }
+            }
+        }
+        w.refit_boxes();
+        w.stack_need = w.compute_stack_need();
+        assert!(w.stack_need < traverse::BIG_STACK, "tree too deep");
+        w
+    }
+
+    /// The nodes; node 0 is the root (none for the empty mesh). A leaf child's `first` and
+    /// `count` are a run of [`WideBvh::blocks`].
+    #[must_use]
+    pub fn nodes(&self) -> &[WideNode<K>] {
+        &self.nodes
+    }
+
+    /// The triangles in blocks of four, in leaf order.
+    #[must_use]
+    pub fn blocks(&self) -> &[TriBlock] {
+        &self.blocks
+    }
+
+    /// Number of triangles.
+    #[must_use]
+    pub fn prim_count(&self) -> usize {
+        self.prim_count
+    }
+
+    /// Box of the whole tree (empty for the empty tree).
+    #[must_use]
+    pub fn bounds(&self) -> Aabb {
+        self.nodes.first().map_or(Aabb::EMPTY, WideNode::bounds)
+    }
+
+    /// Bytes held: nodes, triangle blocks, and each block lane's triangle and vertex indices.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.blocks.as_slice())
+            + std::mem::size_of_val(self.block_indices.as_slice())
+    }
+
+    /// Depth of the deepest node (the root is at depth 0; 0 for the empty tree).
+    #[must_use]
+    pub fn depth(&self) -> usize {
+        let mut depth = vec![0usize; self.nodes.len()];
+        let mut deepest = 0;
+        for (i, n) in self.nodes.iter().enumerate() {
+            for k in 0..K {
+                if let Child::Node(c) = n.child(k) {
+                    depth[c as usize] = depth[i] + 1;
+                    deepest = deepest.max(depth[i] + 1);
+                }
+            }
+        }
+        deepest
+    }
+
+    /// Average number of non-empty lanes per node.
+    #[must_use]
+    pub fn fill(&self) -> f64 {
+        let used: usize = self
+            .nodes
+            .iter()
+            .map(|n| (0..K).filter(|&k| n.child(k) != Child::Empty).count())
+            .sum();
+        used as f64 / self.nodes.len().max(1) as f64
+    }
+
+    fn compute_stack_need(&self) -> usize {
+        let mut need = vec![0usize; self.nodes.len()];
+        for i in (0..self.nodes.len()).rev() {
+            let n = &self.nodes[i];
+            let mut used = 0usize;
+            let mut below = 0;
+            for k in 0..K {
+                match n.child(k) {
+                    Child::Empty => {}
+                    Child::Leaf { .. } => used += 1,
+                    Child::Node(c) => {
+                        used += 1;
+                        below = below.max(need[c as usize]);
+                    }
+                }
+            }
+            need[i] = used.saturating_sub(1) + below;
+        }
+        need.first().copied().unwrap_or(0)
+    }
+
+    /// Checks the invariants of the module docs against `mesh`: the message names the first
+    /// broken one.
+    pub fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
+        mesh.check()?;
+        let n = self.prim_count;
+        if mesh.len() != n || self.block_indices.len() != self.blocks.len() {
+            return Err(format!("tree has {n} triangles, mesh has {}", mesh.len()));
+        }
+        let mut seen = vec![false; n];
+        for (b, block) in self.blocks.iter().enumerate() {
+            for (l, &p) in block.prims.iter().enumerate() {
+                if p == NO_PRIM {
+                    if block.get(l).iter().any(|v| !v.is_nan())
+                        || self.block_indices[b][l] != [UNUSED; 3]
+                    {
+                        return Err(format!("unused lane {l} of block {b} is not NaN"));
+                    }
+                    continue;
+                }
+                match seen.get_mut(p as usize) {
+                    Some(s) if !*s => *s = true,
+                    _ => return Err(format!("triangle index {p} repeated or out of range")),
+                }
+                let t = block.get(l);
+                let want = mesh.triangle(p as usize);
+                // Compare bits: NaN coordinates are copied as they are.
+                if t.map(|v| v.to_array().map(f32::to_bits))
+                    != want.map(|v| v.to_array().map(f32::to_bits))
+                {
+                    return Err(format!(
+                        "block {b} lane {l} holds a stale copy of triangle {p}"
+                    ));
+                }
+                if self.block_indices[b][l] != mesh.indices[p as usize] {
+                    return Err(format!("block {b} lane {l} has stale vertex indices"));
+                }
+            }
+        }
+        if seen.iter().any(|s| !s) {
+            return Err("some triangle is in no block".into());
+        }
+        if self.nodes.is_empty() {
+            return if n == 0 {
+                Ok(())
+            } else {
+                Err(format!("no nodes but {n} triangles"))
+            };
+        }
+        let mut next_block = 0u32;
+        let end = self.check_node(0, 0, &mut next_block, mesh)?;
+        if end != self.nodes.len() {
+            return Err(format!(
+                "the root's subtree ends at {end}, not at the node count {}",
+                self.nodes.len()
+            ));
+        }
+        if next_block as usize != self.blocks.len() {
+            return Err(format!(
+                "leaves cover {next_block} of {} blocks",
+                self.blocks.len()
+            ));
+        }
+        if self.stack_need != self.compute_stack_need() {
+            return Err("stale stack bound".into());
+        }
+        Ok(())
+    }
+
+    /// Checks node `i`'s subtree (which must start at `i`) and returns one past its end.
+    /// Leaves own runs of blocks in node order, lane order.
+    fn check_node(
+        &self,
+        i: usize,
+        depth: usize,
+        next_block: &mut u32,
+        mesh: &TriMesh,
+    ) -> Result<usize, String> {
+        if depth >= MAX_DEPTH {
+            return Err(format!("node {i} is deeper than {MAX_DEPTH}"));
+        }
+        let node = &self.nodes[i];
+        let mut used = 0;
+        for k in 0..K {
+            let b = node.lane_bounds(k);
+            match node.child(k) {
+                Child::Empty => {
+                    if b != Aabb::EMPTY {
+                        return Err(format!("empty lane {k} of node {i} has box {b:?}"));
+                    }
+                }
+                Child::Leaf { first, count } => {
+                    used += 1;
+                    if first != *next_block || (first + count) as usize > self.blocks.len() {
+                        return Err(format!(
+                            "leaf lane {k} of node {i} has blocks {first}+{count}, expected to start at {next_block}"
+                        ));
+                    }
+                    for blk in first..first + count {
+                        for &p in &self.blocks[blk as usize].prims {
+                            if p == NO_PRIM {
+                                continue;
+                            }
+                            let tb = mesh.triangle_bounds(p as usize).sanitized();
+                            if !b.contains(&tb) {
+                                return Err(format!(
+                                    "leaf lane {k} of node {i} box {b:?} does not hold triangle {p} {tb:?}"
+                                ));
+                            }
+                        }
+                    }
+                    *next_block = first + count;
+                }
+                Child::Node(_) => used += 1,
+            }
+        }
+        if used == 0 {
+            return Err(format!("node {i} has no child"));
+        }
+        // Then the interior children's subtrees, each right after the previous one.
+        let mut end = i + 1;
+        for k in 0..K {
+            if let Child::Node(c) = node.child(k) {
+                if c as usize != end || end >= self.nodes.len() {
+                    return Err(format!(
+                        "lane {k} of node {i} points at {c}, expected {end} (depth-first order)"
+                    ));
+                }
+                let (b, inner) = (node.lane_bounds(k), self.nodes[c as usize].bounds());
+                if !b.contains(&inner) {
+                    return Err(format!(
+                        "lane {k} of node {i} box {b:?} does not hold its node's {inner:?}"
+                    ));
+                }
+                end = self.check_node(c as usize, depth + 1, next_block, mesh)?;
+            }
+        }
+        Ok(end)
+    }
+}
+
+/// The collapse of a binary tree.
+struct Collapse<'a> {
+    bvh: &'a Bvh,
+    tris: &'a [[Vec3; 3]],
+    /// Triangle slots `(first, count)` under each binary node.
+    ranges: Vec<(u32, u32)>,
+    /// Binary subtrees with at most this many triangles may become one leaf lane.
+    merge: u32,
+}
+
+impl<'a> Collapse<'a> {
+    fn new(bvh: &'a Bvh, tris: &'a [[Vec3; 3]], merge: u32) -> Self {
+        let nodes = bvh.nodes();
+        let mut ranges = vec![(0u32, 0u32); nodes.len()];
+        for (i, n) in nodes.iter().enumerate().rev() {
+            ranges[i] = if n.is_leaf() {
+                (n.first, n.count)
+            } else {
+                let (l, r) = (ranges[n.first as usize], ranges[n.first as usize + 1]);
+                (l.0, l.1 + r.1)
+            };
+        }
+        Self {
+            bvh,
+            tris,
+            ranges,
+            merge,
+        }
+    }
+
+    fn binary(&self, i: u32) -> &Node {
+        &self.bvh.nodes()[i as usize]
+    }
+
+    /// True when the item may become one leaf lane: a binary leaf or piece of one of at most
+    /// [`MAX_WIDE_LEAF`] triangles, or a binary subtree of at most `merge` triangles.
+    fn fits_leaf(&self, it: Item) -> bool {
+        match it {
+            Item::Node(i) => {
+                let count = self.ranges[i as usize].1;
+                if self.binary(i).is_leaf() {
+                    count <= MAX_WIDE_LEAF
+                } else {
+                    count <= self.merge.min(MAX_WIDE_LEAF)
+                }
+            }
+            Item::Range(_, count) => count <= MAX_WIDE_LEAF,
+        }
+    }
+
+    /// True when the item can be split: a binary interior node, or a range of triangles too
+    /// large for one leaf lane.
+    fn can_open(&self, it: Item) -> bool {
+        match it {
+            Item::Node(i) => !self.binary(i).is_leaf() || self.binary(i).count > MAX_WIDE_LEAF,
+            Item::Range(_, count) => count > MAX_WIDE_LEAF,
+        }
+    }
+
+    /// The triangle slots of an item that fits a leaf.
+    fn slots(&self, it: Item) -> (u32, u32) {
+        match it {
+            Item::Node(i) => self.ranges[i as usize],
+            Item::Range(first, count) => (first, count),
+        }
+    }
+
+    /// The two items an openable item splits into.
+    fn open(&self, it: Item) -> [Item; 2] {
+        let halves = |first: u32, count: u32| {
+            let h = count / 2;
+            [Item::Range(first, h), Item::Range(first + h, count - h)]
+        };
+        match it {
+            Item::Node(i) => {
+                let n = self.binary(i);
+                if n.is_leaf() {
+                    halves(n.first, n.count)
+                } else {
+                    [Item::Node(n.first), Item::Node(n.first + 1)]
+                }
+            }
+            Item::Range(first, count) => halves(first, count),
+        }
+    }
+
+    fn area(&self, it: Item) -> f32 {
+        match it {
+            Item::Node(i) => self.binary(i).bounds().half_area(),
+            Item::Range(first, count) => self.tris[first as usize..(first + count) as usize]
+                .iter()
+                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
+                .half_area(),
+        }
+    }
+
+    /// Writes a wide node over `items` (1 ..= K of them) and its subtree, depth first; returns
+    /// its index. Opens the largest-area openable item until there are `K` items.
+    fn node<const K: usize>(&self, mut items: Vec<Item>, out: &mut Vec<WideNode<K>>) -> u32 {
+        while items.len() < K {
+            let best = items
+                .iter()
+                .enumerate()
+                .filter(|(_, it)| self.can_open(**it))
+                .map(|(k, it)| (k, self.area(*it)))
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            let Some((k, _)) = best else { break };
+            let [a, b] = self.open(items[k]);
+            items[k] = a;
+            items.insert(k + 1, b);
+        }
+        let idx = out.len();
+        out.push(WideNode::EMPTY);
+        for (k, it) in items.into_iter().enumerate() {
+            let child = if self.fits_leaf(it) {
+                let (first, count) = self.slots(it);
+                encode_leaf(first, count)
+            } else {
+                self.node(self.open(it).to_vec(), out)
+            };
+            out[idx].child[k] = child;
+        }
+        idx as u32
+    }
+}

@@ -1,0 +1,209 @@
+//! Closest-hit and any-hit traversal of the wide tree: each node's children are tested in one
+//! SIMD slab test; for closest hit the hit children are visited nearest first (the others go on
+//! the stack, farthest at the bottom, with their entry distances, and are skipped when popped
+//! beyond the closest hit so far). Leaf triangles use the crate's watertight test, so the tree
+//! reports exactly the binary tree's and brute force's distance.
+
+use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab};
+use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
+use crate::bvh::Counters;
+use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
+
+/// Stack entries of the traversal for trees whose bound fits (nearly all); deeper trees use
+/// [`BIG_STACK`].
+const SMALL_STACK: usize = 64;
+/// Enough for any tree: the binary depth is at most `MAX_DEPTH`, splitting binary leaves too
+/// large for one lane adds at most 27 levels, and each level leaves at most 7 siblings pending.
+pub(super) const BIG_STACK: usize = (crate::bvh::MAX_DEPTH + 32) * 8;
+
+/// Whether the children pushed on the stack are prefetched.
+const PREFETCH: bool = true;
+
+/// The closest hit so far: block lane (`4 * block + lane`), distance, barycentrics.
+type Best = Option<(usize, f32, f32, f32)>;
+
+impl<const K: usize> WideBvh<K> {
+    /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
+        self.closest_hit_counted(ray, &mut ())
+    }
+
+    /// [`WideBvh::closest_hit`], counting nodes visited (interior and leaf) and triangles tested.
+    #[must_use]
+    #[inline]
+    pub fn closest_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> Option<Hit> {
+        let best = if self.stack_need < SMALL_STACK {
+            self.traverse::<false, SMALL_STACK>(ray, counters)
+        } else {
+            self.traverse::<false, BIG_STACK>(ray, counters)
+        };
+        best.map(|(slot, t, u, v)| Hit {
+            t,
+            u,
+            v,
+            prim: self.blocks[slot / 4].prims[slot % 4],
+        })
+    }
+
+    /// True when anything is hit along `ray` in `[ray.tmin, ray.tmax)`.
+    #[must_use]
+    #[inline]
+    pub fn any_hit(&self, ray: &Ray) -> bool {
+        self.any_hit_counted(ray, &mut ())
+    }
+
+    /// [`WideBvh::any_hit`], counting nodes visited and triangles tested.
+    #[must_use]
+    #[inline]
+    pub fn any_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> bool {
+        if self.stack_need < SMALL_STACK {
+            self.traverse::<true, SMALL_STACK>(ray, counters)
+        } else {
+            self.traverse::<true, BIG_STACK>(ray, counters)
+        }
+        .is_some()
+    }
+
+    /// Asks for the cache lines of a child that is likely visited soon: the whole node, or a
+    /// leaf's first block (prefetching every block of a leaf measured no better).
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        if c & LEAF_BIT != 0 {
+            let (first, _) = leaf_range(c);
+            if let Some(b) = self.blocks.get(first as usize) {
+                crate::simd::prefetch_all(b);
+            }
+        } else if let Some(n) = self.nodes.get(c as usize) {
+            crate::simd::prefetch_all(n);
+        }
+    }
+
+    /// The traversal both queries share. `ANY` returns at the first hit and visits children in
+    /// lane order; otherwise hit children are visited nearest first.
+    #[inline(always)]
+    fn traverse<const ANY: bool, const N: usize>(
+        &self,
+        ray: &Ray,
+        counters: &mut impl Counters,
+    ) -> Best {
+        let nodes = self.nodes.as_slice();
+        if nodes.is_empty() {
+            return None;
+        }
+        let blocks = self.blocks.as_slice();
+        let lanes = RayLanes::new(ray);
+        let tri_lanes = TriLanes::new(ray);
+        let pre = RayTriPrecomp::new(ray.dir);
+        let mut tmax = ray.tmax;
+        let mut best: Best = None;
+        let mut stack = [(0u32, 0f32); N];
+        let mut sp = 0usize;
+        let mut dist = [0f32; K];
+        // The root, as an interior reference.
+        let mut cur = 0u32;
+        loop {
+            counters.node();
+            if cur & LEAF_BIT != 0 {
+                let (first, count) = leaf_range(cur);
+                let first = first as usize;
+                for (b, block) in (first..).zip(&blocks[first..first + count as usize]) {
+                    for l in 0..4 {
+                        if block.prims[l] != NO_PRIM {
+                            counters.prim();
+                        }
+                    }
+                    let hit = match intersect4(block, &tri_lanes, tmax) {
+                        BlockHit::None => continue,
+                        BlockHit::Hit(l, t, u, v) => Some((b * 4 + l, t, u, v)),
+                        BlockHit::Scalar => {
+                            // Lane by lane, nearest first hit kept, as the scalar loop does.
+                            let mut found = None;
+                            for l in 0..4 {
+                                let [p, q, r] = block.get(l);
+                                if let Some((t, u, v)) = intersect_triangle(
+                                    ray,
+                                    &pre,
+                                    p,
+                                    q,
+                                    r,
+                                    found.map_or(tmax, |f: (usize, f32, f32, f32)| f.1),
+                                ) {
+                                    found = Some((b * 4 + l, t, u, v));
+                                }
+                            }
+                            found
+                        }
+                    };
+                    if let Some(h) = hit {
+                        if ANY {
+                            return Some(h);
+                        }
+                        tmax = h.1;
+                        best = Some(h);
+                    }
+                }
+            } else {
+                let node = &nodes[cur as usize];
+                let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
+                if mask != 0 {
+                    let hits = mask.count_ones();
+                    if hits == 1 {
+                        cur = node.child[mask.trailing_zeros() as usize];
+                        continue;
+                    }
+                    if ANY {
+                        // Lane order; the first hit lane is visited now.
+                        let first = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        while mask != 0 {
+                            let k = mask.trailing_zeros() as usize;
+                            mask &= mask - 1;
+                            stack[sp] = (node.child[k], dist[k]);
+                            if PREFETCH {
+                                self.prefetch(stack[sp].0);
+                            }
+                            sp += 1;
+                        }
+                        cur = node.child[first];
+                        continue;
+                    }
+                    // Sort the hit lanes by entry distance, farthest first, onto the stack.
+                    let base = sp;
+                    while mask != 0 {
+                        let k = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let e = (node.child[k], dist[k]);
+                        if PREFETCH {
+                            self.prefetch(e.0);
+                        }
+                        let mut j = sp;
+                        while j > base && stack[j - 1].1 < e.1 {
+                            stack[j] = stack[j - 1];
+                            j -= 1;
+                        }
+                        stack[j] = e;
+                        sp += 1;
+                    }
+                    // The nearest is on top: visit it now.
+                    sp -= 1;
+                    cur = stack[sp].0;
+                    continue;
+                }
+            }
+            // Pop the next subtree that may still hold a closer hit.
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let (c, tnear) = stack[sp];
+                if tnear <= tmax * FAR_SCALE {
+                    cur = c;
+                    break;
+                }
+            }
+        }
+    }
+}

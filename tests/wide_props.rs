@@ -1,0 +1,470 @@
+//! Wide BVHs (4 and 8 children per node) answer every ray exactly as brute force and the binary
+//! tree they were collapsed from do, for every builder, before and after several deformations
+//! and refits; also on degenerate inputs and on the watertightness rays of a closed mesh.
+
+mod common;
+
+use common::Rng;
+use dynbvh::bvh::{
+    BuildParams, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any, brute_force_closest,
+};
+use dynbvh::geom::shapes::icosphere;
+use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use glam::Vec3;
+use proptest::prelude::*;
+use std::collections::HashSet;
+
+fn builders() -> Vec<BuildParams> {
+    let widest = BuildParams {
+        all_axes: false,
+        ..BuildParams::binned(8)
+    };
+    let tiny_leaves = BuildParams {
+        max_leaf_size: 1,
+        ..BuildParams::binned(4)
+    };
+    // Binary leaves larger than a wide leaf holds (16): they are split across lanes.
+    let huge_leaves = BuildParams {
+        max_leaf_size: 40,
+        intersection_cost: 0.01,
+        ..BuildParams::binned(8)
+    };
+    let parallel = BuildParams {
+        parallel_threshold: 2,
+        ..BuildParams::binned(32)
+    };
+    let parallel_sweep = BuildParams {
+        parallel_threshold: 2,
+        ..BuildParams::SWEEP
+    };
+    vec![
+        BuildParams::binned(4),
+        BuildParams::BINNED,
+        widest,
+        tiny_leaves,
+        huge_leaves,
+        parallel,
+        BuildParams::SWEEP,
+        parallel_sweep,
+        BuildParams::MEDIAN,
+    ]
+}
+
+/// One ray through a wide tree against brute force and the binary tree: the same closest
+/// distance (a tie may name another triangle, which must really be hit there) and the same
+/// any-hit answer.
+fn check_ray<const K: usize>(
+    mesh: &TriMesh,
+    bin: &MeshBvh,
+    w: &WideBvh<K>,
+    ray: &Ray,
+) -> Result<(), String> {
+    let want = brute_force_closest(mesh, ray);
+    let got = w.closest_hit(ray);
+    let binary = bin.closest_hit(ray);
+    match (want, got) {
+        (None, None) => {}
+        (Some(a), Some(g)) => {
+            if a.t != g.t {
+                return Err(format!(
+                    "BVH{K} ray {ray:?}: brute force t {} prim {}, tree t {} prim {}",
+                    a.t, a.prim, g.t, g.prim
+                ));
+            }
+            if a.prim != g.prim {
+                let [p, q, r] = mesh.triangle(g.prim as usize);
+                let pre = RayTriPrecomp::new(ray.dir);
+                let t = intersect_triangle(ray, &pre, p, q, r, f32::INFINITY).map(|h| h.0);
+                if t != Some(g.t) {
+                    return Err(format!(
+                        "BVH{K} ray {ray:?}: reports prim {} at {} but it is hit at {t:?}",
+                        g.prim, g.t
+                    ));
+                }
+            }
+        }
+        (a, g) => return Err(format!("BVH{K} ray {ray:?}: brute force {a:?}, tree {g:?}")),
+    }
+    if binary.map(|h| h.t) != got.map(|h| h.t) {
+        return Err(format!(
+            "BVH{K} ray {ray:?}: binary {binary:?}, wide {got:?}"
+        ));
+    }
+    let (wa, ga) = (brute_force_any(mesh, ray), w.any_hit(ray));
+    if wa != ga {
+        return Err(format!(
+            "BVH{K} ray {ray:?}: any hit brute force {wa}, tree {ga}"
+        ));
+    }
+    // Counting changes nothing.
+    let mut st = TraversalStats::default();
+    if w.closest_hit_counted(ray, &mut st) != got || w.any_hit_counted(ray, &mut st) != ga {
+        return Err(format!("BVH{K} ray {ray:?}: counted traversal differs"));
+    }
+    Ok(())
+}
+
+fn check_both(mesh: &TriMesh, bin: &MeshBvh, rays: &[Ray]) -> Result<(), String> {
+    let w4 = WideBvh::<4>::from_mesh_bvh(bin);
+    let w8 = WideBvh::<8>::from_mesh_bvh(bin);
+    w4.validate(mesh)?;
+    w8.validate(mesh)?;
+    for ray in rays {
+        check_ray(mesh, bin, &w4, ray)?;
+        check_ray(mesh, bin, &w8, ray)?;
+    }
+    Ok(())
+}
+
+fn coord() -> impl Strategy<Value = f32> {
+    -10.0f32..10.0
+}
+
+fn vec3() -> impl Strategy<Value = Vec3> {
+    (coord(), coord(), coord()).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+}
+
+fn soup() -> impl Strategy<Value = TriMesh> {
+    prop::collection::vec([vec3(), vec3(), vec3()], 1..120).prop_map(|t| TriMesh::from_soup(&t))
+}
+
+fn grid() -> impl Strategy<Value = TriMesh> {
+    (2usize..10, 2usize..10)
+        .prop_flat_map(|(w, h)| (Just((w, h)), prop::collection::vec(-3.0f32..3.0, w * h)))
+        .prop_map(|((w, h), heights)| {
+            let positions = (0..w * h)
+                .map(|i| Vec3::new((i % w) as f32, heights[i], (i / w) as f32))
+                .collect();
+            let mut indices = Vec::new();
+            for y in 0..h - 1 {
+                for x in 0..w - 1 {
+                    let i = (y * w + x) as u32;
+                    let (r, d) = (i + 1, i + w as u32);
+                    indices.push([i, r, d + 1]);
+                    indices.push([i, d + 1, d]);
+                }
+            }
+            TriMesh::new(positions, indices)
+        })
+}
+
+fn mesh() -> impl Strategy<Value = TriMesh> {
+    prop_oneof![soup(), grid()]
+}
+
+/// Random directions and axis-parallel ones (one or two zero components).
+fn direction() -> impl Strategy<Value = Vec3> {
+    prop_oneof![
+        vec3().prop_filter("non-zero", |d| d.length() > 1e-3),
+        (0usize..3, any::<bool>()).prop_map(|(a, neg)| {
+            let mut d = Vec3::ZERO;
+            d[a] = if neg { -1.0 } else { 1.0 };
+            d
+        }),
+        (0usize..3, coord(), coord()).prop_filter_map("non-zero", |(a, u, v)| {
+            let mut d = Vec3::new(u, v, u - v);
+            d[a] = 0.0;
+            (d.length() > 1e-3).then_some(d)
+        }),
+    ]
+}
+
+fn rays() -> impl Strategy<Value = Vec<Ray>> {
+    prop::collection::vec(
+        (
+            vec3(),
+            direction(),
+            prop_oneof![Just(f32::INFINITY), 0.5f32..20.0],
+            prop_oneof![Just(0.0f32), 0.0f32..2.0],
+        ),
+        1..40,
+    )
+    .prop_map(|v| {
+        v.into_iter()
+            .map(|(o, d, tmax, tmin)| Ray::with_range(o, d, tmin, tmax))
+            .collect()
+    })
+}
+
+/// The given rays plus rays aimed at the mesh's vertices (where ties between triangles happen).
+fn with_aimed(mesh: &TriMesh, rays: &[Ray]) -> Vec<Ray> {
+    let from = Vec3::new(0.3, 11.0, -0.7);
+    rays.iter()
+        .copied()
+        .chain(
+            mesh.positions
+                .iter()
+                .take(20)
+                .map(|&p| Ray::new(from, p - from))
+                .filter(|r| r.dir.length() > 0.0),
+        )
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+
+    #[test]
+    fn every_builder_collapsed_matches_brute_force(mesh in mesh(), rays in rays()) {
+        let rays = with_aimed(&mesh, &rays);
+        for params in builders() {
+            let bin = MeshBvh::build(&mesh, &params);
+            check_both(&mesh, &bin, &rays).map_err(TestCaseError::fail)?;
+        }
+    }
+
+    #[test]
+    fn wide_refit_after_deformations_matches_brute_force(
+        mesh in mesh(),
+        moves in prop::collection::vec((prop::collection::vec(vec3(), 1..8), 0.0f32..3.0), 3),
+        rays in rays(),
+    ) {
+        for params in builders() {
+            let mut m = mesh.clone();
+            let mut bin = MeshBvh::build(&m, &params);
+            let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+            let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+            // Several deformations in a row, each refitted from the previous trees.
+            for (offsets, scale) in &moves {
+                for (i, p) in m.positions.iter_mut().enumerate() {
+                    *p += offsets[i % offsets.len()] * *scale * (1.0 + (i % 3) as f32);
+                }
+                bin.refit(&m);
+                w4.refit(&m);
+                w8.refit_indexed(&m.positions, &m.indices);
+                w4.validate(&m).map_err(TestCaseError::fail)?;
+                w8.validate(&m).map_err(TestCaseError::fail)?;
+                for ray in with_aimed(&m, &rays) {
+                    check_ray(&m, &bin, &w4, &ray).map_err(TestCaseError::fail)?;
+                    check_ray(&m, &bin, &w8, &ray).map_err(TestCaseError::fail)?;
+                }
+            }
+        }
+    }
+}
+
+/// Rays from a shell around `center` towards points near it, plus axis-parallel ones.
+fn rays_around(center: Vec3, radius: f32, n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng(seed);
+    let mut rays = Vec::new();
+    for _ in 0..n {
+        let o = center + rng.unit_vector() * radius * 2.0;
+        let target = center + rng.unit_vector() * radius * rng.f() * 0.5;
+        rays.push(Ray::new(o, target - o));
+    }
+    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+        rays.push(Ray::new(center - axis * radius * 2.0, axis));
+        rays.push(Ray::new(center + axis * radius * 2.0, -axis));
+    }
+    rays
+}
+
+/// Every builder, collapsed, checked; then refitted to the same positions and checked again.
+fn check_everything(mesh: &TriMesh, rays: &[Ray]) {
+    for params in builders() {
+        let bin = MeshBvh::build(mesh, &params);
+        check_both(mesh, &bin, rays).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+        let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+        let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+        w8.refit(mesh);
+        w4.refit(mesh);
+        w8.validate(mesh).unwrap();
+        w4.validate(mesh).unwrap();
+        for ray in rays {
+            check_ray(mesh, &bin, &w4, ray).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+            check_ray(mesh, &bin, &w8, ray).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+        }
+    }
+}
+
+#[test]
+fn empty_mesh() {
+    let mesh = TriMesh::default();
+    let bin = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let mut w = WideBvh::<8>::from_mesh_bvh(&bin);
+    w.validate(&mesh).unwrap();
+    assert!(w.nodes().is_empty());
+    assert!(w.closest_hit(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
+    assert!(!w.any_hit(&Ray::new(Vec3::ZERO, Vec3::X)));
+    w.refit(&mesh);
+    let w4 = WideBvh::<4>::build(&mesh, &BuildParams::BINNED);
+    assert!(w4.closest_hit(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
+    assert_eq!(w4.memory_bytes(), 0);
+}
+
+#[test]
+fn single_triangle() {
+    let mesh = TriMesh::from_soup(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]);
+    check_everything(&mesh, &rays_around(Vec3::new(0.3, 0.3, 0.0), 1.0, 200, 1));
+    let w = WideBvh::<8>::build(&mesh, &BuildParams::BINNED);
+    assert_eq!(w.nodes().len(), 1);
+    let hit = w
+        .closest_hit(&Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z))
+        .unwrap();
+    assert_eq!((hit.t, hit.prim), (1.0, 0));
+}
+
+#[test]
+fn identical_triangles() {
+    let t = [
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+    ];
+    let mesh = TriMesh::from_soup(&vec![t; 3000]);
+    check_everything(&mesh, &rays_around(Vec3::ZERO, 1.0, 50, 3));
+}
+
+#[test]
+fn nan_and_infinite_vertices() {
+    let mut rng = Rng(13);
+    let mut tris = Vec::new();
+    for i in 0..600 {
+        let p = Vec3::new(
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        );
+        let mut t = [p, p + rng.unit_vector() * 0.3, p + rng.unit_vector() * 0.3];
+        match i % 10 {
+            0 => t[1].x = f32::NAN,
+            1 => t[2] = Vec3::splat(f32::NAN),
+            2 => t[0].y = f32::INFINITY,
+            3 => t[1].z = f32::NEG_INFINITY,
+            _ => {}
+        }
+        tris.push(t);
+    }
+    let mesh = TriMesh::from_soup(&tris);
+    let rays = rays_around(Vec3::ZERO, 1.0, 300, 5);
+    for params in builders() {
+        let bin = MeshBvh::build(&mesh, &params);
+        let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+        let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+        for _round in 0..2 {
+            for ray in &rays {
+                check_ray(&mesh, &bin, &w4, ray).unwrap_or_else(|e| panic!("{e}"));
+                check_ray(&mesh, &bin, &w8, ray).unwrap_or_else(|e| panic!("{e}"));
+            }
+            w8.refit(&mesh);
+            w4.refit(&mesh);
+        }
+    }
+}
+
+#[test]
+fn deep_chain_uses_a_deep_stack() {
+    // Triangles at exponentially spaced positions: the SAH peels off one at a time, so the
+    // binary tree reaches the depth limit and the wide tree's stack bound is large.
+    let tris: Vec<[Vec3; 3]> = (0..2000)
+        .map(|i| {
+            let x = 2f32.powf((i % 250) as f32 * 0.5 - 60.0) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            let p = Vec3::new(x, (i / 250) as f32, 0.0);
+            let s = x.abs() * 1e-3;
+            [p, p + Vec3::new(s, 0.0, 0.0), p + Vec3::new(0.0, s, s)]
+        })
+        .collect();
+    let mesh = TriMesh::from_soup(&tris);
+    let mut rays = rays_around(Vec3::new(0.0, 4.0, 0.0), 8.0, 200, 9);
+    // Rays along the chain, through many of its nodes.
+    for y in 0..8 {
+        rays.push(Ray::new(Vec3::new(-1e30, y as f32 + 1e-9, 0.0), Vec3::X));
+        rays.push(Ray::new(Vec3::new(1e30, y as f32, 0.0), -Vec3::X));
+    }
+    for params in [BuildParams::BINNED, BuildParams::SWEEP] {
+        let bin = MeshBvh::build(&mesh, &params);
+        assert!(bin.bvh().depth() <= MAX_DEPTH);
+        check_both(&mesh, &bin, &rays).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+    }
+}
+
+/// Every vertex and edge midpoint of a mesh.
+fn targets(mesh: &TriMesh) -> Vec<Vec3> {
+    let mut edges = HashSet::new();
+    let mut pts: Vec<Vec3> = mesh.positions.clone();
+    for t in &mesh.indices {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if edges.insert((a.min(b), a.max(b))) {
+                pts.push((mesh.positions[a as usize] + mesh.positions[b as usize]) * 0.5);
+            }
+        }
+    }
+    pts
+}
+
+#[test]
+fn no_ray_slips_through_a_closed_mesh() {
+    // The rays of tests/watertight.rs, through the wide trees.
+    let mut mesh = icosphere(3);
+    let rot = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.7);
+    let center = Vec3::new(10.25, -3.5, 0.125);
+    for p in &mut mesh.positions {
+        *p = rot * (*p * 3.7) + center;
+    }
+    let pts = targets(&mesh);
+    assert!(pts.len() > 1900);
+    let mut rng = Rng(99);
+    let mut rays = Vec::new();
+    for &p in &pts {
+        let out = p + (p - center).normalize() * 5.0;
+        rays.push(Ray::new(out, p - out));
+        let far = center + rng.unit_vector() * 20.0;
+        if (p - far).normalize().dot((p - center).normalize()) < -0.1 {
+            rays.push(Ray::new(far, p - far));
+        }
+        rays.push(Ray::new(center, p - center));
+        let inside = center + rng.unit_vector() * rng.range(0.0, 2.0);
+        rays.push(Ray::new(inside, p - inside));
+    }
+    for params in [BuildParams::BINNED, BuildParams::SWEEP, BuildParams::MEDIAN] {
+        let bin = MeshBvh::build(&mesh, &params);
+        let w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+        let w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+        w4.validate(&mesh).unwrap();
+        w8.validate(&mesh).unwrap();
+        let mut misses = 0;
+        for ray in &rays {
+            check_ray(&mesh, &bin, &w4, ray).unwrap();
+            check_ray(&mesh, &bin, &w8, ray).unwrap();
+            misses += usize::from(w4.closest_hit(ray).is_none());
+            misses += usize::from(w8.closest_hit(ray).is_none());
+        }
+        assert_eq!(misses, 0, "{}", params.name());
+    }
+}
+
+#[test]
+fn large_trees_refit_in_parallel_and_on_one_thread() {
+    // Large enough for the parallel refit (gather, then subtrees as tasks) on two threads.
+    let rest = dynbvh::geom::shapes::bumpy_sphere(60_000);
+    let mut moved = rest.positions.clone();
+    dynbvh::geom::shapes::sine_deform(&rest.positions, &mut moved, 0.1, 0.3);
+    let deformed = TriMesh::new(moved, rest.indices.clone());
+    let bin = MeshBvh::build(&rest, &BuildParams::BINNED);
+    let mut bin_def = bin.clone();
+    bin_def.refit(&deformed);
+    let b = rest.bounds();
+    let rays = dynbvh::report::rays::random_rays(&b, 150, 42);
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+            let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+            assert!(w8.nodes().len() > 2048, "{} nodes", w8.nodes().len());
+            for (m, b) in [(&deformed, &bin_def), (&rest, &bin), (&deformed, &bin_def)] {
+                w4.refit(m);
+                w8.refit(m);
+                w4.validate(m).unwrap();
+                w8.validate(m).unwrap();
+                for ray in &rays {
+                    check_ray(m, b, &w4, ray).unwrap();
+                    check_ray(m, b, &w8, ray).unwrap();
+                }
+            }
+        });
+    }
+}
