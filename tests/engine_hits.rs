@@ -1,6 +1,8 @@
 //! Traversal correctness of the engine after every deformation: for every shipped animation
 //! and every animated glTF sample, on every frame (capped) and under every policy, rays through
-//! the engine hit what brute force over the posed world triangles hits.
+//! the engine hit what brute force over the posed world triangles hits. On the same frames,
+//! each deforming mesh's 4- and 8-wide trees (built on the first frame, refitted on every
+//! later one) and its packet queries give exactly brute force's hits in mesh space.
 //!
 //! Rigid and shared-mesh instances are traced in mesh space through an inverse transform, so
 //! their distances differ from world-space brute force by rounding: distances are compared with
@@ -8,10 +10,10 @@
 //! (a barycentric coordinate within 1e-3 of 0). Such grazing rays must stay rare.
 
 use dynbvh::anim::Scene;
-use dynbvh::bvh::{brute_force_any, brute_force_closest};
+use dynbvh::bvh::{MeshBvh4, MeshBvh8, PacketMode, brute_force_any, brute_force_closest};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Engine, EngineConfig, Policy, SceneHit, TlasPolicy};
+use dynbvh::engine::{Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy};
 use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use dynbvh::report::rays::{camera_rays, random_rays};
 use std::path::{Path, PathBuf};
@@ -131,6 +133,66 @@ fn compare(
     }
 }
 
+/// The wide trees of one deforming mesh, refitted frame after frame.
+struct Wide {
+    bvh4: MeshBvh4,
+    bvh8: MeshBvh8,
+}
+
+/// Closest hits equal brute force exactly (a different triangle only at the same distance, and
+/// really hit there).
+fn same_hit(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hit>) -> bool {
+    match (want, got) {
+        (None, None) => true,
+        (Some(w), Some(g)) => {
+            w.t == g.t
+                && (w.prim == g.prim
+                    || world_hit(mesh, g.prim as usize, ray).is_some_and(|h| h.0 == g.t))
+        }
+        _ => false,
+    }
+}
+
+/// The deforming meshes of engine `e` through the wide trees (refitted to this frame) and
+/// through packets of its binary trees, against brute force in mesh space.
+fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], wide: &mut [Wide]) {
+    for (m, w) in meshes.iter().zip(wide) {
+        let (pos, idx) = (e.positions(*m), e.indices(*m));
+        w.bvh4.refit_indexed(pos, idx);
+        w.bvh8.refit_indexed(pos, idx);
+        let mesh = TriMesh::new(pos.to_vec(), idx.to_vec());
+        let bounds = mesh.bounds();
+        if bounds.is_empty() {
+            continue;
+        }
+        let mut rays = camera_rays(&bounds, 12, 12);
+        let pad = glam::Vec3::splat(0.1 * bounds.extent().length().max(1e-6));
+        let padded = dynbvh::geom::Aabb::new(bounds.min - pad, bounds.max + pad);
+        rays.extend(random_rays(&padded, 64, f as u64 + 7));
+        let mut packet = vec![None; rays.len()];
+        e.mesh_bvh(*m)
+            .closest_hit_packet_mode(&rays, &mut packet, PacketMode::Always);
+        let mut packet_any = vec![false; rays.len()];
+        e.mesh_bvh(*m)
+            .any_hit_packet_mode(&rays, &mut packet_any, PacketMode::Always);
+        for (k, r) in rays.iter().enumerate() {
+            let want = brute_force_closest(&mesh, r);
+            let any = want.is_some();
+            for (what, got, got_any) in [
+                ("bvh4", w.bvh4.closest_hit(r), w.bvh4.any_hit(r)),
+                ("bvh8", w.bvh8.closest_hit(r), w.bvh8.any_hit(r)),
+                ("packet", packet[k], packet_any[k]),
+            ] {
+                assert!(
+                    same_hit(&mesh, r, want, got) && got_any == any,
+                    "{name} frame {f} mesh {m:?} {what} ray {k} {r:?}: brute force {want:?}, \
+                     got {got:?} (any {got_any})"
+                );
+            }
+        }
+    }
+}
+
 /// Runs every policy in lockstep over `frames` frames of one animation and checks each frame.
 fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mut Tally) {
     let policies = policies();
@@ -148,12 +210,25 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
             )
         })
         .collect();
+    let deforming = src.deforming().to_vec();
+    let params = EngineConfig::default().build;
+    let mut wide: Vec<Wide> = deforming
+        .iter()
+        .map(|m| {
+            let (pos, idx) = (engines[0].positions(*m), engines[0].indices(*m));
+            Wide {
+                bvh4: MeshBvh4::build_indexed(pos, idx, &params),
+                bvh8: MeshBvh8::build_indexed(pos, idx, &params),
+            }
+        })
+        .collect();
     let mut flat = TriMesh::default();
     for f in 1..=src.frames() {
         for e in &mut engines {
             src.advance(e, f);
             e.update();
         }
+        check_wide_and_packets(&src.name(), f, &engines[0], &deforming, &mut wide);
         src.flatten_into(&mut flat);
         let bounds = flat.bounds();
         if bounds.is_empty() {
