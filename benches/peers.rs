@@ -134,6 +134,66 @@ impl Accel for Dyn {
     }
 }
 
+/// dynbvh's binary tree traced as packets of up to 128 consecutive rays (16x8 camera tiles;
+/// incoherent packets fall back to single rays by themselves).
+struct DynPackets(Dyn);
+
+impl Accel for DynPackets {
+    type Input = TriMesh;
+    type R = Ray;
+    fn prepare(mesh: &TriMesh) -> TriMesh {
+        mesh.clone()
+    }
+    fn ray(r: &Ray) -> Ray {
+        *r
+    }
+    fn closest(&self, ray: &Ray) -> Option<(f32, u32)> {
+        self.0.closest(ray)
+    }
+    fn trace_all(&self, rays: &[Ray]) -> f32 {
+        let mut hits = [None; 128];
+        let mut sum = 0.0;
+        for chunk in rays.chunks(128) {
+            let out = &mut hits[..chunk.len()];
+            self.0.0.closest_hit_packet(chunk, out);
+            sum += out.iter().flatten().map(|h| h.t).sum::<f32>();
+        }
+        sum
+    }
+    fn sah(&self) -> f64 {
+        self.0.sah()
+    }
+    fn refit(&mut self, input: &TriMesh) -> bool {
+        self.0.refit(input)
+    }
+}
+
+/// dynbvh's 8-wide tree, collapsed from the binned16 tree (the collapse is part of its build),
+/// refitted in place.
+struct DynWide(dynbvh::bvh::MeshBvh8);
+
+impl Accel for DynWide {
+    type Input = TriMesh;
+    type R = Ray;
+    fn prepare(mesh: &TriMesh) -> TriMesh {
+        mesh.clone()
+    }
+    fn ray(r: &Ray) -> Ray {
+        *r
+    }
+    #[inline]
+    fn closest(&self, ray: &Ray) -> Option<(f32, u32)> {
+        self.0.closest_hit(ray).map(|h| (h.t, h.prim))
+    }
+    fn sah(&self) -> f64 {
+        f64::NAN
+    }
+    fn refit(&mut self, input: &TriMesh) -> bool {
+        self.0.refit(input);
+        true
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // obvhs (Bvh2: binary, PLOC builder)
 // ---------------------------------------------------------------------------------------------
@@ -678,24 +738,20 @@ fn load(dir: &Path, stem: &str) -> Option<Input> {
 }
 
 // ---------------------------------------------------------------------------------------------
-/// A square image's rays reordered tile by tile (4x4 pixels, each tile row by row), the order
-/// in which a renderer casts packets of 16; every variant traces this same order.
+/// A square image's rays reordered as a renderer casts packets
+/// (`dynbvh::bvh::image_tiles`): tiles of 16x8 pixels, each in 4x4 blocks, so that 16
+/// consecutive rays are a 4x4 block and 128 a 16x8 tile. Every variant traces this same order.
 fn in_tiles(rays: Vec<Ray>) -> Vec<Ray> {
     let side = (rays.len() as f64).sqrt().round() as usize;
-    if side * side != rays.len() || !side.is_multiple_of(4) {
+    if side * side != rays.len() {
         return rays;
     }
     let mut out = Vec::with_capacity(rays.len());
-    for ty in (0..side).step_by(4) {
-        for tx in (0..side).step_by(4) {
-            for y in ty..ty + 4 {
-                out.extend_from_slice(&rays[y * side + tx..y * side + tx + 4]);
-            }
-        }
-    }
+    dynbvh::bvh::image_tiles(side, side, |idx| out.extend(idx.iter().map(|&i| rays[i])));
     out
 }
 
+// ---------------------------------------------------------------------------------------------
 // Measuring
 // ---------------------------------------------------------------------------------------------
 
@@ -960,6 +1016,25 @@ fn variants() -> Vec<Variant> {
             make: |i| {
                 measured(i, |m: TriMesh| {
                     Dyn(MeshBvh::build(&m, &BuildParams::BINNED))
+                })
+            },
+        },
+        Variant {
+            name: "dynbvh bvh8",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(&MeshBvh::build(
+                        &m,
+                        &BuildParams::BINNED,
+                    )))
+                })
+            },
+        },
+        Variant {
+            name: "dynbvh packets",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    DynPackets(Dyn(MeshBvh::build(&m, &BuildParams::BINNED)))
                 })
             },
         },
