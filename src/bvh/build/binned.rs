@@ -464,12 +464,38 @@ impl Ctx {
         let [lbins, rbins] = next;
         let shift = 8 * axis as u32;
         let bin = bin as u32;
-        let (mid, lcb, rcb) = partition_bin(
-            refs,
-            |r| (r.bins() >> shift) & 0xff <= bin,
-            (lmap.as_ref(), lbins),
-            (rmap.as_ref(), rbins),
-        );
+        let goes_left = |r: &PrimRef| (r.bins() >> shift) & 0xff <= bin;
+        // The top levels, whose subtrees are still fewer than the threads, partition in
+        // parallel blocks, so that every thread has work before there are subtrees for all.
+        let threads = rayon::current_num_threads();
+        let (mid, lcb, rcb) = if threads > 1
+            && (depth as usize) < usize::BITS as usize - 1
+            && (1usize << depth) < threads
+            && n >= self.parallel_threshold.saturating_mul(8)
+        {
+            let blocks = (threads >> depth).max(2);
+            let (lmap, rmap) = (
+                *lmap.as_ref().unwrap_or(&NO_MAP),
+                *rmap.as_ref().unwrap_or(&NO_MAP),
+            );
+            let p = par_partition_bin(
+                refs,
+                &goes_left,
+                (&lmap, &rmap),
+                n.div_ceil(blocks),
+                self.parallel_threshold.saturating_mul(8),
+            );
+            *lbins = p.l;
+            *rbins = p.r;
+            (p.mid, p.lcb, p.rcb)
+        } else {
+            partition_bin(
+                refs,
+                goes_left,
+                (lmap.as_ref(), lbins),
+                (rmap.as_ref(), rbins),
+            )
+        };
         debug_assert_eq!(mid, nl);
         Some(Split {
             mid,
@@ -541,6 +567,72 @@ fn partition_bin(
         refs.swap(i, j - 1);
     }
     (i, lcb, rcb)
+}
+
+/// A block's partition: its left count, both sides' doubled centroid bounds and bins.
+struct Part {
+    mid: usize,
+    lcb: Box3,
+    rcb: Box3,
+    l: Bins,
+    r: Bins,
+}
+
+/// [`partition_bin`] in parallel: blocks of at most `block` references are partitioned (and
+/// binned into bins of their own) as parallel tasks, then each pair of neighbouring blocks
+/// `[L1 R1] [L2 R2]` is joined by swapping the shorter of `R1` and `L2` with the far end of
+/// the other (the order within a side does not matter), and their bins merged. Swaps of at
+/// least `par_swap` references are split into parallel chunks.
+fn par_partition_bin(
+    refs: &mut [PrimRef],
+    goes_left: &(impl Fn(&PrimRef) -> bool + Sync),
+    maps: (&BinMap, &BinMap),
+    block: usize,
+    par_swap: usize,
+) -> Part {
+    let n = refs.len();
+    if n <= block.max(2) {
+        let (mut l, mut r) = (EMPTY_BINS, EMPTY_BINS);
+        let (mid, lcb, rcb) = partition_bin(
+            refs,
+            goes_left,
+            (Some(maps.0), &mut l),
+            (Some(maps.1), &mut r),
+        );
+        return Part {
+            mid,
+            lcb,
+            rcb,
+            l,
+            r,
+        };
+    }
+    let h = n / 2;
+    let (a, b) = refs.split_at_mut(h);
+    let (pa, pb) = rayon::join(
+        || par_partition_bin(a, goes_left, maps, block, par_swap),
+        || par_partition_bin(b, goes_left, maps, block, par_swap),
+    );
+    // `a` is `[La Ra]`, `b` is `[Lb Rb]`: swap the shorter of `Ra` and `Lb` with the end of the
+    // other next to it, giving `[La Lb' | Ra' Rb]`.
+    let m = (h - pa.mid).min(pb.mid);
+    let xs = &mut a[pa.mid..pa.mid + m];
+    let ys = &mut b[pb.mid - m..pb.mid];
+    if m >= par_swap.max(1) {
+        let c = m.div_ceil(rayon::current_num_threads().max(1) * 2).max(1);
+        xs.par_chunks_mut(c)
+            .zip(ys.par_chunks_mut(c))
+            .for_each(|(x, y)| x.swap_with_slice(y));
+    } else {
+        xs.swap_with_slice(ys);
+    }
+    Part {
+        mid: pa.mid + pb.mid,
+        lcb: pa.lcb.union(pb.lcb),
+        rcb: pa.rcb.union(pb.rcb),
+        l: pa.l.merge(&pb.l, maps.0.k),
+        r: pa.r.merge(&pb.r, maps.1.k),
+    }
 }
 
 /// The map of a side that is not binned: everything into bin 0.
