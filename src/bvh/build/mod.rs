@@ -351,16 +351,20 @@ impl Bvh {
             slots.resize(2 * n - 1, Node::default());
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
-        root[0] = match params.method {
-            Method::Binned => binned::build(params, refs, rb, desc),
+        let count;
+        (root[0], count) = match params.method {
+            Method::Binned => {
+                let (root, count) = binned::build(params, refs, rb, desc);
+                (root, Some(count))
+            }
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                build_range(&m, params, refs, rb, desc)
+                (build_range(&m, params, refs, rb, desc), None)
             }
-            Method::Sweep => sweep::build(params, refs, desc),
+            Method::Sweep => (sweep::build(params, refs, desc), None),
         };
         self.prim_indices.extend(refs.iter().map(PrimRef::id));
-        compact(&slots[..2 * n - 1], &mut self.nodes);
+        compact(&slots[..2 * n - 1], count, &mut self.nodes);
     }
 }
 
@@ -482,13 +486,15 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
 /// Copies the nodes out of the reserved slots into `out`, skipping the slots no node was
 /// written to. Slots hold each subtree as "children pair, left child's descendants, right
 /// child's descendants", so a pre-order walk over pairs emits the nodes in slot order: the
-/// order, and with it every invariant, is kept.
-fn compact(slots: &[Node], out: &mut Vec<Node>) {
+/// order, and with it every invariant, is kept. `count` is the tree's node count if the builder
+/// knows it.
+fn compact(slots: &[Node], count: Option<usize>, out: &mut Vec<Node>) {
     // Grow with 1/8 headroom plus a few nodes, but never past the most a tree over these
     // primitives can have (`slots.len()`): rebuilds of a deforming mesh vary in node count by
     // a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
     // and then fit without reallocating.
-    let count = count_nodes(slots, 0);
+    let count = count.unwrap_or_else(|| count_nodes(slots, 0));
+    debug_assert_eq!(count, count_nodes(slots, 0));
     if count > out.capacity() {
         out.reserve_exact((count + count / 8 + 8).min(slots.len()).max(count));
     }
