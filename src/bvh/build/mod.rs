@@ -105,7 +105,7 @@ impl BuildParams {
 /// binned builder (the bin of its centroid on each axis, one byte each). With the upper corner
 /// negated, the box of two such vectors is one lane-wise minimum (the id and bins lanes carry
 /// junk through it and are never read as floats).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 #[repr(C)]
 pub(crate) struct PrimRef {
     v: f32x8,
@@ -327,7 +327,8 @@ impl Bvh {
         let refs = &mut ws.refs;
         // Every reference is written below and every used slot is written before it is read,
         // so old contents are kept: only growth initialises memory.
-        refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
+        grow_zeroed(refs, n);
+        refs.truncate(n);
         // The references, and the root's bounds gathered on the way.
         let fill = |refs: &mut [PrimRef], boxes: &[Aabb], base: usize| {
             let mut rb = RangeBounds::EMPTY;
@@ -347,9 +348,7 @@ impl Bvh {
             fill(refs, boxes, 0)
         };
         let slots = &mut ws.slots;
-        if slots.len() < 2 * n - 1 {
-            slots.resize(2 * n - 1, Node::default());
-        }
+        grow_zeroed(slots, 2 * n - 1);
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         let count;
         (root[0], count) = match params.method {
@@ -365,6 +364,17 @@ impl Bvh {
         };
         self.prim_indices.extend(refs.iter().map(PrimRef::id));
         compact(&slots[..2 * n - 1], count, &mut self.nodes);
+    }
+}
+
+/// Makes `v` at least `len` long. New storage is allocated zeroed (by the system, page by page
+/// on first touch, for large sizes) rather than filled: a cold 1M build would otherwise write
+/// 64 MB of node slots, most of which it never uses, and 32 MB of references it overwrites.
+fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) {
+    if v.capacity() < len {
+        *v = bytemuck::zeroed_vec(len);
+    } else if v.len() < len {
+        v.resize(len, T::zeroed());
     }
 }
 
