@@ -4,7 +4,8 @@
 //! and every subtree owns a contiguous range of nodes and of primitive slots. While building, a
 //! subtree over `n` primitives reserves `2n - 2` node slots for its descendants (the most a
 //! binary tree with `n` leaves can need), so parallel subtrees write disjoint slices with no
-//! locking; the unused slots are squeezed out at the end without changing the order.
+//! locking; the unused slots are squeezed out at the end without changing the order. (The
+//! binned builder packs each one-task subtree at the start of its slots and knows the count.)
 
 mod binned;
 mod median;
