@@ -289,6 +289,20 @@ pub struct BuildWorkspace {
     refs: Vec<PrimRef>,
     slots: Vec<Node>,
     pub(crate) boxes: Vec<Aabb>,
+    /// Set for a workspace used for one build and dropped: the build then compacts the nodes
+    /// in place and hands the slot storage to a tree that has none, instead of copying them
+    /// into fresh memory.
+    pub(crate) one_shot: bool,
+}
+
+impl BuildWorkspace {
+    /// A workspace for a single build (`Bvh::build`, `MeshBvh::build`).
+    pub(crate) fn one_shot() -> Self {
+        Self {
+            one_shot: true,
+            ..Self::default()
+        }
+    }
 }
 
 impl BuildWorkspace {
@@ -306,7 +320,7 @@ impl Bvh {
     #[must_use]
     pub fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh {
         let mut bvh = Bvh::empty(params.max_leaf_size);
-        bvh.rebuild(boxes, params, &mut BuildWorkspace::default());
+        bvh.rebuild(boxes, params, &mut BuildWorkspace::one_shot());
         bvh
     }
 
@@ -364,7 +378,17 @@ impl Bvh {
             Method::Sweep => (sweep::build(params, refs, desc), None),
         };
         self.prim_indices.extend(refs.iter().map(PrimRef::id));
-        compact(&slots[..2 * n - 1], count, &mut self.nodes);
+        if ws.one_shot && self.nodes.capacity() == 0 {
+            // A cold build: no copy into fresh pages.
+            let mut slots = std::mem::take(&mut ws.slots);
+            slots.truncate(2 * n - 1);
+            compact_in_place(&mut slots, count);
+            let count = slots.len();
+            slots.shrink_to((count + count / 8 + 8).min(2 * n - 1));
+            self.nodes = slots;
+        } else {
+            compact(&slots[..2 * n - 1], count, &mut self.nodes);
+        }
     }
 }
 
@@ -512,6 +536,35 @@ fn compact(slots: &[Node], count: Option<usize>, out: &mut Vec<Node>) {
     out.push(slots[0]);
     if !slots[0].is_leaf() {
         emit_pair(slots, 0, out);
+    }
+}
+
+/// [`compact`] within the slots themselves (truncated to the tree): the walk emits nodes in
+/// slot order, so each pair is written at or before the slots it is read from, and no slot
+/// still to be read is overwritten.
+fn compact_in_place(slots: &mut Vec<Node>, count: Option<usize>) {
+    let mut len = 1;
+    if !slots[0].is_leaf() {
+        emit_pair_in_place(slots, 0, &mut len);
+    }
+    debug_assert!(count.is_none_or(|c| c == len));
+    slots.truncate(len);
+}
+
+/// [`emit_pair`] in place: `len` nodes are emitted so far.
+fn emit_pair_in_place(s: &mut [Node], parent: usize, len: &mut usize) {
+    let c = slots_child(s[parent]);
+    let at = *len;
+    debug_assert!(at <= c);
+    let pair = [s[c], s[c + 1]];
+    s[parent].first = at as u32;
+    s[at] = pair[0];
+    s[at + 1] = pair[1];
+    *len += 2;
+    for k in [at, at + 1] {
+        if !s[k].is_leaf() {
+            emit_pair_in_place(s, k, len);
+        }
     }
 }
 
