@@ -38,7 +38,7 @@ impl MeshBvh {
     #[must_use]
     pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
         let mut m = Self::default();
-        m.rebuild_indexed(positions, indices, params, &mut BuildWorkspace::default());
+        m.rebuild_indexed(positions, indices, params, &mut BuildWorkspace::one_shot());
         m
     }
 

@@ -7,7 +7,7 @@ use glam::Vec3;
 /// always after the node itself. Leaves (`count > 0`) own the slots
 /// `first .. first + count` of the BVH's primitive index array.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Zeroable)]
 pub struct Node {
     /// Lower corner of the box.
     pub min: [f32; 3],

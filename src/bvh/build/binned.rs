@@ -28,14 +28,14 @@ struct Ctx {
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
-/// the root into `desc` and returns the root.
+/// the root into `desc` and returns the root and the tree's node count.
 /// `rb` bounds `refs`.
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
     rb: RangeBounds,
     desc: &mut [Node],
-) -> Node {
+) -> (Node, usize) {
     let ctx = Ctx {
         bins: p.bins.clamp(2, MAX_BINS),
         all_axes: p.all_axes,
@@ -50,7 +50,7 @@ pub(crate) fn build(
         map: None,
     };
     let mut stack = Stack::take();
-    ctx.node(
+    let (root, desc_count) = ctx.node(
         refs,
         info,
         Slots {
@@ -62,7 +62,8 @@ pub(crate) fn build(
         &mut stack,
         0,
         0,
-    )
+    );
+    (root, desc_count as usize + 1)
 }
 
 /// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
@@ -265,14 +266,20 @@ struct Split {
 }
 
 impl Ctx {
-    /// Bins for a node of `n` primitives: at most one per two primitives (and at least 4, or
+    /// Bins for a node of `n` primitives: at most one per three primitives (and at least 4, or
     /// `n` if fewer): a small node's candidates cost more to price than they gain.
     #[inline]
     fn bins_for(&self, n: usize) -> usize {
-        (n / 2).max(4).min(n).min(self.bins).max(2)
+        (n / 3).max(4).min(n).min(self.bins).max(2)
     }
 
     /// Builds the subtree over `refs`; its bins (if `info.map` is set) are `stack[level][side]`.
+    /// Returns its root and the number of its descendants.
+    ///
+    /// A subtree built by one task (below `parallel_threshold`) packs its nodes at the start of
+    /// its slots (the right child's subtree right after the left's) instead of in the halves
+    /// reserved for each: fewer memory pages touched, and the final compaction reads them in
+    /// order.
     #[allow(clippy::too_many_arguments)]
     fn node(
         &self,
@@ -283,11 +290,11 @@ impl Ctx {
         stack: &mut Stack,
         level: usize,
         side: usize,
-    ) -> Node {
+    ) -> (Node, u32) {
         let n = refs.len();
         let bounds = info.bounds.to_aabb();
         if n == 1 {
-            return Node::leaf(bounds, out.prim_offset, 1);
+            return (Node::leaf(bounds, out.prim_offset, 1), 0);
         }
         let split = if depth < SAH_DEPTH_LIMIT {
             self.split(refs, &info, depth, stack, level, side)
@@ -297,7 +304,7 @@ impl Ctx {
         let split = match split {
             Some(sp) => sp,
             None if n <= self.max_leaf_size => {
-                return Node::leaf(bounds, out.prim_offset, n as u32);
+                return (Node::leaf(bounds, out.prim_offset, n as u32), 0);
             }
             None => {
                 let h = halve(refs, self.parallel_threshold);
@@ -316,23 +323,24 @@ impl Ctx {
         let mid = split.mid;
         debug_assert!(mid > 0 && mid < n);
         let (pair, rest) = out.desc.split_at_mut(2);
-        let (ldesc, rdesc) = rest.split_at_mut(2 * mid - 2);
         let (lrefs, rrefs) = refs.split_at_mut(mid);
         let lbase = out.desc_base + 2;
-        let left = Slots {
-            prim_offset: out.prim_offset,
-            desc: ldesc,
-            desc_base: lbase,
-        };
-        let right = Slots {
-            prim_offset: out.prim_offset + mid as u32,
-            desc_base: lbase + 2 * mid as u32 - 2,
-            desc: rdesc,
-        };
+        let rprim = out.prim_offset + mid as u32;
         let (l, r) = if n >= self.parallel_threshold {
             // The right child becomes a task of its own, with its bins in a stack of its own.
             // (Its stack is taken when the task starts, so that a thread holds one stack per
             // task it has in progress, not one per pending sibling.)
+            let (ldesc, rdesc) = rest.split_at_mut(2 * mid - 2);
+            let left = Slots {
+                prim_offset: out.prim_offset,
+                desc: ldesc,
+                desc_base: lbase,
+            };
+            let right = Slots {
+                prim_offset: rprim,
+                desc_base: lbase + 2 * mid as u32 - 2,
+                desc: rdesc,
+            };
             let rbins = split.right.map.map(|_| stack.pair(level).1[1]);
             rayon::join(
                 || self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
@@ -345,14 +353,23 @@ impl Ctx {
                 },
             )
         } else {
-            (
-                self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
-                self.node(rrefs, split.right, right, depth + 1, stack, level + 1, 1),
-            )
+            let left = Slots {
+                prim_offset: out.prim_offset,
+                desc: &mut *rest,
+                desc_base: lbase,
+            };
+            let l = self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0);
+            let right = Slots {
+                prim_offset: rprim,
+                desc_base: lbase + l.1,
+                desc: &mut rest[l.1 as usize..],
+            };
+            let r = self.node(rrefs, split.right, right, depth + 1, stack, level + 1, 1);
+            (l, r)
         };
-        pair[0] = l;
-        pair[1] = r;
-        Node::interior(bounds, out.desc_base)
+        pair[0] = l.0;
+        pair[1] = r.0;
+        (Node::interior(bounds, out.desc_base), 2 + l.1 + r.1)
     }
 
     /// Finds the cheapest split of the node's bins (binning first if the node was not binned
@@ -464,12 +481,38 @@ impl Ctx {
         let [lbins, rbins] = next;
         let shift = 8 * axis as u32;
         let bin = bin as u32;
-        let (mid, lcb, rcb) = partition_bin(
-            refs,
-            |r| (r.bins() >> shift) & 0xff <= bin,
-            (lmap.as_ref(), lbins),
-            (rmap.as_ref(), rbins),
-        );
+        let goes_left = |r: &PrimRef| (r.bins() >> shift) & 0xff <= bin;
+        // The top levels, whose subtrees are still fewer than the threads, partition in
+        // parallel blocks, so that every thread has work before there are subtrees for all.
+        let threads = rayon::current_num_threads();
+        let (mid, lcb, rcb) = if threads > 1
+            && (depth as usize) < usize::BITS as usize - 1
+            && (1usize << depth) < threads
+            && n >= self.parallel_threshold.saturating_mul(8)
+        {
+            let blocks = (threads >> depth).max(2);
+            let (lmap, rmap) = (
+                *lmap.as_ref().unwrap_or(&NO_MAP),
+                *rmap.as_ref().unwrap_or(&NO_MAP),
+            );
+            let p = par_partition_bin(
+                refs,
+                &goes_left,
+                (&lmap, &rmap),
+                n.div_ceil(blocks),
+                self.parallel_threshold.saturating_mul(8),
+            );
+            *lbins = p.l;
+            *rbins = p.r;
+            (p.mid, p.lcb, p.rcb)
+        } else {
+            partition_bin(
+                refs,
+                goes_left,
+                (lmap.as_ref(), lbins),
+                (rmap.as_ref(), rbins),
+            )
+        };
         debug_assert_eq!(mid, nl);
         Some(Split {
             mid,
@@ -541,6 +584,72 @@ fn partition_bin(
         refs.swap(i, j - 1);
     }
     (i, lcb, rcb)
+}
+
+/// A block's partition: its left count, both sides' doubled centroid bounds and bins.
+struct Part {
+    mid: usize,
+    lcb: Box3,
+    rcb: Box3,
+    l: Bins,
+    r: Bins,
+}
+
+/// [`partition_bin`] in parallel: blocks of at most `block` references are partitioned (and
+/// binned into bins of their own) as parallel tasks, then each pair of neighbouring blocks
+/// `[L1 R1] [L2 R2]` is joined by swapping the shorter of `R1` and `L2` with the far end of
+/// the other (the order within a side does not matter), and their bins merged. Swaps of at
+/// least `par_swap` references are split into parallel chunks.
+fn par_partition_bin(
+    refs: &mut [PrimRef],
+    goes_left: &(impl Fn(&PrimRef) -> bool + Sync),
+    maps: (&BinMap, &BinMap),
+    block: usize,
+    par_swap: usize,
+) -> Part {
+    let n = refs.len();
+    if n <= block.max(2) {
+        let (mut l, mut r) = (EMPTY_BINS, EMPTY_BINS);
+        let (mid, lcb, rcb) = partition_bin(
+            refs,
+            goes_left,
+            (Some(maps.0), &mut l),
+            (Some(maps.1), &mut r),
+        );
+        return Part {
+            mid,
+            lcb,
+            rcb,
+            l,
+            r,
+        };
+    }
+    let h = n / 2;
+    let (a, b) = refs.split_at_mut(h);
+    let (pa, pb) = rayon::join(
+        || par_partition_bin(a, goes_left, maps, block, par_swap),
+        || par_partition_bin(b, goes_left, maps, block, par_swap),
+    );
+    // `a` is `[La Ra]`, `b` is `[Lb Rb]`: swap the shorter of `Ra` and `Lb` with the end of the
+    // other next to it, giving `[La Lb' | Ra' Rb]`.
+    let m = (h - pa.mid).min(pb.mid);
+    let xs = &mut a[pa.mid..pa.mid + m];
+    let ys = &mut b[pb.mid - m..pb.mid];
+    if m >= par_swap.max(1) {
+        let c = m.div_ceil(rayon::current_num_threads().max(1) * 2).max(1);
+        xs.par_chunks_mut(c)
+            .zip(ys.par_chunks_mut(c))
+            .for_each(|(x, y)| x.swap_with_slice(y));
+    } else {
+        xs.swap_with_slice(ys);
+    }
+    Part {
+        mid: pa.mid + pb.mid,
+        lcb: pa.lcb.union(pb.lcb),
+        rcb: pa.rcb.union(pb.rcb),
+        l: pa.l.merge(&pb.l, maps.0.k),
+        r: pa.r.merge(&pb.r, maps.1.k),
+    }
 }
 
 /// The map of a side that is not binned: everything into bin 0.

@@ -4,7 +4,8 @@
 //! and every subtree owns a contiguous range of nodes and of primitive slots. While building, a
 //! subtree over `n` primitives reserves `2n - 2` node slots for its descendants (the most a
 //! binary tree with `n` leaves can need), so parallel subtrees write disjoint slices with no
-//! locking; the unused slots are squeezed out at the end without changing the order.
+//! locking; the unused slots are squeezed out at the end without changing the order. (The
+//! binned builder packs each one-task subtree at the start of its slots and knows the count.)
 
 mod binned;
 mod median;
@@ -105,7 +106,7 @@ impl BuildParams {
 /// binned builder (the bin of its centroid on each axis, one byte each). With the upper corner
 /// negated, the box of two such vectors is one lane-wise minimum (the id and bins lanes carry
 /// junk through it and are never read as floats).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 #[repr(C)]
 pub(crate) struct PrimRef {
     v: f32x8,
@@ -288,6 +289,20 @@ pub struct BuildWorkspace {
     refs: Vec<PrimRef>,
     slots: Vec<Node>,
     pub(crate) boxes: Vec<Aabb>,
+    /// Set for a workspace used for one build and dropped: the build then compacts the nodes
+    /// in place and hands the slot storage to a tree that has none, instead of copying them
+    /// into fresh memory.
+    pub(crate) one_shot: bool,
+}
+
+impl BuildWorkspace {
+    /// A workspace for a single build (`Bvh::build`, `MeshBvh::build`).
+    pub(crate) fn one_shot() -> Self {
+        Self {
+            one_shot: true,
+            ..Self::default()
+        }
+    }
 }
 
 impl BuildWorkspace {
@@ -305,7 +320,7 @@ impl Bvh {
     #[must_use]
     pub fn build(boxes: &[Aabb], params: &BuildParams) -> Bvh {
         let mut bvh = Bvh::empty(params.max_leaf_size);
-        bvh.rebuild(boxes, params, &mut BuildWorkspace::default());
+        bvh.rebuild(boxes, params, &mut BuildWorkspace::one_shot());
         bvh
     }
 
@@ -327,7 +342,8 @@ impl Bvh {
         let refs = &mut ws.refs;
         // Every reference is written below and every used slot is written before it is read,
         // so old contents are kept: only growth initialises memory.
-        refs.resize(n, PrimRef::new(&Aabb::EMPTY, 0));
+        grow_zeroed(refs, n);
+        refs.truncate(n);
         // The references, and the root's bounds gathered on the way.
         let fill = |refs: &mut [PrimRef], boxes: &[Aabb], base: usize| {
             let mut rb = RangeBounds::EMPTY;
@@ -347,20 +363,43 @@ impl Bvh {
             fill(refs, boxes, 0)
         };
         let slots = &mut ws.slots;
-        if slots.len() < 2 * n - 1 {
-            slots.resize(2 * n - 1, Node::default());
-        }
+        grow_zeroed(slots, 2 * n - 1);
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
-        root[0] = match params.method {
-            Method::Binned => binned::build(params, refs, rb, desc),
+        let count;
+        (root[0], count) = match params.method {
+            Method::Binned => {
+                let (root, count) = binned::build(params, refs, rb, desc);
+                (root, Some(count))
+            }
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                build_range(&m, params, refs, rb, desc)
+                (build_range(&m, params, refs, rb, desc), None)
             }
-            Method::Sweep => sweep::build(params, refs, desc),
+            Method::Sweep => (sweep::build(params, refs, desc), None),
         };
         self.prim_indices.extend(refs.iter().map(PrimRef::id));
-        compact(&slots[..2 * n - 1], &mut self.nodes);
+        if ws.one_shot && self.nodes.capacity() == 0 {
+            // A cold build: no copy into fresh pages.
+            let mut slots = std::mem::take(&mut ws.slots);
+            slots.truncate(2 * n - 1);
+            compact_in_place(&mut slots, count);
+            let count = slots.len();
+            slots.shrink_to((count + count / 8 + 8).min(2 * n - 1));
+            self.nodes = slots;
+        } else {
+            compact(&slots[..2 * n - 1], count, &mut self.nodes);
+        }
+    }
+}
+
+/// Makes `v` at least `len` long. New storage is allocated zeroed (by the system, page by page
+/// on first touch, for large sizes) rather than filled: a cold 1M build would otherwise write
+/// 64 MB of node slots, most of which it never uses, and 32 MB of references it overwrites.
+fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) {
+    if v.capacity() < len {
+        *v = bytemuck::zeroed_vec(len);
+    } else if v.len() < len {
+        v.resize(len, T::zeroed());
     }
 }
 
@@ -482,19 +521,50 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
 /// Copies the nodes out of the reserved slots into `out`, skipping the slots no node was
 /// written to. Slots hold each subtree as "children pair, left child's descendants, right
 /// child's descendants", so a pre-order walk over pairs emits the nodes in slot order: the
-/// order, and with it every invariant, is kept.
-fn compact(slots: &[Node], out: &mut Vec<Node>) {
+/// order, and with it every invariant, is kept. `count` is the tree's node count if the builder
+/// knows it.
+fn compact(slots: &[Node], count: Option<usize>, out: &mut Vec<Node>) {
     // Grow with 1/8 headroom plus a few nodes, but never past the most a tree over these
     // primitives can have (`slots.len()`): rebuilds of a deforming mesh vary in node count by
     // a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
     // and then fit without reallocating.
-    let count = count_nodes(slots, 0);
+    let count = count.unwrap_or_else(|| count_nodes(slots, 0));
+    debug_assert_eq!(count, count_nodes(slots, 0));
     if count > out.capacity() {
         out.reserve_exact((count + count / 8 + 8).min(slots.len()).max(count));
     }
     out.push(slots[0]);
     if !slots[0].is_leaf() {
         emit_pair(slots, 0, out);
+    }
+}
+
+/// [`compact`] within the slots themselves (truncated to the tree): the walk emits nodes in
+/// slot order, so each pair is written at or before the slots it is read from, and no slot
+/// still to be read is overwritten.
+fn compact_in_place(slots: &mut Vec<Node>, count: Option<usize>) {
+    let mut len = 1;
+    if !slots[0].is_leaf() {
+        emit_pair_in_place(slots, 0, &mut len);
+    }
+    debug_assert!(count.is_none_or(|c| c == len));
+    slots.truncate(len);
+}
+
+/// [`emit_pair`] in place: `len` nodes are emitted so far.
+fn emit_pair_in_place(s: &mut [Node], parent: usize, len: &mut usize) {
+    let c = slots_child(s[parent]);
+    let at = *len;
+    debug_assert!(at <= c);
+    let pair = [s[c], s[c + 1]];
+    s[parent].first = at as u32;
+    s[at] = pair[0];
+    s[at + 1] = pair[1];
+    *len += 2;
+    for k in [at, at + 1] {
+        if !s[k].is_leaf() {
+            emit_pair_in_place(s, k, len);
+        }
     }
 }
 
