@@ -10,6 +10,9 @@ use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::{Affine3A, Quat, Vec3};
 use proptest::prelude::*;
 
+mod common;
+use common::strategies::{direction, mesh, rays, vec3};
+
 fn builders() -> Vec<BuildParams> {
     vec![
         BuildParams::binned(4),
@@ -29,80 +32,6 @@ fn builders() -> Vec<BuildParams> {
         BuildParams::SWEEP,
         BuildParams::MEDIAN,
     ]
-}
-
-fn coord() -> impl Strategy<Value = f32> {
-    -10.0f32..10.0
-}
-
-fn vec3() -> impl Strategy<Value = Vec3> {
-    (coord(), coord(), coord()).prop_map(|(x, y, z)| Vec3::new(x, y, z))
-}
-
-/// A triangle soup: unshared vertices anywhere in the cube.
-fn soup() -> impl Strategy<Value = TriMesh> {
-    prop::collection::vec([vec3(), vec3(), vec3()], 1..120).prop_map(|t| TriMesh::from_soup(&t))
-}
-
-/// A connected height-field mesh on a grid (shared vertices and edges).
-fn grid() -> impl Strategy<Value = TriMesh> {
-    (2usize..10, 2usize..10)
-        .prop_flat_map(|(w, h)| (Just((w, h)), prop::collection::vec(-3.0f32..3.0, w * h)))
-        .prop_map(|((w, h), heights)| {
-            let positions = (0..w * h)
-                .map(|i| Vec3::new((i % w) as f32, heights[i], (i / w) as f32))
-                .collect();
-            let mut indices = Vec::new();
-            for y in 0..h - 1 {
-                for x in 0..w - 1 {
-                    let i = (y * w + x) as u32;
-                    let (r, d) = (i + 1, i + w as u32);
-                    indices.push([i, r, d + 1]);
-                    indices.push([i, d + 1, d]);
-                }
-            }
-            TriMesh::new(positions, indices)
-        })
-}
-
-fn mesh() -> impl Strategy<Value = TriMesh> {
-    prop_oneof![soup(), grid()]
-}
-
-/// A direction: random, or with one or two zero components (axis-parallel rays).
-fn direction() -> impl Strategy<Value = Vec3> {
-    prop_oneof![
-        vec3().prop_filter("non-zero", |d| d.length() > 1e-3),
-        (0usize..3, any::<bool>()).prop_map(|(a, neg)| {
-            let mut d = Vec3::ZERO;
-            d[a] = if neg { -1.0 } else { 1.0 };
-            d
-        }),
-        (0usize..3, coord(), coord()).prop_filter_map("non-zero", |(a, u, v)| {
-            let mut d = Vec3::new(u, v, u - v);
-            d[a] = 0.0;
-            (d.length() > 1e-3).then_some(d)
-        }),
-    ]
-}
-
-/// Incoherent rays: origins anywhere (inside the mesh's box too), mixed signs, axis-parallel
-/// directions, some ending early or starting late.
-fn incoherent() -> impl Strategy<Value = Vec<Ray>> {
-    prop::collection::vec(
-        (
-            vec3(),
-            direction(),
-            prop_oneof![Just(f32::INFINITY), 0.5f32..20.0],
-            prop_oneof![Just(0.0f32), 0.0f32..2.0],
-        ),
-        1..=MAX_PACKET,
-    )
-    .prop_map(|v| {
-        v.into_iter()
-            .map(|(o, d, tmax, tmin)| Ray::with_range(o, d, tmin, tmax))
-            .collect()
-    })
 }
 
 /// A coherent packet: a pinhole camera's tile (common origin, directions in a narrow cone), or
@@ -222,9 +151,9 @@ proptest! {
 
     #[test]
     fn packets_match_single_rays_and_brute_force(
-        mesh in mesh(),
+        mesh in mesh(120, 10),
         coherent in prop::collection::vec(coherent(), 1..4),
-        incoherent in prop::collection::vec(incoherent(), 1..3),
+        incoherent in prop::collection::vec(rays(1..=MAX_PACKET), 1..3),
     ) {
         let packets: Vec<Vec<Ray>> = coherent.into_iter().chain(incoherent).collect();
         for params in builders() {
@@ -235,10 +164,10 @@ proptest! {
 
     #[test]
     fn packets_after_deformation_and_refit(
-        mesh in mesh(),
+        mesh in mesh(120, 10),
         moves in prop::collection::vec((prop::collection::vec(vec3(), 1..8), 0.0f32..3.0), 2),
         coherent in prop::collection::vec(coherent(), 1..3),
-        incoherent in incoherent(),
+        incoherent in rays(1..=MAX_PACKET),
     ) {
         let packets: Vec<Vec<Ray>> = coherent.into_iter().chain([incoherent]).collect();
         for params in builders() {
@@ -256,10 +185,10 @@ proptest! {
 
     #[test]
     fn engine_packets_match_engine_single_rays(
-        meshes in prop::collection::vec(mesh(), 1..3),
+        meshes in prop::collection::vec(mesh(120, 10), 1..3),
         placements in prop::collection::vec((0usize..3, vec3(), -3.0f32..3.0, 0.5f32..2.0, any::<bool>()), 1..5),
         coherent in prop::collection::vec(coherent(), 1..3),
-        incoherent in incoherent(),
+        incoherent in rays(1..=MAX_PACKET),
     ) {
         let mut e = Engine::new(EngineConfig::default());
         let ids: Vec<_> = meshes

@@ -5,6 +5,7 @@
 mod common;
 
 use common::Rng;
+use common::strategies::{mesh, rays, vec3};
 use dynbvh::bvh::{
     BuildParams, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any, brute_force_closest,
 };
@@ -116,76 +117,6 @@ fn check_both(mesh: &TriMesh, bin: &MeshBvh, rays: &[Ray]) -> Result<(), String>
     Ok(())
 }
 
-fn coord() -> impl Strategy<Value = f32> {
-    -10.0f32..10.0
-}
-
-fn vec3() -> impl Strategy<Value = Vec3> {
-    (coord(), coord(), coord()).prop_map(|(x, y, z)| Vec3::new(x, y, z))
-}
-
-fn soup() -> impl Strategy<Value = TriMesh> {
-    prop::collection::vec([vec3(), vec3(), vec3()], 1..120).prop_map(|t| TriMesh::from_soup(&t))
-}
-
-fn grid() -> impl Strategy<Value = TriMesh> {
-    (2usize..10, 2usize..10)
-        .prop_flat_map(|(w, h)| (Just((w, h)), prop::collection::vec(-3.0f32..3.0, w * h)))
-        .prop_map(|((w, h), heights)| {
-            let positions = (0..w * h)
-                .map(|i| Vec3::new((i % w) as f32, heights[i], (i / w) as f32))
-                .collect();
-            let mut indices = Vec::new();
-            for y in 0..h - 1 {
-                for x in 0..w - 1 {
-                    let i = (y * w + x) as u32;
-                    let (r, d) = (i + 1, i + w as u32);
-                    indices.push([i, r, d + 1]);
-                    indices.push([i, d + 1, d]);
-                }
-            }
-            TriMesh::new(positions, indices)
-        })
-}
-
-fn mesh() -> impl Strategy<Value = TriMesh> {
-    prop_oneof![soup(), grid()]
-}
-
-/// Random directions and axis-parallel ones (one or two zero components).
-fn direction() -> impl Strategy<Value = Vec3> {
-    prop_oneof![
-        vec3().prop_filter("non-zero", |d| d.length() > 1e-3),
-        (0usize..3, any::<bool>()).prop_map(|(a, neg)| {
-            let mut d = Vec3::ZERO;
-            d[a] = if neg { -1.0 } else { 1.0 };
-            d
-        }),
-        (0usize..3, coord(), coord()).prop_filter_map("non-zero", |(a, u, v)| {
-            let mut d = Vec3::new(u, v, u - v);
-            d[a] = 0.0;
-            (d.length() > 1e-3).then_some(d)
-        }),
-    ]
-}
-
-fn rays() -> impl Strategy<Value = Vec<Ray>> {
-    prop::collection::vec(
-        (
-            vec3(),
-            direction(),
-            prop_oneof![Just(f32::INFINITY), 0.5f32..20.0],
-            prop_oneof![Just(0.0f32), 0.0f32..2.0],
-        ),
-        1..40,
-    )
-    .prop_map(|v| {
-        v.into_iter()
-            .map(|(o, d, tmax, tmin)| Ray::with_range(o, d, tmin, tmax))
-            .collect()
-    })
-}
-
 /// The given rays plus rays aimed at the mesh's vertices (where ties between triangles happen).
 fn with_aimed(mesh: &TriMesh, rays: &[Ray]) -> Vec<Ray> {
     let from = Vec3::new(0.3, 11.0, -0.7);
@@ -205,7 +136,7 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
 
     #[test]
-    fn every_builder_collapsed_matches_brute_force(mesh in mesh(), rays in rays()) {
+    fn every_builder_collapsed_matches_brute_force(mesh in mesh(120, 10), rays in rays(1..40)) {
         let rays = with_aimed(&mesh, &rays);
         for params in builders() {
             let bin = MeshBvh::build(&mesh, &params);
@@ -215,9 +146,9 @@ proptest! {
 
     #[test]
     fn wide_refit_after_deformations_matches_brute_force(
-        mesh in mesh(),
+        mesh in mesh(120, 10),
         moves in prop::collection::vec((prop::collection::vec(vec3(), 1..8), 0.0f32..3.0), 3),
-        rays in rays(),
+        rays in rays(1..40),
     ) {
         for params in builders() {
             let mut m = mesh.clone();

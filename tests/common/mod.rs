@@ -1,6 +1,8 @@
 //! Helpers shared by integration tests: brute-force comparison and test meshes.
 #![allow(dead_code)]
 
+pub mod strategies;
+
 use dynbvh::bvh::{MeshBvh, brute_force_any, brute_force_closest};
 use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
