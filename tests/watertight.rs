@@ -1,10 +1,11 @@
 //! Watertightness: rays aimed exactly at the vertices and edge midpoints of a closed mesh, from
-//! inside and from outside, never slip between its triangles.
+//! inside and from outside, never slip between its triangles, through the binary tree, the 4-
+//! and 8-wide trees and packets.
 
 mod common;
 
 use common::{Rng, check_ray};
-use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh4, MeshBvh8, PacketMode};
 use dynbvh::geom::shapes::icosphere;
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
@@ -69,5 +70,30 @@ fn no_ray_slips_through_a_closed_mesh() {
         let bvh = MeshBvh::build(&mesh, &params);
         bvh.validate(&mesh).unwrap();
         assert_eq!(count_misses(&mesh, &bvh, &rays), 0, "{}", params.name());
+        // The binary tree's hits equal brute force (checked above); every other traversal
+        // must give exactly the same distances.
+        let t = |h: Option<dynbvh::geom::Hit>| h.map(|h| h.t);
+        let (w4, w8) = (MeshBvh4::from_mesh_bvh(&bvh), MeshBvh8::from_mesh_bvh(&bvh));
+        w4.validate(&mesh).unwrap();
+        w8.validate(&mesh).unwrap();
+        let mut packet = vec![None; rays.len()];
+        bvh.closest_hit_packet_mode(&rays, &mut packet, PacketMode::Always);
+        for (ray, p) in rays.iter().zip(&packet) {
+            let want = t(bvh.closest_hit(ray));
+            assert!(want.is_some());
+            assert_eq!(
+                t(w4.closest_hit(ray)),
+                want,
+                "BVH4 {} {ray:?}",
+                params.name()
+            );
+            assert_eq!(
+                t(w8.closest_hit(ray)),
+                want,
+                "BVH8 {} {ray:?}",
+                params.name()
+            );
+            assert_eq!(t(*p), want, "packet {} {ray:?}", params.name());
+        }
     }
 }

@@ -9,11 +9,9 @@ use common::strategies::{mesh, rays, vec3};
 use dynbvh::bvh::{
     BuildParams, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any, brute_force_closest,
 };
-use dynbvh::geom::shapes::icosphere;
 use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 use proptest::prelude::*;
-use std::collections::HashSet;
 
 fn builders() -> Vec<BuildParams> {
     let widest = BuildParams {
@@ -306,62 +304,6 @@ fn deep_chain_uses_a_deep_stack() {
         let bin = MeshBvh::build(&mesh, &params);
         assert!(bin.bvh().depth() <= MAX_DEPTH);
         check_both(&mesh, &bin, &rays).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
-    }
-}
-
-/// Every vertex and edge midpoint of a mesh.
-fn targets(mesh: &TriMesh) -> Vec<Vec3> {
-    let mut edges = HashSet::new();
-    let mut pts: Vec<Vec3> = mesh.positions.clone();
-    for t in &mesh.indices {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if edges.insert((a.min(b), a.max(b))) {
-                pts.push((mesh.positions[a as usize] + mesh.positions[b as usize]) * 0.5);
-            }
-        }
-    }
-    pts
-}
-
-#[test]
-fn no_ray_slips_through_a_closed_mesh() {
-    // The rays of tests/watertight.rs, through the wide trees.
-    let mut mesh = icosphere(3);
-    let rot = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -0.7);
-    let center = Vec3::new(10.25, -3.5, 0.125);
-    for p in &mut mesh.positions {
-        *p = rot * (*p * 3.7) + center;
-    }
-    let pts = targets(&mesh);
-    assert!(pts.len() > 1900);
-    let mut rng = Rng(99);
-    let mut rays = Vec::new();
-    for &p in &pts {
-        let out = p + (p - center).normalize() * 5.0;
-        rays.push(Ray::new(out, p - out));
-        let far = center + rng.unit_vector() * 20.0;
-        if (p - far).normalize().dot((p - center).normalize()) < -0.1 {
-            rays.push(Ray::new(far, p - far));
-        }
-        rays.push(Ray::new(center, p - center));
-        let inside = center + rng.unit_vector() * rng.range(0.0, 2.0);
-        rays.push(Ray::new(inside, p - inside));
-    }
-    for params in [BuildParams::BINNED, BuildParams::SWEEP, BuildParams::MEDIAN] {
-        let bin = MeshBvh::build(&mesh, &params);
-        let w4 = WideBvh::<4>::from_mesh_bvh(&bin);
-        let w8 = WideBvh::<8>::from_mesh_bvh(&bin);
-        w4.validate(&mesh).unwrap();
-        w8.validate(&mesh).unwrap();
-        let mut misses = 0;
-        for ray in &rays {
-            check_ray(&mesh, &bin, &w4, ray).unwrap();
-            check_ray(&mesh, &bin, &w8, ray).unwrap();
-            misses += usize::from(w4.closest_hit(ray).is_none());
-            misses += usize::from(w8.closest_hit(ray).is_none());
-        }
-        assert_eq!(misses, 0, "{}", params.name());
     }
 }
 
