@@ -575,69 +575,28 @@ impl Bvh {
         root: u32,
         leaf: &mut impl FnMut(&mut RayPacket, usize, Mask) -> bool,
     ) -> bool {
-        let nodes = self.nodes.as_slice();
         let bit = (1 as Mask) << i;
         let ray = p.rays[i];
+        let tmax = p.tmax(i);
         let mut changed = false;
-        let node = &nodes[root as usize];
-        if ray
-            .hit_box(Vec3::from(node.min), Vec3::from(node.max), p.tmax(i))
-            .is_none()
-        {
-            return false;
-        }
-        let mut stack = [(0u32, 0f32); MAX_DEPTH];
-        let mut sp = 0;
-        let mut node = node;
-        loop {
-            if node.is_leaf() {
-                for slot in node.first as usize..(node.first + node.count) as usize {
-                    changed |= leaf(p, slot, bit);
-                    if ANY && p.active & bit == 0 {
-                        return true;
-                    }
+        // `leaf` keeps the lane's closest hit (and its `tmax`) in the packet; the walk only
+        // needs to hear that it moved, or for any-hit that the lane is done.
+        self.traverse_from::<ANY>(
+            root as usize,
+            &ray,
+            tmax,
+            |slot, _| {
+                let c = leaf(p, slot, bit);
+                changed |= c;
+                if ANY {
+                    (p.active & bit == 0).then_some(0.0)
+                } else {
+                    c.then(|| p.tmax(i))
                 }
-            } else {
-                let tmax = p.tmax(i);
-                let l = &nodes[node.first as usize];
-                let r = &nodes[node.first as usize + 1];
-                let tl = ray.hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax);
-                let tr = ray.hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax);
-                match (tl, tr) {
-                    (Some(a), Some(b)) => {
-                        let (near, far, tfar) = if a <= b {
-                            (l, node.first + 1, b)
-                        } else {
-                            (r, node.first, a)
-                        };
-                        stack[sp] = (far, tfar);
-                        sp += 1;
-                        node = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        node = l;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        node = r;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
-            }
-            loop {
-                if sp == 0 {
-                    return changed;
-                }
-                sp -= 1;
-                let (n, tnear) = stack[sp];
-                if tnear <= p.tmax(i) * FAR_SCALE {
-                    node = &nodes[n as usize];
-                    break;
-                }
-            }
-        }
+            },
+            &mut (),
+        );
+        changed
     }
 }
 

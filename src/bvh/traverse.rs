@@ -84,12 +84,28 @@ impl Bvh {
     fn traverse<const ANY: bool>(
         &self,
         ray: &Ray,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+        counters: &mut impl Counters,
+    ) -> Option<(usize, f32)> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        self.traverse_from::<ANY>(0, ray, ray.tmax, test, counters)
+    }
+
+    /// [`Bvh::traverse`] of the subtree at node `start` over `[ray.tmin, tmax)` (packets walk
+    /// single lanes through subtrees with it).
+    #[inline(always)]
+    pub(crate) fn traverse_from<const ANY: bool>(
+        &self,
+        start: usize,
+        ray: &Ray,
+        mut tmax: f32,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
         counters: &mut impl Counters,
     ) -> Option<(usize, f32)> {
         let nodes = self.nodes.as_slice();
-        let root = nodes.first()?;
-        let mut tmax = ray.tmax;
+        let root = &nodes[start];
         ray.hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)?;
         let mut best = None;
         let mut stack = [(0u32, 0f32); MAX_DEPTH];
