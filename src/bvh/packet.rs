@@ -681,24 +681,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
-        assert_eq!(rays.len(), hits.len(), "one output per ray");
-        if rays.is_empty() {
-            return;
-        }
-        assert!(
-            width > 0 && rays.len().is_multiple_of(width),
-            "rows of {width} rays"
-        );
-        let mut buf = Vec::with_capacity(MAX_PACKET);
-        let mut out = vec![None; MAX_PACKET];
-        image_tiles(width, rays.len() / width, |idx| {
-            buf.clear();
-            buf.extend(idx.iter().map(|&i| rays[i]));
-            self.closest_hit_packet(&buf, &mut out[..buf.len()]);
-            for (&i, h) in idx.iter().zip(&out) {
-                hits[i] = *h;
-            }
-        });
+        self.trace_image(rays, width, hits, Self::closest_hit_packet);
     }
 
     /// Any-hit answers of an image's rays given row by row, as packets of [`TILE_W`] x
@@ -707,6 +690,17 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
+        self.trace_image(rays, width, out, Self::any_hit_packet);
+    }
+
+    /// The image in tiles ([`image_tiles`]), each tile's rays gathered and answered by `trace`.
+    fn trace_image<T: Copy + Default>(
+        &self,
+        rays: &[Ray],
+        width: usize,
+        out: &mut [T],
+        trace: impl Fn(&Self, &[Ray], &mut [T]),
+    ) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         if rays.is_empty() {
             return;
@@ -716,13 +710,13 @@ impl MeshBvh {
             "rows of {width} rays"
         );
         let mut buf = Vec::with_capacity(MAX_PACKET);
-        let mut res = vec![false; MAX_PACKET];
+        let mut res = vec![T::default(); MAX_PACKET];
         image_tiles(width, rays.len() / width, |idx| {
             buf.clear();
             buf.extend(idx.iter().map(|&i| rays[i]));
-            self.any_hit_packet(&buf, &mut res[..buf.len()]);
-            for (&i, o) in idx.iter().zip(&res) {
-                out[i] = *o;
+            trace(self, &buf, &mut res[..buf.len()]);
+            for (&i, r) in idx.iter().zip(&res) {
+                out[i] = *r;
             }
         });
     }
