@@ -10,41 +10,14 @@ use dynbvh::bvh::{BuildParams, Bvh, MAX_DEPTH, MeshBvh};
 use dynbvh::geom::{Aabb, Ray, TriMesh};
 use glam::Vec3;
 
+/// The common builders, and the widest axis with the default bin count.
 fn builders() -> Vec<BuildParams> {
-    vec![
-        BuildParams::binned(4),
-        BuildParams::BINNED,
-        BuildParams {
-            all_axes: false,
-            ..BuildParams::BINNED
-        },
-        BuildParams {
-            parallel_threshold: 2,
-            ..BuildParams::binned(32)
-        },
-        BuildParams::SWEEP,
-        BuildParams {
-            parallel_threshold: 2,
-            ..BuildParams::SWEEP
-        },
-        BuildParams::MEDIAN,
-    ]
-}
-
-/// Rays from a shell around `center` towards points near it, plus axis-parallel ones.
-fn rays_around(center: Vec3, radius: f32, n: usize, seed: u64) -> Vec<Ray> {
-    let mut rng = Rng(seed);
-    let mut rays = Vec::new();
-    for _ in 0..n {
-        let o = center + rng.unit_vector() * radius * 2.0;
-        let target = center + rng.unit_vector() * radius * rng.f() * 0.5;
-        rays.push(Ray::new(o, target - o));
-    }
-    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
-        rays.push(Ray::new(center - axis * radius * 2.0, axis));
-        rays.push(Ray::new(center + axis * radius * 2.0, -axis));
-    }
-    rays
+    let mut b = common::builders();
+    b.push(BuildParams {
+        all_axes: false,
+        ..BuildParams::BINNED
+    });
+    b
 }
 
 /// Builds with every builder, validates, and compares every ray with brute force; then
@@ -82,7 +55,7 @@ fn empty_input_builds_an_empty_tree() {
 #[test]
 fn single_triangle() {
     let mesh = TriMesh::from_soup(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]);
-    let rays = rays_around(Vec3::new(0.3, 0.3, 0.0), 1.0, 200, 1);
+    let rays = common::rays_around(Vec3::new(0.3, 0.3, 0.0), 1.0, 200, 1);
     check_everything(&mesh, &rays);
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
     assert_eq!(bvh.bvh().nodes().len(), 1);
@@ -106,7 +79,7 @@ fn all_centroids_in_one_point() {
     for i in 0..mesh.len() {
         assert_eq!(mesh.triangle_bounds(i).center(), c);
     }
-    check_everything(&mesh, &rays_around(c, 1.0, 300, 2));
+    check_everything(&mesh, &common::rays_around(c, 1.0, 300, 2));
 }
 
 #[test]
@@ -117,7 +90,7 @@ fn identical_triangles() {
         Vec3::new(0.0, 1.0, 0.0),
     ];
     let mesh = TriMesh::from_soup(&vec![t; 20_000]);
-    let rays = rays_around(Vec3::ZERO, 1.0, 50, 3);
+    let rays = common::rays_around(Vec3::ZERO, 1.0, 50, 3);
     check_everything(&mesh, &rays);
     // Every leaf respects the size limit although no split separates anything.
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
@@ -158,30 +131,12 @@ fn zero_area_triangles() {
         tris.push([p, p + rng.unit_vector() * 0.2, p + rng.unit_vector() * 0.2]);
     }
     let mesh = TriMesh::from_soup(&tris);
-    check_everything(&mesh, &rays_around(Vec3::ZERO, 1.0, 400, 4));
+    check_everything(&mesh, &common::rays_around(Vec3::ZERO, 1.0, 400, 4));
 }
 
 #[test]
 fn nan_and_infinite_vertices_do_not_break_the_tree() {
-    let mut rng = Rng(13);
-    let mut tris = Vec::new();
-    for i in 0..600 {
-        let p = Vec3::new(
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-        );
-        let mut t = [p, p + rng.unit_vector() * 0.3, p + rng.unit_vector() * 0.3];
-        match i % 10 {
-            0 => t[1].x = f32::NAN,
-            1 => t[2] = Vec3::splat(f32::NAN),
-            2 => t[0].y = f32::INFINITY,
-            3 => t[1].z = f32::NEG_INFINITY,
-            _ => {}
-        }
-        tris.push(t);
-    }
-    let mesh = TriMesh::from_soup(&tris);
+    let mesh = common::soup_with_nan_and_inf();
     for params in builders() {
         let bvh = MeshBvh::build(&mesh, &params);
         // Structure holds (each primitive once, leaves in range, children after parents).
@@ -190,7 +145,7 @@ fn nan_and_infinite_vertices_do_not_break_the_tree() {
             .unwrap_or_else(|e| panic!("{}: {e}", params.name()));
         // Triangles with a NaN vertex are never hit; the others are found as brute force finds
         // them.
-        for ray in rays_around(Vec3::ZERO, 1.0, 300, 5) {
+        for ray in common::rays_around(Vec3::ZERO, 1.0, 300, 5) {
             check_ray(&mesh, &bvh, &ray).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
         }
         // A refit to the same positions bounds every leaf exactly as the build did (NaN
@@ -212,14 +167,17 @@ fn scaled_sphere(scale: f32) -> TriMesh {
 #[test]
 fn tiny_scale() {
     let s = 1e-20;
-    check_everything(&scaled_sphere(s), &rays_around(Vec3::ZERO, s, 300, 6));
+    check_everything(
+        &scaled_sphere(s),
+        &common::rays_around(Vec3::ZERO, s, 300, 6),
+    );
 }
 
 #[test]
 fn huge_scale() {
     let s = 1e20;
     let mesh = scaled_sphere(s);
-    check_everything(&mesh, &rays_around(Vec3::ZERO, s, 300, 7));
+    check_everything(&mesh, &common::rays_around(Vec3::ZERO, s, 300, 7));
     // Areas of 1e40 overflow f32: the SAH must still separate the triangles sensibly.
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
     let unit = MeshBvh::build(&scaled_sphere(1.0), &BuildParams::BINNED);

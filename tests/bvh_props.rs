@@ -5,40 +5,10 @@ mod common;
 
 use common::check_ray;
 use common::strategies::{mesh, rays, vec3};
-use dynbvh::bvh::{BuildParams, BuildWorkspace, MeshBvh};
+use dynbvh::bvh::{BuildWorkspace, MeshBvh};
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
 use proptest::prelude::*;
-
-fn builders() -> Vec<BuildParams> {
-    let widest = BuildParams {
-        all_axes: false,
-        ..BuildParams::binned(8)
-    };
-    let tiny_leaves = BuildParams {
-        max_leaf_size: 1,
-        ..BuildParams::binned(4)
-    };
-    // A low threshold so that small inputs also take the parallel paths.
-    let parallel = BuildParams {
-        parallel_threshold: 2,
-        ..BuildParams::binned(32)
-    };
-    let parallel_sweep = BuildParams {
-        parallel_threshold: 2,
-        ..BuildParams::SWEEP
-    };
-    vec![
-        BuildParams::binned(4),
-        BuildParams::BINNED,
-        widest,
-        tiny_leaves,
-        parallel,
-        BuildParams::SWEEP,
-        parallel_sweep,
-        BuildParams::MEDIAN,
-    ]
-}
 
 /// Also rays aimed at the mesh's vertices, the hardest place for the triangle test.
 fn aimed(mesh: &TriMesh, from: Vec3) -> impl Iterator<Item = Ray> + '_ {
@@ -66,7 +36,7 @@ proptest! {
 
     #[test]
     fn every_builder_matches_brute_force(mesh in mesh(80, 8), rays in rays(1..40)) {
-        for params in builders() {
+        for params in common::builders() {
             let bvh = MeshBvh::build(&mesh, &params);
             check_all(&mesh, &bvh, &rays)?;
         }
@@ -78,7 +48,7 @@ proptest! {
         moves in prop::collection::vec((prop::collection::vec(vec3(), 1..8), 0.0f32..3.0), 3),
         rays in rays(1..40),
     ) {
-        for params in builders() {
+        for params in common::builders() {
             let mut m = mesh.clone();
             let mut bvh = MeshBvh::build(&m, &params);
             // Several deformations in a row, each refitted from the previous tree.
@@ -99,7 +69,7 @@ proptest! {
     ) {
         // Meshes of different sizes in a row: the tree and workspace keep stale contents
         // from the previous, possibly larger, build.
-        for params in builders() {
+        for params in common::builders() {
             let mut ws = BuildWorkspace::default();
             let mut bvh = MeshBvh::default();
             for m in &meshes {

@@ -13,27 +13,6 @@ use proptest::prelude::*;
 mod common;
 use common::strategies::{direction, mesh, rays, vec3};
 
-fn builders() -> Vec<BuildParams> {
-    vec![
-        BuildParams::binned(4),
-        BuildParams::BINNED,
-        BuildParams {
-            all_axes: false,
-            ..BuildParams::binned(8)
-        },
-        BuildParams {
-            max_leaf_size: 1,
-            ..BuildParams::binned(4)
-        },
-        BuildParams {
-            parallel_threshold: 2,
-            ..BuildParams::binned(32)
-        },
-        BuildParams::SWEEP,
-        BuildParams::MEDIAN,
-    ]
-}
-
 /// A coherent packet: a pinhole camera's tile (common origin, directions in a narrow cone), or
 /// parallel rays from a patch of origins (shadow rays toward a distant light); the camera
 /// may sit inside the mesh's box. Some packets aim exactly along an axis.
@@ -156,7 +135,7 @@ proptest! {
         incoherent in prop::collection::vec(rays(1..=MAX_PACKET), 1..3),
     ) {
         let packets: Vec<Vec<Ray>> = coherent.into_iter().chain(incoherent).collect();
-        for params in builders() {
+        for params in common::builders() {
             let bvh = MeshBvh::build(&mesh, &params);
             check_all(&mesh, &bvh, &packets)?;
         }
@@ -170,7 +149,7 @@ proptest! {
         incoherent in rays(1..=MAX_PACKET),
     ) {
         let packets: Vec<Vec<Ray>> = coherent.into_iter().chain([incoherent]).collect();
-        for params in builders() {
+        for params in common::builders() {
             let mut m = mesh.clone();
             let mut bvh = MeshBvh::build(&m, &params);
             for (offsets, scale) in &moves {

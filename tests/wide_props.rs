@@ -4,7 +4,6 @@
 
 mod common;
 
-use common::Rng;
 use common::strategies::{mesh, rays, vec3};
 use dynbvh::bvh::{
     BuildParams, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any, brute_force_closest,
@@ -13,40 +12,16 @@ use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 use proptest::prelude::*;
 
+/// The common builders, and one whose binary leaves are larger than a wide leaf holds (16):
+/// they are split across lanes.
 fn builders() -> Vec<BuildParams> {
-    let widest = BuildParams {
-        all_axes: false,
-        ..BuildParams::binned(8)
-    };
-    let tiny_leaves = BuildParams {
-        max_leaf_size: 1,
-        ..BuildParams::binned(4)
-    };
-    // Binary leaves larger than a wide leaf holds (16): they are split across lanes.
-    let huge_leaves = BuildParams {
+    let mut b = common::builders();
+    b.push(BuildParams {
         max_leaf_size: 40,
         intersection_cost: 0.01,
         ..BuildParams::binned(8)
-    };
-    let parallel = BuildParams {
-        parallel_threshold: 2,
-        ..BuildParams::binned(32)
-    };
-    let parallel_sweep = BuildParams {
-        parallel_threshold: 2,
-        ..BuildParams::SWEEP
-    };
-    vec![
-        BuildParams::binned(4),
-        BuildParams::BINNED,
-        widest,
-        tiny_leaves,
-        huge_leaves,
-        parallel,
-        BuildParams::SWEEP,
-        parallel_sweep,
-        BuildParams::MEDIAN,
-    ]
+    });
+    b
 }
 
 /// One ray through a wide tree against brute force and the binary tree: the same closest
@@ -172,22 +147,6 @@ proptest! {
     }
 }
 
-/// Rays from a shell around `center` towards points near it, plus axis-parallel ones.
-fn rays_around(center: Vec3, radius: f32, n: usize, seed: u64) -> Vec<Ray> {
-    let mut rng = Rng(seed);
-    let mut rays = Vec::new();
-    for _ in 0..n {
-        let o = center + rng.unit_vector() * radius * 2.0;
-        let target = center + rng.unit_vector() * radius * rng.f() * 0.5;
-        rays.push(Ray::new(o, target - o));
-    }
-    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
-        rays.push(Ray::new(center - axis * radius * 2.0, axis));
-        rays.push(Ray::new(center + axis * radius * 2.0, -axis));
-    }
-    rays
-}
-
 /// Every builder, collapsed, checked; then refitted to the same positions and checked again.
 fn check_everything(mesh: &TriMesh, rays: &[Ray]) {
     for params in builders() {
@@ -224,7 +183,10 @@ fn empty_mesh() {
 #[test]
 fn single_triangle() {
     let mesh = TriMesh::from_soup(&[[Vec3::ZERO, Vec3::X, Vec3::Y]]);
-    check_everything(&mesh, &rays_around(Vec3::new(0.3, 0.3, 0.0), 1.0, 200, 1));
+    check_everything(
+        &mesh,
+        &common::rays_around(Vec3::new(0.3, 0.3, 0.0), 1.0, 200, 1),
+    );
     let w = WideBvh::<8>::build(&mesh, &BuildParams::BINNED);
     assert_eq!(w.nodes().len(), 1);
     let hit = w
@@ -241,31 +203,13 @@ fn identical_triangles() {
         Vec3::new(0.0, 1.0, 0.0),
     ];
     let mesh = TriMesh::from_soup(&vec![t; 3000]);
-    check_everything(&mesh, &rays_around(Vec3::ZERO, 1.0, 50, 3));
+    check_everything(&mesh, &common::rays_around(Vec3::ZERO, 1.0, 50, 3));
 }
 
 #[test]
 fn nan_and_infinite_vertices() {
-    let mut rng = Rng(13);
-    let mut tris = Vec::new();
-    for i in 0..600 {
-        let p = Vec3::new(
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0),
-        );
-        let mut t = [p, p + rng.unit_vector() * 0.3, p + rng.unit_vector() * 0.3];
-        match i % 10 {
-            0 => t[1].x = f32::NAN,
-            1 => t[2] = Vec3::splat(f32::NAN),
-            2 => t[0].y = f32::INFINITY,
-            3 => t[1].z = f32::NEG_INFINITY,
-            _ => {}
-        }
-        tris.push(t);
-    }
-    let mesh = TriMesh::from_soup(&tris);
-    let rays = rays_around(Vec3::ZERO, 1.0, 300, 5);
+    let mesh = common::soup_with_nan_and_inf();
+    let rays = common::rays_around(Vec3::ZERO, 1.0, 300, 5);
     for params in builders() {
         let bin = MeshBvh::build(&mesh, &params);
         let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
@@ -294,7 +238,7 @@ fn deep_chain_uses_a_deep_stack() {
         })
         .collect();
     let mesh = TriMesh::from_soup(&tris);
-    let mut rays = rays_around(Vec3::new(0.0, 4.0, 0.0), 8.0, 200, 9);
+    let mut rays = common::rays_around(Vec3::new(0.0, 4.0, 0.0), 8.0, 200, 9);
     // Rays along the chain, through many of its nodes.
     for y in 0..8 {
         rays.push(Ray::new(Vec3::new(-1e30, y as f32 + 1e-9, 0.0), Vec3::X));

@@ -3,7 +3,7 @@
 
 pub mod strategies;
 
-use dynbvh::bvh::{MeshBvh, brute_force_any, brute_force_closest};
+use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
 use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 
@@ -68,4 +68,75 @@ impl Rng {
         let s = (1.0 - z * z).max(0.0).sqrt();
         Vec3::new(s * phi.cos(), s * phi.sin(), z)
     }
+}
+
+/// Every builder, with the settings that take their rarer paths: few bins, the widest axis
+/// only, one triangle per leaf, and a parallel threshold so low that small inputs also take the
+/// parallel code.
+pub fn builders() -> Vec<BuildParams> {
+    let widest = BuildParams {
+        all_axes: false,
+        ..BuildParams::binned(8)
+    };
+    let tiny_leaves = BuildParams {
+        max_leaf_size: 1,
+        ..BuildParams::binned(4)
+    };
+    let parallel = BuildParams {
+        parallel_threshold: 2,
+        ..BuildParams::binned(32)
+    };
+    let parallel_sweep = BuildParams {
+        parallel_threshold: 2,
+        ..BuildParams::SWEEP
+    };
+    vec![
+        BuildParams::binned(4),
+        BuildParams::BINNED,
+        widest,
+        tiny_leaves,
+        parallel,
+        BuildParams::SWEEP,
+        parallel_sweep,
+        BuildParams::MEDIAN,
+    ]
+}
+
+/// Rays from a shell around `center` towards points near it, plus axis-parallel ones.
+pub fn rays_around(center: Vec3, radius: f32, n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng(seed);
+    let mut rays = Vec::new();
+    for _ in 0..n {
+        let o = center + rng.unit_vector() * radius * 2.0;
+        let target = center + rng.unit_vector() * radius * rng.f() * 0.5;
+        rays.push(Ray::new(o, target - o));
+    }
+    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+        rays.push(Ray::new(center - axis * radius * 2.0, axis));
+        rays.push(Ray::new(center + axis * radius * 2.0, -axis));
+    }
+    rays
+}
+
+/// 600 small triangles in the unit cube, four in ten with a NaN or infinite coordinate.
+pub fn soup_with_nan_and_inf() -> TriMesh {
+    let mut rng = Rng(13);
+    let mut tris = Vec::new();
+    for i in 0..600 {
+        let p = Vec3::new(
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        );
+        let mut t = [p, p + rng.unit_vector() * 0.3, p + rng.unit_vector() * 0.3];
+        match i % 10 {
+            0 => t[1].x = f32::NAN,
+            1 => t[2] = Vec3::splat(f32::NAN),
+            2 => t[0].y = f32::INFINITY,
+            3 => t[1].z = f32::NEG_INFINITY,
+            _ => {}
+        }
+        tris.push(t);
+    }
+    TriMesh::from_soup(&tris)
 }
