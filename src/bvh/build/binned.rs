@@ -13,9 +13,14 @@
 use super::{
     Box3, BuildParams, MAX_BINS, Node, PrimRef, RangeBounds, SAH_DEPTH_LIMIT, Slots, halve,
 };
+use bytemuck::Zeroable;
 use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
 use wide::f32x8;
+
+/// Nodes of at most this many primitives are split by a full sweep ([`Ctx::small_split`])
+/// rather than binned.
+const SMALL: usize = 5;
 
 /// The binned builder's settings.
 struct Ctx {
@@ -385,6 +390,9 @@ impl Ctx {
         side: usize,
     ) -> Option<Split> {
         let n = refs.len();
+        if n <= SMALL {
+            return self.small_split(refs, info);
+        }
         let (cur, next) = stack.pair(level);
         let bins = &mut cur[side];
         let map = match info.map {
@@ -455,8 +463,9 @@ impl Ctx {
         // each primitive, so the partition does not depend on rounding here).
         let cut = map.origin[axis] + (bin + 1) as f32 / map.scale[axis];
         let child_map = |bounds: &Box3, count: usize, left: bool| {
-            // Children at the depth limit, and single primitives, are never split by SAH.
-            if count < 2 || depth + 1 >= SAH_DEPTH_LIMIT {
+            // Children at the depth limit are never split by SAH, and small ones are swept
+            // instead of binned.
+            if count <= SMALL || depth + 1 >= SAH_DEPTH_LIMIT {
                 return None;
             }
             let mut cb = Box3 {
@@ -506,12 +515,23 @@ impl Ctx {
             *rbins = p.r;
             (p.mid, p.lcb, p.rcb)
         } else {
-            partition_bin(
-                refs,
-                goes_left,
-                (lmap.as_ref(), lbins),
-                (rmap.as_ref(), rbins),
-            )
+            match (&lmap, &rmap) {
+                (Some(lm), Some(rm)) => {
+                    partition_bin::<true, true>(refs, goes_left, (lm, lbins), (rm, rbins))
+                }
+                (Some(lm), None) => {
+                    partition_bin::<true, false>(refs, goes_left, (lm, lbins), (&NO_MAP, rbins))
+                }
+                (None, Some(rm)) => {
+                    partition_bin::<false, true>(refs, goes_left, (&NO_MAP, lbins), (rm, rbins))
+                }
+                (None, None) => partition_bin::<false, false>(
+                    refs,
+                    goes_left,
+                    (&NO_MAP, lbins),
+                    (&NO_MAP, rbins),
+                ),
+            }
         };
         debug_assert_eq!(mid, nl);
         Some(Split {
@@ -525,6 +545,76 @@ impl Ctx {
                 bounds: rb,
                 cbounds: rcb,
                 map: rmap,
+            },
+        })
+    }
+
+    /// The split of a node of at most [`SMALL`] primitives: every way to cut it in two is
+    /// priced (3 for 3 primitives, 7 for 4), which costs less than clearing, filling and
+    /// pricing bins, and finds the best split there is. `None` to make a leaf.
+    fn small_split(&self, refs: &mut [PrimRef], info: &Info) -> Option<Split> {
+        let n = refs.len();
+        debug_assert!((2..=SMALL).contains(&n));
+        let mut boxes = [EMPTY8; SMALL];
+        for (b, r) in boxes.iter_mut().zip(refs.iter()) {
+            *b = r.packed();
+        }
+        // Left sides as bit masks over `refs`; the last primitive always goes right, so each
+        // way to cut is priced once.
+        let (mut best_cost, mut best_mask) = (f32::INFINITY, 0u32);
+        for mask in 1..1u32 << (n - 1) {
+            let (mut l, mut r) = (EMPTY8, EMPTY8);
+            for (i, b) in boxes[..n].iter().enumerate() {
+                if mask >> i & 1 != 0 {
+                    l = l.fast_min(*b);
+                } else {
+                    r = r.fast_min(*b);
+                }
+            }
+            let nl = mask.count_ones();
+            let c = half_area8(l) * nl as f32 + half_area8(r) * (n as u32 - nl) as f32;
+            if c < best_cost {
+                best_cost = c;
+                best_mask = mask;
+            }
+        }
+        let area = info.bounds.half_area();
+        let split_cost = self.traversal_cost * area + self.intersection_cost * best_cost;
+        let leaf_cost = self.intersection_cost * area * n as f32;
+        if !best_cost.is_finite() || (split_cost >= leaf_cost && n <= self.max_leaf_size) {
+            return None;
+        }
+        // The left side first, each side in its old order.
+        let mut old = [PrimRef::zeroed(); SMALL];
+        old[..n].copy_from_slice(refs);
+        let mid = best_mask.count_ones() as usize;
+        let (mut li, mut ri) = (0, mid);
+        let (mut lb, mut rb) = (EMPTY8, EMPTY8);
+        let (mut lcb, mut rcb) = (Box3::EMPTY, Box3::EMPTY);
+        for (i, r) in old[..n].iter().enumerate() {
+            if best_mask >> i & 1 != 0 {
+                refs[li] = *r;
+                li += 1;
+                lb = lb.fast_min(r.packed());
+                lcb.grow_point(r.c2());
+            } else {
+                refs[ri] = *r;
+                ri += 1;
+                rb = rb.fast_min(r.packed());
+                rcb.grow_point(r.c2());
+            }
+        }
+        Some(Split {
+            mid,
+            left: Info {
+                bounds: unpack(lb),
+                cbounds: lcb,
+                map: None,
+            },
+            right: Info {
+                bounds: unpack(rb),
+                cbounds: rcb,
+                map: None,
             },
         })
     }
@@ -552,30 +642,39 @@ impl Ctx {
     }
 }
 
-/// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified and binned
-/// once, into its side's bins with its side's map), gathering both sides' doubled
-/// centroid bounds. Returns the left count and the two centroid bounds.
-fn partition_bin(
+/// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified once, and
+/// binned into its side's bins with its side's map where `BL` / `BR` say that side is binned),
+/// gathering both sides' doubled centroid bounds. Returns the left count and the two centroid
+/// bounds.
+fn partition_bin<const BL: bool, const BR: bool>(
     refs: &mut [PrimRef],
     goes_left: impl Fn(&PrimRef) -> bool,
-    left: (Option<&BinMap>, &mut Bins),
-    right: (Option<&BinMap>, &mut Bins),
+    left: (&BinMap, &mut Bins),
+    right: (&BinMap, &mut Bins),
 ) -> (usize, Box3, Box3) {
-    // A side that is not binned is binned anyway, into bin 0 of bins nobody reads: the loop
-    // then has no branch but the partition's, and keeps both maps in registers.
     let (lmap, lbins) = left;
     let (rmap, rbins) = right;
-    let (lmap, rmap) = (*lmap.unwrap_or(&NO_MAP), *rmap.unwrap_or(&NO_MAP));
+    let (lmap, rmap) = (*lmap, *rmap);
     let mut lcb = Box3::EMPTY;
     let mut rcb = Box3::EMPTY;
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && goes_left(&refs[i]) {
-            lcb.grow_point(lbins.add(&mut refs[i], &lmap));
+            let c2 = if BL {
+                lbins.add(&mut refs[i], &lmap)
+            } else {
+                refs[i].c2()
+            };
+            lcb.grow_point(c2);
             i += 1;
         }
         while i < j && !goes_left(&refs[j - 1]) {
-            rcb.grow_point(rbins.add(&mut refs[j - 1], &rmap));
+            let c2 = if BR {
+                rbins.add(&mut refs[j - 1], &rmap)
+            } else {
+                refs[j - 1].c2()
+            };
+            rcb.grow_point(c2);
             j -= 1;
         }
         if i >= j {
@@ -609,13 +708,10 @@ fn par_partition_bin(
 ) -> Part {
     let n = refs.len();
     if n <= block.max(2) {
+        // (A side that is not binned is binned with [`NO_MAP`], into bins nobody reads.)
         let (mut l, mut r) = (EMPTY_BINS, EMPTY_BINS);
-        let (mid, lcb, rcb) = partition_bin(
-            refs,
-            goes_left,
-            (Some(maps.0), &mut l),
-            (Some(maps.1), &mut r),
-        );
+        let (mid, lcb, rcb) =
+            partition_bin::<true, true>(refs, goes_left, (maps.0, &mut l), (maps.1, &mut r));
         return Part {
             mid,
             lcb,
