@@ -56,25 +56,9 @@ impl MeshBvh {
         ws: &mut BuildWorkspace,
     ) {
         let mesh = Indexed { positions, indices };
-        let mut boxes = std::mem::take(&mut ws.boxes);
-        boxes.clear();
-        boxes.resize(mesh.len(), Aabb::EMPTY);
-        if mesh.len() >= 2 * GATHER_CHUNK {
-            boxes
-                .par_chunks_mut(GATHER_CHUNK)
-                .enumerate()
-                .for_each(|(c, b)| {
-                    for (i, b) in b.iter_mut().enumerate() {
-                        *b = mesh.triangle_bounds(c * GATHER_CHUNK + i);
-                    }
-                });
-        } else {
-            for (i, b) in boxes.iter_mut().enumerate() {
-                *b = mesh.triangle_bounds(i);
-            }
-        }
-        self.bvh.rebuild(&boxes, params, ws);
-        ws.boxes = boxes;
+        // The triangles are bounded where the builder makes its references.
+        self.bvh
+            .rebuild_from(mesh.len(), |i| mesh.triangle_bounds(i), params, ws);
         // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
         // old contents are kept: only growth initialises memory).
         self.leaf_indices.resize(mesh.len(), [0; 3]);

@@ -288,7 +288,6 @@ pub(crate) const SAH_DEPTH_LIMIT: u32 = MAX_DEPTH as u32 - 40;
 pub struct BuildWorkspace {
     refs: Vec<PrimRef>,
     slots: Vec<Node>,
-    pub(crate) boxes: Vec<Aabb>,
     /// Set for a workspace used for one build and dropped: the build then compacts the nodes
     /// in place and hands the slot storage to a tree that has none, instead of copying them
     /// into fresh memory.
@@ -311,7 +310,6 @@ impl BuildWorkspace {
     pub fn memory_bytes(&self) -> usize {
         self.refs.capacity() * std::mem::size_of::<PrimRef>()
             + self.slots.capacity() * std::mem::size_of::<Node>()
-            + self.boxes.capacity() * std::mem::size_of::<Aabb>()
     }
 }
 
@@ -327,6 +325,19 @@ impl Bvh {
     /// Rebuilds this tree over new boxes (any count), reusing its storage and `ws`'s: once
     /// they have grown to the input's size, a binned or median rebuild allocates nothing.
     pub fn rebuild(&mut self, boxes: &[Aabb], params: &BuildParams, ws: &mut BuildWorkspace) {
+        self.rebuild_from(boxes.len(), |i| boxes[i], params, ws);
+    }
+
+    /// [`Bvh::rebuild`] over `n` primitives whose boxes `box_of` computes: each box is made
+    /// where the builder reads it, with no array of boxes in between (`MeshBvh` bounds its
+    /// triangles here).
+    pub(crate) fn rebuild_from(
+        &mut self,
+        n: usize,
+        box_of: impl Fn(usize) -> Aabb + Sync,
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) {
         // A threshold of 0 would ask for chunks of no element.
         let params = &BuildParams {
             parallel_threshold: params.parallel_threshold.max(1),
@@ -335,7 +346,6 @@ impl Bvh {
         self.max_leaf_size = params.max_leaf_size;
         self.nodes.clear();
         self.prim_indices.clear();
-        let n = boxes.len();
         if n == 0 {
             return;
         }
@@ -345,22 +355,22 @@ impl Bvh {
         grow_zeroed(refs, n);
         refs.truncate(n);
         // The references, and the root's bounds gathered on the way.
-        let fill = |refs: &mut [PrimRef], boxes: &[Aabb], base: usize| {
+        let fill = |refs: &mut [PrimRef], base: usize| {
             let mut rb = RangeBounds::EMPTY;
-            for (i, (r, b)) in refs.iter_mut().zip(boxes).enumerate() {
-                *r = PrimRef::new(b, (base + i) as u32);
+            for (i, r) in refs.iter_mut().enumerate() {
+                let id = base + i;
+                *r = PrimRef::new(&box_of(id), id as u32);
                 rb.add(r);
             }
             rb
         };
         let rb = if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
-                .zip(boxes.par_chunks(params.parallel_threshold))
                 .enumerate()
-                .map(|(c, (r, b))| fill(r, b, c * params.parallel_threshold))
+                .map(|(c, r)| fill(r, c * params.parallel_threshold))
                 .reduce(|| RangeBounds::EMPTY, RangeBounds::merge)
         } else {
-            fill(refs, boxes, 0)
+            fill(refs, 0)
         };
         let slots = &mut ws.slots;
         grow_zeroed(slots, 2 * n - 1);
