@@ -18,8 +18,8 @@ use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
 use wide::f32x8;
 
-/// Nodes of at most this many primitives are split by a full sweep ([`Ctx::small_split`])
-/// rather than binned.
+/// Nodes of at most this many primitives are split by pricing every way to cut them
+/// ([`Ctx::small_node`]) rather than by binning.
 const SMALL: usize = 5;
 
 /// The binned builder's settings.
@@ -297,6 +297,9 @@ impl Ctx {
         side: usize,
     ) -> (Node, u32) {
         let n = refs.len();
+        if n <= SMALL && depth < SAH_DEPTH_LIMIT {
+            return self.small_node(refs, info.bounds, out);
+        }
         let bounds = info.bounds.to_aabb();
         if n == 1 {
             return (Node::leaf(bounds, out.prim_offset, 1), 0);
@@ -390,9 +393,6 @@ impl Ctx {
         side: usize,
     ) -> Option<Split> {
         let n = refs.len();
-        if n <= SMALL {
-            return self.small_split(refs, info);
-        }
         let (cur, next) = stack.pair(level);
         let bins = &mut cur[side];
         let map = match info.map {
@@ -549,12 +549,18 @@ impl Ctx {
         })
     }
 
-    /// The split of a node of at most [`SMALL`] primitives: every way to cut it in two is
-    /// priced (3 for 3 primitives, 7 for 4), which costs less than clearing, filling and
-    /// pricing bins, and finds the best split there is. `None` to make a leaf.
-    fn small_split(&self, refs: &mut [PrimRef], info: &Info) -> Option<Split> {
+    /// Builds the subtree of a node of at most [`SMALL`] primitives (bounded by `bounds`),
+    /// packed at the start of its slots, by a lean recursion of its own: every way to cut such
+    /// a node in two is priced (3 for 3 primitives, 7 for 4, 15 for 5), which costs less than
+    /// clearing, filling and pricing bins, and finds the best split there is. Returns the
+    /// subtree's root and the number of its descendants.
+    fn small_node(&self, refs: &mut [PrimRef], bounds: Box3, out: Slots<'_>) -> (Node, u32) {
         let n = refs.len();
-        debug_assert!((2..=SMALL).contains(&n));
+        debug_assert!((1..=SMALL).contains(&n));
+        let leaf = Node::leaf(bounds.to_aabb(), out.prim_offset, n as u32);
+        if n == 1 {
+            return (leaf, 0);
+        }
         let mut boxes = [EMPTY8; SMALL];
         for (b, r) in boxes.iter_mut().zip(refs.iter()) {
             *b = r.packed();
@@ -578,11 +584,17 @@ impl Ctx {
                 best_mask = mask;
             }
         }
-        let area = info.bounds.half_area();
+        let area = bounds.half_area();
         let split_cost = self.traversal_cost * area + self.intersection_cost * best_cost;
         let leaf_cost = self.intersection_cost * area * n as f32;
-        if !best_cost.is_finite() || (split_cost >= leaf_cost && n <= self.max_leaf_size) {
-            return None;
+        if !best_cost.is_finite() || split_cost >= leaf_cost {
+            if n <= self.max_leaf_size {
+                return (leaf, 0);
+            }
+            if !best_cost.is_finite() {
+                // No split has a price (infinite areas): cut by count.
+                best_mask = (1 << (n / 2)) - 1;
+            }
         }
         // The left side first, each side in its old order.
         let mut old = [PrimRef::zeroed(); SMALL];
@@ -590,33 +602,44 @@ impl Ctx {
         let mid = best_mask.count_ones() as usize;
         let (mut li, mut ri) = (0, mid);
         let (mut lb, mut rb) = (EMPTY8, EMPTY8);
-        let (mut lcb, mut rcb) = (Box3::EMPTY, Box3::EMPTY);
         for (i, r) in old[..n].iter().enumerate() {
             if best_mask >> i & 1 != 0 {
                 refs[li] = *r;
                 li += 1;
                 lb = lb.fast_min(r.packed());
-                lcb.grow_point(r.c2());
             } else {
                 refs[ri] = *r;
                 ri += 1;
                 rb = rb.fast_min(r.packed());
-                rcb.grow_point(r.c2());
             }
         }
-        Some(Split {
-            mid,
-            left: Info {
-                bounds: unpack(lb),
-                cbounds: lcb,
-                map: None,
+        let (pair, rest) = out.desc.split_at_mut(2);
+        let (lrefs, rrefs) = refs.split_at_mut(mid);
+        let lbase = out.desc_base + 2;
+        let l = self.small_node(
+            lrefs,
+            unpack(lb),
+            Slots {
+                prim_offset: out.prim_offset,
+                desc: &mut *rest,
+                desc_base: lbase,
             },
-            right: Info {
-                bounds: unpack(rb),
-                cbounds: rcb,
-                map: None,
+        );
+        let r = self.small_node(
+            rrefs,
+            unpack(rb),
+            Slots {
+                prim_offset: out.prim_offset + mid as u32,
+                desc: &mut rest[l.1 as usize..],
+                desc_base: lbase + l.1,
             },
-        })
+        );
+        pair[0] = l.0;
+        pair[1] = r.0;
+        (
+            Node::interior(bounds.to_aabb(), out.desc_base),
+            2 + l.1 + r.1,
+        )
     }
 
     /// Bins `refs` with `map` into `bins` (in parallel chunks for large nodes).
@@ -642,10 +665,11 @@ impl Ctx {
     }
 }
 
-/// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified once, and
-/// binned into its side's bins with its side's map where `BL` / `BR` say that side is binned),
-/// gathering both sides' doubled centroid bounds. Returns the left count and the two centroid
-/// bounds.
+/// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified once), and
+/// bins each reference of a side that `BL` / `BR` say is binned into that side's bins with its
+/// map, gathering that side's doubled centroid bounds (a side that is not binned never needs
+/// them: it is small, or at the depth limit). Returns the left count and the two centroid
+/// bounds (empty for a side not binned).
 fn partition_bin<const BL: bool, const BR: bool>(
     refs: &mut [PrimRef],
     goes_left: impl Fn(&PrimRef) -> bool,
@@ -660,21 +684,15 @@ fn partition_bin<const BL: bool, const BR: bool>(
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && goes_left(&refs[i]) {
-            let c2 = if BL {
-                lbins.add(&mut refs[i], &lmap)
-            } else {
-                refs[i].c2()
-            };
-            lcb.grow_point(c2);
+            if BL {
+                lcb.grow_point(lbins.add(&mut refs[i], &lmap));
+            }
             i += 1;
         }
         while i < j && !goes_left(&refs[j - 1]) {
-            let c2 = if BR {
-                rbins.add(&mut refs[j - 1], &rmap)
-            } else {
-                refs[j - 1].c2()
-            };
-            rcb.grow_point(c2);
+            if BR {
+                rcb.grow_point(rbins.add(&mut refs[j - 1], &rmap));
+            }
             j -= 1;
         }
         if i >= j {
