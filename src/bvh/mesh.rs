@@ -58,7 +58,7 @@ impl MeshBvh {
         let mesh = Indexed { positions, indices };
         // The triangles are bounded where the builder makes its references.
         self.bvh
-            .rebuild_from(mesh.len(), |i| mesh.triangle_bounds(i), params, ws);
+            .rebuild_from(mesh.len(), |i| mesh.triangle_corners(i), params, ws);
         // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
         // old contents are kept: only growth initialises memory).
         self.leaf_indices.resize(mesh.len(), [0; 3]);
@@ -193,13 +193,37 @@ impl Indexed<'_> {
         self.indices.len()
     }
 
+    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
     #[inline]
     fn triangle(&self, i: usize) -> [Vec3; 3] {
         self.indices[i].map(|v| self.positions[v as usize])
     }
 
-    fn triangle_bounds(&self, i: usize) -> Aabb {
-        Aabb::of_triangle(&self.triangle(i))
+    /// The corners of [`Aabb::of_triangle`] before sanitizing (the builder sanitizes): with
+    /// SSE `min`/`max`, which return their second operand when either is NaN, a NaN coordinate
+    /// is skipped as `of_triangle` skips it, and an axis with no number at all comes out
+    /// `+inf .. -inf` (sanitized as the empty axis `of_triangle` gives). Other targets take
+    /// `of_triangle` itself.
+    #[inline]
+    fn triangle_corners(&self, i: usize) -> (Vec3A, Vec3A) {
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        {
+            let [a, b, c] = self.indices[i];
+            let (a, b, c) = (
+                Vec3A::from(self.positions[a as usize]),
+                Vec3A::from(self.positions[b as usize]),
+                Vec3A::from(self.positions[c as usize]),
+            );
+            (
+                c.min(b.min(a.min(Vec3A::INFINITY))),
+                c.max(b.max(a.max(Vec3A::NEG_INFINITY))),
+            )
+        }
+        #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+        {
+            let b = Aabb::of_triangle(&self.triangle(i));
+            (b.min.into(), b.max.into())
+        }
     }
 }
 

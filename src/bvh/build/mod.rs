@@ -113,12 +113,12 @@ pub(crate) struct PrimRef {
 }
 
 impl PrimRef {
-    /// The reference to box `b` ([`Aabb::sanitized`], in vector form).
+    /// The reference to the box from `min` to `max`, sanitized as [`Aabb::sanitized`] does.
     #[inline(always)]
-    fn new(b: &Aabb, id: u32) -> Self {
+    fn from_corners(min: Vec3A, max: Vec3A, id: u32) -> Self {
         let m = Vec3A::splat(f32::MAX);
         let fix = |v: Vec3A, if_nan: Vec3A| Vec3A::select(v.is_nan_mask(), if_nan, v.clamp(-m, m));
-        let (lo, hi) = (fix(b.min.into(), m), -fix(b.max.into(), -m));
+        let (lo, hi) = (fix(min, m), -fix(max, -m));
         Self {
             v: f32x8::new([lo.x, lo.y, lo.z, f32::from_bits(id), hi.x, hi.y, hi.z, 0.0]),
         }
@@ -325,16 +325,21 @@ impl Bvh {
     /// Rebuilds this tree over new boxes (any count), reusing its storage and `ws`'s: once
     /// they have grown to the input's size, a binned or median rebuild allocates nothing.
     pub fn rebuild(&mut self, boxes: &[Aabb], params: &BuildParams, ws: &mut BuildWorkspace) {
-        self.rebuild_from(boxes.len(), |i| boxes[i], params, ws);
+        self.rebuild_from(
+            boxes.len(),
+            |i| (boxes[i].min.into(), boxes[i].max.into()),
+            params,
+            ws,
+        );
     }
 
-    /// [`Bvh::rebuild`] over `n` primitives whose boxes `box_of` computes: each box is made
-    /// where the builder reads it, with no array of boxes in between (`MeshBvh` bounds its
-    /// triangles here).
+    /// [`Bvh::rebuild`] over `n` primitives whose boxes `corners_of` computes (lower and upper
+    /// corner, sanitized here as [`Aabb::sanitized`] does): each box is made where the builder
+    /// reads it, with no array of boxes in between (`MeshBvh` bounds its triangles here).
     pub(crate) fn rebuild_from(
         &mut self,
         n: usize,
-        box_of: impl Fn(usize) -> Aabb + Sync,
+        corners_of: impl Fn(usize) -> (Vec3A, Vec3A) + Sync,
         params: &BuildParams,
         ws: &mut BuildWorkspace,
     ) {
@@ -359,7 +364,8 @@ impl Bvh {
             let mut rb = RangeBounds::EMPTY;
             for (i, r) in refs.iter_mut().enumerate() {
                 let id = base + i;
-                *r = PrimRef::new(&box_of(id), id as u32);
+                let (min, max) = corners_of(id);
+                *r = PrimRef::from_corners(min, max, id as u32);
                 rb.add(r);
             }
             rb
