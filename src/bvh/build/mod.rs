@@ -393,7 +393,12 @@ impl Bvh {
             }
             Method::Sweep => (sweep::build(params, refs, desc), None),
         };
-        self.prim_indices.extend(refs.iter().map(PrimRef::id));
+        if n >= params.parallel_threshold.saturating_mul(8) {
+            // Written in place by parallel chunks.
+            self.prim_indices.par_extend(refs.par_iter().map(PrimRef::id));
+        } else {
+            self.prim_indices.extend(refs.iter().map(PrimRef::id));
+        }
         if ws.one_shot && self.nodes.capacity() == 0 {
             // A cold build: no copy into fresh pages.
             let mut slots = std::mem::take(&mut ws.slots);
