@@ -271,11 +271,11 @@ struct Split {
 }
 
 impl Ctx {
-    /// Bins for a node of `n` primitives: at most one per three primitives (and at least 4, or
+    /// Bins for a node of `n` primitives: at most one per four primitives (and at least 4, or
     /// `n` if fewer): a small node's candidates cost more to price than they gain.
     #[inline]
     fn bins_for(&self, n: usize) -> usize {
-        (n / 3).max(4).min(n).min(self.bins).max(2)
+        (n / 4).max(4).min(n).min(self.bins).max(2)
     }
 
     /// Builds the subtree over `refs`; its bins (if `info.map` is set) are `stack[level][side]`.

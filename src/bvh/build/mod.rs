@@ -395,7 +395,8 @@ impl Bvh {
         };
         if n >= params.parallel_threshold.saturating_mul(8) {
             // Written in place by parallel chunks.
-            self.prim_indices.par_extend(refs.par_iter().map(PrimRef::id));
+            self.prim_indices
+                .par_extend(refs.par_iter().map(PrimRef::id));
         } else {
             self.prim_indices.extend(refs.iter().map(PrimRef::id));
         }
