@@ -60,9 +60,13 @@ impl MeshBvh {
         self.bvh
             .rebuild_from(mesh.len(), |i| mesh.triangle_corners(i), params, ws);
         // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
-        // old contents are kept: only growth initialises memory).
-        self.leaf_indices.resize(mesh.len(), [0; 3]);
-        self.tris.resize(mesh.len(), [Vec3::ZERO; 3]);
+        // old contents are kept: only growth initialises memory, and new storage comes zeroed
+        // from the system rather than filled, so that a fresh build touches its pages once,
+        // from every thread).
+        super::build::grow_zeroed(&mut self.leaf_indices, mesh.len());
+        super::build::grow_zeroed(&mut self.tris, mesh.len());
+        self.leaf_indices.truncate(mesh.len());
+        self.tris.truncate(mesh.len());
         let prims = self.bvh.prim_indices();
         let fill = |li: &mut [[u32; 3]], t: &mut [[Vec3; 3]], p: &[u32]| {
             for (li, &p) in li.iter_mut().zip(p) {

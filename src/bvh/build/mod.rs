@@ -417,7 +417,7 @@ impl Bvh {
 /// Makes `v` at least `len` long. New storage is allocated zeroed (by the system, page by page
 /// on first touch, for large sizes) rather than filled: a cold 1M build would otherwise write
 /// 64 MB of node slots, most of which it never uses, and 32 MB of references it overwrites.
-fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) {
+pub(crate) fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) {
     if v.capacity() < len {
         *v = bytemuck::zeroed_vec(len);
     } else if v.len() < len {
