@@ -114,6 +114,15 @@ impl Bins {
         }
     }
 
+    fn merge_from(&mut self, o: &Bins, k: usize) {
+        for a in 0..3 {
+            for i in 0..k {
+                self.b[a][i] = self.b[a][i].fast_min(o.b[a][i]);
+                self.n[a][i] += o.n[a][i];
+            }
+        }
+    }
+
     fn merge(mut self, o: &Bins, k: usize) -> Bins {
         for a in 0..3 {
             for i in 0..k {
@@ -236,18 +245,30 @@ impl Stack {
         let spare = SPARE_STACKS.with_borrow_mut(|s| s.iter_mut().find_map(Option::take));
         // Reserved for the deepest SAH split, so that a warm stack never reallocates.
         Self(Some(spare.unwrap_or_else(|| {
-            Vec::with_capacity(SAH_DEPTH_LIMIT as usize + 2)
+            Vec::with_capacity(SAH_DEPTH_LIMIT as usize + 2 + DUAL_SPARE)
         })))
     }
 
     /// The levels `level` and `level + 1` (growing the stack as needed).
     fn pair(&mut self, level: usize) -> (&mut [Bins; 2], &mut [Bins; 2]) {
+        let (a, b, _) = self.levels(level, 0);
+        (a, b)
+    }
+
+    /// The levels `level` and `level + 1`, and the `spare` levels after them (growing the
+    /// stack as needed).
+    fn levels(
+        &mut self,
+        level: usize,
+        spare: usize,
+    ) -> (&mut [Bins; 2], &mut [Bins; 2], &mut [[Bins; 2]]) {
         let v = self.0.get_or_insert_with(Vec::new);
-        while v.len() < level + 2 {
+        while v.len() < level + 2 + spare {
             v.push([EMPTY_BINS; 2]);
         }
-        let (a, b) = v.split_at_mut(level + 1);
-        (&mut a[level], &mut b[0])
+        let (a, b) = v[level..level + 2 + spare].split_at_mut(1);
+        let (b, c) = b.split_at_mut(1);
+        (&mut a[0], &mut b[0], c)
     }
 }
 
@@ -393,7 +414,10 @@ impl Ctx {
         side: usize,
     ) -> Option<Split> {
         let n = refs.len();
-        let (cur, next) = stack.pair(level);
+        // Large nodes bin into two sets per side (see `partition_bin_dual`), kept in the two
+        // stack levels after the children's: those are free until a child splits.
+        let dual = n >= DUAL_MIN;
+        let (cur, next, spare) = stack.levels(level, if dual { DUAL_SPARE } else { 0 });
         let bins = &mut cur[side];
         let map = match info.map {
             Some(m) if m.any_usable() => m,
@@ -516,6 +540,21 @@ impl Ctx {
             (p.mid, p.lcb, p.rcb)
         } else {
             match (&lmap, &rmap) {
+                (Some(lm), Some(rm)) if dual => {
+                    let [lp, rp] = spare else {
+                        unreachable!("two spare levels")
+                    };
+                    let r = partition_bin_dual(refs, goes_left, (lm, lp), (rm, rp));
+                    lbins.clear(lm.k);
+                    rbins.clear(rm.k);
+                    for b in &*lp {
+                        lbins.merge_from(b, lm.k);
+                    }
+                    for b in &*rp {
+                        rbins.merge_from(b, rm.k);
+                    }
+                    r
+                }
                 (Some(lm), Some(rm)) => {
                     partition_bin::<true, true>(refs, goes_left, (lm, lbins), (rm, rbins))
                 }
@@ -649,11 +688,12 @@ impl Ctx {
             *bins = refs
                 .par_chunks_mut(self.parallel_threshold)
                 .map(|c| {
-                    let mut b = EMPTY_BINS;
-                    for r in c {
-                        b.add(r, map);
+                    // Two sets taken in turn, as in `partition_bin_dual`.
+                    let mut b = [EMPTY_BINS; 2];
+                    for (i, r) in c.iter_mut().enumerate() {
+                        b[i & 1].add(r, map);
                     }
-                    b
+                    b[0].merge(&b[1], k)
                 })
                 .reduce(|| EMPTY_BINS, |a, b| a.merge(&b, k));
         } else {
@@ -703,6 +743,49 @@ fn partition_bin<const BL: bool, const BR: bool>(
     (i, lcb, rcb)
 }
 
+/// Nodes of at least this many primitives partition with [`partition_bin_dual`].
+const DUAL_MIN: usize = 1024;
+/// The stack levels [`partition_bin_dual`] borrows.
+const DUAL_SPARE: usize = 2;
+
+/// [`partition_bin`] with both sides binned, each into two sets of bins taken in turn (by
+/// position), merged by the caller: consecutive primitives, which tend to fall into the same
+/// bins, then do not wait on each other's bin update (a store and a reload per bin).
+fn partition_bin_dual(
+    refs: &mut [PrimRef],
+    goes_left: impl Fn(&PrimRef) -> bool,
+    left: (&BinMap, &mut [Bins; 2]),
+    right: (&BinMap, &mut [Bins; 2]),
+) -> (usize, Box3, Box3) {
+    let (lmap, lbins) = left;
+    let (rmap, rbins) = right;
+    let (lmap, rmap) = (*lmap, *rmap);
+    for b in lbins.iter_mut() {
+        b.clear(lmap.k);
+    }
+    for b in rbins.iter_mut() {
+        b.clear(rmap.k);
+    }
+    let mut lcb = Box3::EMPTY;
+    let mut rcb = Box3::EMPTY;
+    let (mut i, mut j) = (0, refs.len());
+    loop {
+        while i < j && goes_left(&refs[i]) {
+            lcb.grow_point(lbins[i & 1].add(&mut refs[i], &lmap));
+            i += 1;
+        }
+        while i < j && !goes_left(&refs[j - 1]) {
+            rcb.grow_point(rbins[j & 1].add(&mut refs[j - 1], &rmap));
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        refs.swap(i, j - 1);
+    }
+    (i, lcb, rcb)
+}
+
 /// A block's partition: its left count, both sides' doubled centroid bounds and bins.
 struct Part {
     mid: usize,
@@ -727,9 +810,10 @@ fn par_partition_bin(
     let n = refs.len();
     if n <= block.max(2) {
         // (A side that is not binned is binned with [`NO_MAP`], into bins nobody reads.)
-        let (mut l, mut r) = (EMPTY_BINS, EMPTY_BINS);
+        let (mut l, mut r) = ([EMPTY_BINS; 2], [EMPTY_BINS; 2]);
         let (mid, lcb, rcb) =
-            partition_bin::<true, true>(refs, goes_left, (maps.0, &mut l), (maps.1, &mut r));
+            partition_bin_dual(refs, goes_left, (maps.0, &mut l), (maps.1, &mut r));
+        let (l, r) = (l[0].merge(&l[1], maps.0.k), r[0].merge(&r[1], maps.1.k));
         return Part {
             mid,
             lcb,
