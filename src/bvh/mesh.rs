@@ -57,8 +57,12 @@ impl MeshBvh {
     ) {
         let mesh = Indexed { positions, indices };
         // The triangles are bounded where the builder makes its references.
-        self.bvh
-            .rebuild_from(mesh.len(), |i| mesh.triangle_corners(i), params, ws);
+        self.bvh.rebuild_from(
+            mesh.len(),
+            |refs, base| super::build::refs_from_corners(refs, base, |i| mesh.triangle_corners(i)),
+            params,
+            ws,
+        );
         // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
         // old contents are kept: only growth initialises memory, and new storage comes zeroed
         // from the system rather than filled, so that a fresh build touches its pages once,

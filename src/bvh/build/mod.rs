@@ -59,7 +59,9 @@ impl BuildParams {
     /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 189 / 194 / 204 /
     /// 208 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
     /// the bin count changes the time by a few per cent only, and 16 bins stay within 1.2% of
-    /// the sweep on every shared input (8 bins: 1.8% at 1M and on sphere_100k). Binning only the
+    /// the sweep on every shared input (8 bins: 1.8% at 1M and on sphere_100k). (Those figures
+    /// predate the cheaper small nodes of `docs/build_speed.md`'s third round, after which 16
+    /// bins are within 1.4% of the sweep.) Binning only the
     /// widest axis saved 10% of the time (184 ms) for a 4.3% worse SAH (51.47), which costs
     /// more in tracing than it saves in building.
     pub const BINNED: BuildParams = BuildParams::binned(16);
@@ -327,19 +329,27 @@ impl Bvh {
     pub fn rebuild(&mut self, boxes: &[Aabb], params: &BuildParams, ws: &mut BuildWorkspace) {
         self.rebuild_from(
             boxes.len(),
-            |i| (boxes[i].min.into(), boxes[i].max.into()),
+            |refs, base| {
+                let mut rb = RangeBounds::EMPTY;
+                for (i, (r, b)) in refs.iter_mut().zip(&boxes[base..]).enumerate() {
+                    *r = PrimRef::from_corners(b.min.into(), b.max.into(), (base + i) as u32);
+                    rb.add(r);
+                }
+                rb
+            },
             params,
             ws,
         );
     }
 
-    /// [`Bvh::rebuild`] over `n` primitives whose boxes `corners_of` computes (lower and upper
-    /// corner, sanitized here as [`Aabb::sanitized`] does): each box is made where the builder
-    /// reads it, with no array of boxes in between (`MeshBvh` bounds its triangles here).
+    /// [`Bvh::rebuild`] over `n` primitives whose references `fill` makes: `fill(refs, base)`
+    /// writes the references of primitives `base .. base + refs.len()` into `refs` and returns
+    /// their bounds. Each box is made where the builder reads it, with no array of boxes in
+    /// between (`MeshBvh` bounds its triangles here, with [`refs_from_corners`]).
     pub(crate) fn rebuild_from(
         &mut self,
         n: usize,
-        corners_of: impl Fn(usize) -> (Vec3A, Vec3A) + Sync,
+        fill: impl Fn(&mut [PrimRef], usize) -> RangeBounds + Sync,
         params: &BuildParams,
         ws: &mut BuildWorkspace,
     ) {
@@ -360,16 +370,6 @@ impl Bvh {
         grow_zeroed(refs, n);
         refs.truncate(n);
         // The references, and the root's bounds gathered on the way.
-        let fill = |refs: &mut [PrimRef], base: usize| {
-            let mut rb = RangeBounds::EMPTY;
-            for (i, r) in refs.iter_mut().enumerate() {
-                let id = base + i;
-                let (min, max) = corners_of(id);
-                *r = PrimRef::from_corners(min, max, id as u32);
-                rb.add(r);
-            }
-            rb
-        };
         let rb = if n >= params.parallel_threshold.saturating_mul(8) {
             refs.par_chunks_mut(params.parallel_threshold)
                 .enumerate()
@@ -412,6 +412,25 @@ impl Bvh {
             compact(&slots[..2 * n - 1], count, &mut self.nodes);
         }
     }
+}
+
+/// Writes the references of primitives `base ..` into `refs`, their boxes given by `corners_of`
+/// (lower and upper corner, sanitized here as [`Aabb::sanitized`] does), and returns their
+/// bounds: a `fill` for [`Bvh::rebuild_from`].
+#[inline]
+pub(crate) fn refs_from_corners(
+    refs: &mut [PrimRef],
+    base: usize,
+    corners_of: impl Fn(usize) -> (Vec3A, Vec3A),
+) -> RangeBounds {
+    let mut rb = RangeBounds::EMPTY;
+    for (i, r) in refs.iter_mut().enumerate() {
+        let id = base + i;
+        let (min, max) = corners_of(id);
+        *r = PrimRef::from_corners(min, max, id as u32);
+        rb.add(r);
+    }
+    rb
 }
 
 /// Makes `v` at least `len` long. New storage is allocated zeroed (by the system, page by page
