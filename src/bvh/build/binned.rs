@@ -9,6 +9,10 @@
 //! the child's box (exact: the union of its bins). Any monotone map gives valid bins; a
 //! predicted map only spreads the child's centroids over somewhat fewer bins than its exact
 //! centroid bounds would.
+//!
+//! Subtrees of at most [`SMALL`] primitives are never binned: their parent's partition skips
+//! them and [`Ctx::small_node`] prices every way to cut them. Large nodes bin into two sets
+//! per side taken in turn ([`partition_bin_dual`]).
 
 use super::{
     Box3, BuildParams, MAX_BINS, Node, PrimRef, RangeBounds, SAH_DEPTH_LIMIT, Slots, halve,
