@@ -1,6 +1,7 @@
 //! A BVH over a triangle mesh, with the triangles copied in leaf order so that a leaf's
 //! triangles are contiguous in memory for traversal.
 
+use super::refit::LeafRefit;
 use super::{BuildParams, BuildWorkspace, Bvh, Counters};
 use crate::geom::{Aabb, Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::{Vec3, Vec3A};
@@ -119,11 +120,13 @@ impl MeshBvh {
         );
         // One pass: each leaf copies its triangles' new vertices into its slots and bounds them
         // on the way.
-        let leaf_indices = &self.leaf_indices;
-        self.bvh.refit_with(&mut self.tris, |tris, first, _| {
-            let idx = &leaf_indices[first as usize..first as usize + tris.len()];
-            gather_bounds(tris, idx, positions)
-        });
+        self.bvh.refit_with(
+            &mut self.tris,
+            &GatherLeaf {
+                leaf_indices: &self.leaf_indices,
+                positions,
+            },
+        );
     }
 
     /// The underlying tree.
@@ -216,6 +219,34 @@ impl Indexed<'_> {
 
     fn triangle_bounds(&self, i: usize) -> Aabb {
         Aabb::of_triangle(&self.triangle(i))
+    }
+}
+
+/// Refits a leaf by copying its triangles' moved vertices into its slots.
+struct GatherLeaf<'a> {
+    leaf_indices: &'a [[u32; 3]],
+    positions: &'a [Vec3],
+}
+
+impl LeafRefit<[Vec3; 3]> for GatherLeaf<'_> {
+    #[inline(always)]
+    fn leaf(&self, tris: &mut [[Vec3; 3]], first: u32, _: u32) -> Aabb {
+        let idx = &self.leaf_indices[first as usize..first as usize + tris.len()];
+        gather_bounds(tris, idx, self.positions)
+    }
+
+    /// The vertices are scattered through the position buffer (every triangle's, in a soup);
+    /// asking for them early lets their loads overlap with the work on the leaves before.
+    #[inline(always)]
+    fn prefetch(&self, first: u32, count: u32) {
+        let (s, e) = (first as usize, (first + count) as usize);
+        for idx in self.leaf_indices.get(s..e).unwrap_or_default() {
+            for &v in idx {
+                if let Some(p) = self.positions.get(v as usize) {
+                    crate::simd::prefetch(p);
+                }
+            }
+        }
     }
 }
 
