@@ -237,13 +237,17 @@ impl LeafRefit<[Vec3; 3]> for GatherLeaf<'_> {
 
     /// The vertices are scattered through the position buffer (every triangle's, in a soup);
     /// asking for them early lets their loads overlap with the work on the leaves before.
+    /// Only the first two triangles are asked for (most leaves hold one or two), without a
+    /// loop whose exit would be mispredicted.
     #[inline(always)]
     fn prefetch(&self, first: u32, count: u32) {
-        let (s, e) = (first as usize, (first + count) as usize);
-        for idx in self.leaf_indices.get(s..e).unwrap_or_default() {
-            for &v in idx {
-                if let Some(p) = self.positions.get(v as usize) {
-                    crate::simd::prefetch(p);
+        let first = first as usize;
+        for s in [first, first + usize::from(count > 1)] {
+            if let Some(idx) = self.leaf_indices.get(s) {
+                for &v in idx {
+                    if let Some(p) = self.positions.get(v as usize) {
+                        crate::simd::prefetch(p);
+                    }
                 }
             }
         }
@@ -262,8 +266,8 @@ fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]])
     }
 }
 
-/// Copies the triangles with vertex indices `idx` into `tris` and returns their box, the same
-/// box as the union of [`Aabb::of_triangle`] over them.
+/// Copies the triangles with vertex indices `idx` into `tris` (at least one) and returns their
+/// box, the same box as the union of [`Aabb::of_triangle`] over them.
 #[inline]
 fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -> Aabb {
     // SSE `min`/`max` return their second operand when either is NaN, so `v.min(lo)` skips a
@@ -273,16 +277,26 @@ fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -
     #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
     {
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for (t, &[a, b, c]) in tris.iter_mut().zip(idx) {
+        let n = tris.len();
+        let mut one = |k: usize| {
+            let [a, b, c] = idx[k];
             let (a, b, c) = (
                 positions[a as usize],
                 positions[b as usize],
                 positions[c as usize],
             );
-            *t = [a, b, c];
+            tris[k] = [a, b, c];
             let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
             lo = c.min(b.min(a.min(lo)));
             hi = c.max(b.max(a.max(hi)));
+        };
+        // Most leaves hold one or two triangles: the first two slots (the first one twice in a
+        // one-triangle leaf, which changes nothing) are done without a loop, whose exit would
+        // be mispredicted at about every leaf.
+        one(0);
+        one(usize::from(n > 1));
+        for k in 2..n {
+            one(k);
         }
         let m = Vec3A::splat(f32::MAX);
         Aabb::new(lo.clamp(-m, m).into(), hi.clamp(-m, m).into())

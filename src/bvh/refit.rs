@@ -21,7 +21,8 @@ pub(crate) trait LeafRefit<T>: Sync {
 
     /// Called a few dozen nodes before the sweep reaches the leaf over slots
     /// `first .. first + count`, to start loading what [`LeafRefit::leaf`] will read. A hint:
-    /// not every leaf is announced.
+    /// not every leaf is announced, and a leaf may be announced more than once (`count` is 0
+    /// before the first leaf).
     #[inline(always)]
     fn prefetch(&self, first: u32, count: u32) {
         let _ = (first, count);
@@ -182,12 +183,18 @@ fn refit_sweep<T, F: LeafRefit<T>>(
     data: &mut SlotData<'_, T>,
     leaf: &F,
 ) {
+    // The leaf announced last: an interior node ahead announces it again (rather than a
+    // branch on whether the node ahead is a leaf, which would often be mispredicted).
+    let mut announced = (0, 0);
     for i in (0..nodes.len()).rev() {
         if let Some(ahead) = i.checked_sub(PREFETCH_NODES) {
             let a = nodes[ahead];
-            if a.is_leaf() {
-                leaf.prefetch(a.first, a.count);
-            }
+            announced = if a.is_leaf() {
+                (a.first, a.count)
+            } else {
+                announced
+            };
+            leaf.prefetch(announced.0, announced.1);
         }
         let n = nodes[i];
         let b = if n.is_leaf() {
