@@ -118,8 +118,8 @@ impl MeshBvh {
             self.tris.len(),
             "refit needs the same triangles"
         );
-        // One pass: each leaf copies its triangles' new vertices into its slots and bounds them
-        // on the way.
+        // Subtree by subtree: the triangles' new vertices are copied into their slots, then
+        // the subtree's leaves are bounded from the copies, still in the cache.
         self.bvh.refit_with(
             &mut self.tris,
             &GatherLeaf {
@@ -222,35 +222,23 @@ impl Indexed<'_> {
     }
 }
 
-/// Refits a leaf by copying its triangles' moved vertices into its slots.
+/// Refits by copying the triangles' moved vertices into their slots, then bounding each leaf's.
 struct GatherLeaf<'a> {
     leaf_indices: &'a [[u32; 3]],
     positions: &'a [Vec3],
 }
 
 impl LeafRefit<[Vec3; 3]> for GatherLeaf<'_> {
-    #[inline(always)]
-    fn leaf(&self, tris: &mut [[Vec3; 3]], first: u32, _: u32) -> Aabb {
-        let idx = &self.leaf_indices[first as usize..first as usize + tris.len()];
-        gather_bounds(tris, idx, self.positions)
+    #[inline]
+    fn update(&self, tris: &mut [[Vec3; 3]], first: u32) {
+        let first = first as usize;
+        let idx = &self.leaf_indices[first..first + tris.len()];
+        gather_prefetched(idx, self.positions, tris);
     }
 
-    /// The vertices are scattered through the position buffer (every triangle's, in a soup);
-    /// asking for them early lets their loads overlap with the work on the leaves before.
-    /// Only the first two triangles are asked for (most leaves hold one or two), without a
-    /// loop whose exit would be mispredicted.
     #[inline(always)]
-    fn prefetch(&self, first: u32, count: u32) {
-        let first = first as usize;
-        for s in [first, first + usize::from(count > 1)] {
-            if let Some(idx) = self.leaf_indices.get(s) {
-                for &v in idx {
-                    if let Some(p) = self.positions.get(v as usize) {
-                        crate::simd::prefetch(p);
-                    }
-                }
-            }
-        }
+    fn leaf(&self, tris: &[[Vec3; 3]], _: u32, _: u32) -> Aabb {
+        bound_tris(tris)
     }
 }
 
@@ -266,10 +254,37 @@ fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]])
     }
 }
 
-/// Copies the triangles with vertex indices `idx` into `tris` (at least one) and returns their
-/// box, the same box as the union of [`Aabb::of_triangle`] over them.
-#[inline]
-fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -> Aabb {
+/// How many triangles ahead [`gather_prefetched`] asks for vertex positions.
+const PREFETCH_TRIS: usize = 64;
+
+/// [`gather`] for triangles whose vertices are scattered through `positions` (as in leaf
+/// order): the vertices of the triangle [`PREFETCH_TRIS`] slots ahead are asked for at each
+/// slot, so that many loads are in flight at once.
+fn gather_prefetched(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
+    let ask = |idx: &[u32; 3]| {
+        for &v in idx {
+            if let Some(p) = positions.get(v as usize) {
+                crate::simd::prefetch(p);
+            }
+        }
+    };
+    leaf_indices.iter().take(PREFETCH_TRIS).for_each(ask);
+    for (k, (t, &[a, b, c])) in tris.iter_mut().zip(leaf_indices).enumerate() {
+        if let Some(idx) = leaf_indices.get(k + PREFETCH_TRIS) {
+            ask(idx);
+        }
+        *t = [
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        ];
+    }
+}
+
+/// The box of some triangles (at least one), the same box as the union of
+/// [`Aabb::of_triangle`] over them.
+#[inline(always)]
+fn bound_tris(tris: &[[Vec3; 3]]) -> Aabb {
     // SSE `min`/`max` return their second operand when either is NaN, so `v.min(lo)` skips a
     // NaN coordinate exactly as `of_triangle` does; clamping the union to `±f32::MAX` then
     // matches its sanitizing (an axis with no number at all becomes `MAX .. -MAX`). Other
@@ -277,38 +292,24 @@ fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -
     #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
     {
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let n = tris.len();
-        let mut one = |k: usize| {
-            let [a, b, c] = idx[k];
-            let (a, b, c) = (
-                positions[a as usize],
-                positions[b as usize],
-                positions[c as usize],
-            );
-            tris[k] = [a, b, c];
+        let mut one = |[a, b, c]: [Vec3; 3]| {
             let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
             lo = c.min(b.min(a.min(lo)));
             hi = c.max(b.max(a.max(hi)));
         };
-        // Most leaves hold one or two triangles: the first two slots (the first one twice in a
+        // Most leaves hold one or two triangles: the first two (the first one twice in a
         // one-triangle leaf, which changes nothing) are done without a loop, whose exit would
         // be mispredicted at about every leaf.
-        one(0);
-        one(usize::from(n > 1));
-        for k in 2..n {
-            one(k);
-        }
+        one(tris[0]);
+        one(tris[usize::from(tris.len() > 1)]);
+        tris.iter().skip(2).for_each(|&t| one(t));
         let m = Vec3A::splat(f32::MAX);
         Aabb::new(lo.clamp(-m, m).into(), hi.clamp(-m, m).into())
     }
     #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
     {
-        let mut b = Aabb::EMPTY;
-        for (t, i) in tris.iter_mut().zip(idx) {
-            *t = i.map(|v| positions[v as usize]);
-            b = b.union(Aabb::of_triangle(t));
-        }
-        b
+        tris.iter()
+            .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
     }
 }
 

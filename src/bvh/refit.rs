@@ -1,41 +1,43 @@
 //! Refit: recompute every box bottom-up for new primitive positions, topology unchanged.
 //!
 //! Children are stored after their parent, so one reverse sweep over the nodes sees every child
-//! before its parent. Large trees are refitted as parallel subtrees: a subtree's descendants
-//! form one contiguous range of nodes, so the ranges of sibling subtrees are disjoint slices.
+//! before its parent. Large trees are refitted as subtrees (in parallel when there are several
+//! threads): a subtree's descendants form one contiguous range of nodes and its leaves one
+//! contiguous range of primitive slots, so the ranges of sibling subtrees are disjoint slices.
+//! Per-slot data (a mesh's triangles in leaf order) is updated for a whole subtree in one pass
+//! over its slots before its sweep, which then bounds each leaf from that data while it is
+//! still in the cache: the scattered reads of the update run in a plain loop over the slots,
+//! not in the sweep, which branches at every node.
 
 use super::{Bvh, Node};
 use crate::geom::Aabb;
 
-/// Subtrees with at least this many descendant nodes are refitted as parallel tasks.
+/// Subtrees with at least this many descendant nodes are split into their two children's
+/// subtrees (refitted as parallel tasks); smaller ones are swept by one task. Small enough for
+/// a subtree's nodes and per-slot data to stay in the cache between its update and its sweep.
 const PARALLEL_NODES: usize = 1 << 14;
-/// How many nodes ahead of the sweep a leaf is announced to [`LeafRefit::prefetch`] (about
-/// half of the nodes are leaves: some 30 leaves, 50 triangles, at a leaf size of 4).
-const PREFETCH_NODES: usize = 64;
 
-/// What a refit does at a leaf.
+/// What a refit does at the slots and leaves of a tree.
 pub(crate) trait LeafRefit<T>: Sync {
-    /// Updates a leaf's per-slot entries `data` (`slot_data[first .. first + count]`, or an
-    /// empty slice) and returns the leaf's new box.
-    fn leaf(&self, data: &mut [T], first: u32, count: u32) -> Aabb;
-
-    /// Called a few dozen nodes before the sweep reaches the leaf over slots
-    /// `first .. first + count`, to start loading what [`LeafRefit::leaf`] will read. A hint:
-    /// not every leaf is announced, and a leaf may be announced more than once (`count` is 0
-    /// before the first leaf).
+    /// Updates the per-slot entries of a subtree before any of its leaves is bounded: `data` is
+    /// `slot_data[first .. first + data.len()]`, or an empty slice when there is none.
     #[inline(always)]
-    fn prefetch(&self, first: u32, count: u32) {
-        let _ = (first, count);
+    fn update(&self, data: &mut [T], first: u32) {
+        let _ = (data, first);
     }
+
+    /// The new box of the leaf over slots `first .. first + count`; `data` is its (updated)
+    /// entries, or an empty slice.
+    fn leaf(&self, data: &[T], first: u32, count: u32) -> Aabb;
 }
 
-/// A leaf refit from a closure, without prefetching.
+/// Leaf boxes from a closure, without per-slot data.
 struct LeafFn<F>(F);
 
-impl<T, F: Fn(&mut [T], u32, u32) -> Aabb + Sync> LeafRefit<T> for LeafFn<F> {
+impl<T, F: Fn(u32, u32) -> Aabb + Sync> LeafRefit<T> for LeafFn<F> {
     #[inline(always)]
-    fn leaf(&self, data: &mut [T], first: u32, count: u32) -> Aabb {
-        (self.0)(data, first, count)
+    fn leaf(&self, _: &[T], first: u32, count: u32) -> Aabb {
+        (self.0)(first, count)
     }
 }
 
@@ -54,17 +56,13 @@ impl Bvh {
     /// Refits the tree given each leaf's new box: `leaf_bounds(first, count)` bounds the
     /// primitives in slots `first .. first + count`. No allocation.
     pub fn refit_leaves(&mut self, leaf_bounds: impl Fn(u32, u32) -> Aabb + Sync) {
-        self.refit_with(
-            &mut [(); 0],
-            &LeafFn(|_: &mut [()], first, count| leaf_bounds(first, count)),
-        );
+        self.refit_with(&mut [(); 0], &LeafFn(leaf_bounds));
     }
 
     /// Refits the tree while updating per-slot data: `slot_data` is empty or has one entry per
-    /// primitive slot, and `leaf.leaf(data, first, count)` gets a leaf's entries
-    /// (`slot_data[first .. first + count]`, or an empty slice) to update, and returns the
-    /// leaf's new box. Every leaf is visited once; leaves of disjoint subtrees may be visited
-    /// in parallel. No allocation.
+    /// primitive slot. Every slot is passed to `leaf.update` once (in runs of consecutive slots,
+    /// a subtree's) before `leaf.leaf` bounds the leaves holding it; every leaf is bounded once.
+    /// Disjoint subtrees may be done in parallel. No allocation.
     pub(crate) fn refit_with<T: Send>(&mut self, slot_data: &mut [T], leaf: &impl LeafRefit<T>) {
         debug_assert!(slot_data.is_empty() || slot_data.len() == self.prim_indices.len());
         let Some((root, desc)) = self.nodes.split_first_mut() else {
@@ -75,7 +73,7 @@ impl Bvh {
             first: 0,
         };
         if root.is_leaf() {
-            root.set_bounds(leaf.leaf(data.leaf(root.first, root.count), root.first, root.count));
+            refit_leaf(root, &mut data, leaf);
             return;
         }
         refit_desc(desc, 1, &mut data, leaf);
@@ -92,12 +90,12 @@ struct SlotData<'a, T> {
 impl<T> SlotData<'_, T> {
     /// A leaf's entries (empty when there is no per-slot data).
     #[inline(always)]
-    fn leaf(&mut self, first: u32, count: u32) -> &mut [T] {
+    fn leaf(&self, first: u32, count: u32) -> &[T] {
         if self.data.is_empty() {
-            return &mut [];
+            return &[];
         }
         let at = (first - self.first) as usize;
-        &mut self.data[at..at + count as usize]
+        &self.data[at..at + count as usize]
     }
 
     /// Splits off the slots from global slot `at` on.
@@ -167,35 +165,30 @@ fn refit_child<T: Send, F: LeafRefit<T>>(
     leaf: &F,
 ) {
     if node.is_leaf() {
-        node.set_bounds(leaf.leaf(data.leaf(node.first, node.count), node.first, node.count));
+        refit_leaf(node, data, leaf);
     } else {
         refit_desc(desc, base, data, leaf);
         node.set_bounds(desc[0].bounds().union(desc[1].bounds()));
     }
 }
 
-/// One reverse sweep over a contiguous, closed range of nodes (global index of `nodes[0]` is
-/// `base`): every child is met before its parent. Leaves are announced
-/// [`PREFETCH_NODES`] nodes ahead.
+/// Refits a leaf whose slots are exactly `data`'s.
+fn refit_leaf<T, F: LeafRefit<T>>(node: &mut Node, data: &mut SlotData<'_, T>, leaf: &F) {
+    leaf.update(data.data, data.first);
+    node.set_bounds(leaf.leaf(data.leaf(node.first, node.count), node.first, node.count));
+}
+
+/// Updates the slots of a subtree, then one reverse sweep over its nodes, a contiguous, closed
+/// range (global index of `nodes[0]` is `base`) whose slots are exactly `data`'s: every child
+/// is met before its parent.
 fn refit_sweep<T, F: LeafRefit<T>>(
     nodes: &mut [Node],
     base: u32,
     data: &mut SlotData<'_, T>,
     leaf: &F,
 ) {
-    // The leaf announced last: an interior node ahead announces it again (rather than a
-    // branch on whether the node ahead is a leaf, which would often be mispredicted).
-    let mut announced = (0, 0);
+    leaf.update(data.data, data.first);
     for i in (0..nodes.len()).rev() {
-        if let Some(ahead) = i.checked_sub(PREFETCH_NODES) {
-            let a = nodes[ahead];
-            announced = if a.is_leaf() {
-                (a.first, a.count)
-            } else {
-                announced
-            };
-            leaf.prefetch(announced.0, announced.1);
-        }
         let n = nodes[i];
         let b = if n.is_leaf() {
             leaf.leaf(data.leaf(n.first, n.count), n.first, n.count)
