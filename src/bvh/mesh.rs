@@ -255,7 +255,7 @@ fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]])
 }
 
 /// How many triangles ahead [`gather_prefetched`] asks for vertex positions.
-const PREFETCH_TRIS: usize = 64;
+const PREFETCH_TRIS: usize = 128;
 
 /// [`gather`] for triangles whose vertices are scattered through `positions` (as in leaf
 /// order): the vertices of the triangle [`PREFETCH_TRIS`] slots ahead are asked for at each
