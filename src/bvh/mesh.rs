@@ -118,8 +118,8 @@ impl MeshBvh {
             self.tris.len(),
             "refit needs the same triangles"
         );
-        // Subtree by subtree: the triangles' new vertices are copied into their slots, then
-        // the subtree's leaves are bounded from the copies, still in the cache.
+        // The triangles' new vertices are copied into their slots (by subtrees on several
+        // threads), then the leaves are bounded from the copies.
         self.bvh.refit_with(
             &mut self.tris,
             &GatherLeaf {
