@@ -1,5 +1,8 @@
-//! Times refit from a mesh to its deformed version: `cargo run --release --example prof_refit A.tri B.tri`.
+//! Times refit from a mesh to its deformed version: `cargo run --release --example prof_refit A.tri B.tri`,
+//! or `prof_refit bumpy:N` for an indexed mesh (shared vertices): a bumpy sphere of about `N`
+//! triangles and its sine deformation by 10% of its box.
 use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::geom::{TriMesh, shapes};
 use std::time::Instant;
 
 #[path = "common/cpu.rs"]
@@ -8,8 +11,16 @@ use cpu::cpu_s;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let a = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
-    let b = dynbvh::io::read_tri(args.next().expect("deformed mesh").as_ref()).unwrap();
+    let first = args.next().expect("mesh");
+    let (a, b) = if let Some(n) = first.strip_prefix("bumpy:") {
+        let a = shapes::bumpy_sphere(n.parse().expect("triangle count"));
+        let mut b = a.clone();
+        shapes::sine_deform(&a.positions, &mut b.positions, 0.1, 0.0);
+        (a, b)
+    } else {
+        let read = |p: String| -> TriMesh { dynbvh::io::read_tri(p.as_ref()).unwrap() };
+        (read(first), read(args.next().expect("deformed mesh")))
+    };
     let mut bvh = MeshBvh::build(&a, &BuildParams::BINNED);
     // CPU time is read from the scheduler's counters, which may advance only at ticks: the
     // mean over all refits is the precise figure, the median of single refits a rough one.
