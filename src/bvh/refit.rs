@@ -8,7 +8,8 @@
 //! thread: the whole tree) in one pass over its slots before its sweep, which then bounds each
 //! leaf from the updated data. The update's scattered reads thus run in a plain forward loop,
 //! which can prefetch far ahead, instead of in the sweep, which branches at every node; the
-//! sweep reads the slots back roughly last-written first, mostly from the last-level cache.
+//! sweep reads the slots back roughly last-written first, so the part written last is still in
+//! the last-level cache.
 
 use super::{Bvh, Node};
 use crate::geom::Aabb;
