@@ -251,7 +251,7 @@ impl RayPacket {
         self.lanes[i / LANES].tmax.as_array()[i % LANES]
     }
 
-    fn update_tmax_hi(&mut self) {
+    pub(crate) fn update_tmax_hi(&mut self) {
         let mut hi = wide::f32x16::splat(f32::NEG_INFINITY);
         for l in &self.lanes[..self.n.div_ceil(LANES)] {
             hi = hi.fast_max(l.tmax);
@@ -266,11 +266,17 @@ impl RayPacket {
     /// Interval-arithmetic test: false when no ray of the packet can touch the box.
     #[inline(always)]
     fn may_hit(&self, n: &Node) -> bool {
-        if !(self.i_lo.is_finite() && self.i_hi.is_finite()) {
+        self.may_hit_box(n.min, n.max)
+    }
+
+    /// [`RayPacket::may_hit`] of the box `[bmin, bmax]`.
+    #[inline(always)]
+    fn may_hit_box(&self, bmin: [f32; 3], bmax: [f32; 3]) -> bool {
+        if !self.interval_ok() {
             return true;
         }
-        let bmin = Vec3A::from(n.min);
-        let bmax = Vec3A::from(n.max);
+        let bmin = Vec3A::from(bmin);
+        let bmax = Vec3A::from(bmax);
         let corners = |d_lo: Vec3A, d_hi: Vec3A| {
             let a = d_lo * self.i_lo;
             let b = d_lo * self.i_hi;
@@ -285,18 +291,82 @@ impl RayPacket {
         near <= far
     }
 
+    /// The interval test of [`RayPacket::may_hit`] on `K` boxes at once (rows min x, y, z, max
+    /// x, y, z; one lane per box): bit `k` is clear when no ray of the packet can touch box `k`.
+    /// Every bit is set when the test cannot be used ([`RayPacket::interval_ok`]). An empty box
+    /// (min `+inf`, max `-inf`) may keep its bit: callers mask empty lanes themselves.
+    #[inline(always)]
+    pub(crate) fn may_hit_lanes<const K: usize>(&self, b: &[[f32; K]; 6]) -> u32 {
+        if !self.interval_ok() {
+            return u32::MAX;
+        }
+        let (o_lo, o_hi) = (self.o_lo.to_array(), self.o_hi.to_array());
+        let (i_lo, i_hi) = (self.i_lo.to_array(), self.i_hi.to_array());
+        let mut near = [self.tmin_lo; K];
+        let mut far = [self.tmax_hi; K];
+        let mn = |a: f32, b: f32| if a < b { a } else { b };
+        let mx = |a: f32, b: f32| if a > b { a } else { b };
+        for a in 0..3 {
+            for k in 0..K {
+                // Corner products of (plane - origin) and the reciprocal, both as intervals.
+                let span = |p: f32| {
+                    let (d_lo, d_hi) = (p - o_hi[a], p - o_lo[a]);
+                    let (w, x) = (d_lo * i_lo[a], d_lo * i_hi[a]);
+                    let (y, z) = (d_hi * i_lo[a], d_hi * i_hi[a]);
+                    (mn(mn(w, x), mn(y, z)), mx(mx(w, x), mx(y, z)))
+                };
+                let (t0_lo, t0_hi) = span(b[a][k]);
+                let (t1_lo, t1_hi) = span(b[3 + a][k]);
+                near[k] = mx(near[k], mn(t0_lo, t1_lo));
+                far[k] = mn(far[k], mx(t0_hi, t1_hi));
+            }
+        }
+        let mut mask = 0;
+        for k in 0..K {
+            // A NaN keeps the box.
+            let culled = near[k] > far[k] * FAR_SCALE;
+            mask |= u32::from(!culled) << k;
+        }
+        mask
+    }
+
+    /// Sum of the rays' unit directions.
+    #[inline(always)]
+    pub(crate) fn dir(&self) -> Vec3 {
+        self.dir
+    }
+
+    /// True when the interval test may be used: every reciprocal direction is finite.
+    #[inline(always)]
+    pub(crate) fn interval_ok(&self) -> bool {
+        self.i_lo.is_finite() && self.i_hi.is_finite()
+    }
+
     /// Index of the first ray of `live` whose slab test touches the box.
     #[inline(always)]
     fn first_hit(&self, n: &Node, live: Mask) -> Option<u8> {
+        self.first_hit_box(n.min, n.max, live, true)
+    }
+
+    /// Index of the first ray of `live` whose slab test touches the box `[bmin, bmax]`; with
+    /// `cull`, the interval test may reject the box after the first live ray's group missed.
+    #[inline(always)]
+    pub(crate) fn first_hit_box(
+        &self,
+        bmin: [f32; 3],
+        bmax: [f32; 3],
+        live: Mask,
+        cull: bool,
+    ) -> Option<u8> {
         let mut g = live.trailing_zeros() as usize / LANES;
         // The group of the first live ray usually hits: test it before anything else.
         let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
-        let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+        let m = self.lanes[g].hit_box(bmin, bmax) & bits;
         if m != 0 {
             return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
         }
         // Then cull the node for the whole packet before testing the other groups.
-        if !self.may_hit(n) {
+        if cull && !self.may_hit_box(bmin, bmax) {
             return None;
         }
         g += 1;
@@ -307,7 +377,7 @@ impl RayPacket {
             }
             let bits = rest as u32 & 0xFFFF;
             if bits != 0 {
-                let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+                let m = self.lanes[g].hit_box(bmin, bmax) & bits;
                 if m != 0 {
                     return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
                 }
@@ -320,12 +390,18 @@ impl RayPacket {
     /// Every ray of `live` whose slab test touches the box.
     #[inline(always)]
     fn hit_mask(&self, n: &Node, live: Mask) -> Mask {
+        self.hit_mask_box(n.min, n.max, live)
+    }
+
+    /// Every ray of `live` whose slab test touches the box `[bmin, bmax]`.
+    #[inline(always)]
+    pub(crate) fn hit_mask_box(&self, bmin: [f32; 3], bmax: [f32; 3], live: Mask) -> Mask {
         let mut mask: Mask = 0;
         let mut g = live.trailing_zeros() as usize / LANES;
         while g < GROUPS && live >> (g * LANES) != 0 {
             let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
             if bits != 0 {
-                mask |= Mask::from(self.lanes[g].hit_box(n.min, n.max) & bits) << (g * LANES);
+                mask |= Mask::from(self.lanes[g].hit_box(bmin, bmax) & bits) << (g * LANES);
             }
             g += 1;
         }
@@ -336,7 +412,12 @@ impl RayPacket {
     /// (`ANY == false`): shortens each ray that hits it and records the hit; returns true when
     /// some ray was shortened. Any hit: retires the rays that hit it.
     #[inline(always)]
-    fn test_triangle<const ANY: bool>(&mut self, tri: &[Vec3; 3], slot: u32, rays: Mask) -> bool {
+    pub(crate) fn test_triangle<const ANY: bool>(
+        &mut self,
+        tri: &[Vec3; 3],
+        slot: u32,
+        rays: Mask,
+    ) -> bool {
         let uniform = self.uniform.map(|k| RayLanes::permute_uniform(tri, k));
         let mut changed = false;
         for g in 0..GROUPS {
@@ -403,7 +484,7 @@ impl RayPacket {
 impl RayPacket {
     /// Records a closest hit `(t, u, v)` in `slot` for lane `l` of group `g`.
     #[inline]
-    fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
+    pub(crate) fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
         self.lanes[g].tmax.as_mut_array()[l] = t;
         self.found |= (1 as Mask) << (g * LANES + l);
         self.slot[g].as_mut_array()[l] = f32::from_bits(slot);
@@ -600,6 +681,37 @@ impl Bvh {
     }
 }
 
+/// The rays of an image given row by row (`width` rays a row) in tiles ([`image_tiles`]), each
+/// tile's rays gathered and answered by `trace`; `out[i]` answers `rays[i]`.
+///
+/// # Panics
+/// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+pub(crate) fn trace_tiles<T: Copy + Default>(
+    rays: &[Ray],
+    width: usize,
+    out: &mut [T],
+    mut trace: impl FnMut(&[Ray], &mut [T]),
+) {
+    assert_eq!(rays.len(), out.len(), "one output per ray");
+    if rays.is_empty() {
+        return;
+    }
+    assert!(
+        width > 0 && rays.len().is_multiple_of(width),
+        "rows of {width} rays"
+    );
+    let mut buf = Vec::with_capacity(MAX_PACKET);
+    let mut res = vec![T::default(); MAX_PACKET];
+    image_tiles(width, rays.len() / width, |idx| {
+        buf.clear();
+        buf.extend(idx.iter().map(|&i| rays[i]));
+        trace(&buf, &mut res[..buf.len()]);
+        for (&i, r) in idx.iter().zip(&res) {
+            out[i] = *r;
+        }
+    });
+}
+
 impl MeshBvh {
     /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
     /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
@@ -681,7 +793,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
-        self.trace_image(rays, width, hits, Self::closest_hit_packet);
+        trace_tiles(rays, width, hits, |r, h| self.closest_hit_packet(r, h));
     }
 
     /// Any-hit answers of an image's rays given row by row, as packets of [`TILE_W`] x
@@ -690,35 +802,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
-        self.trace_image(rays, width, out, Self::any_hit_packet);
-    }
-
-    /// The image in tiles ([`image_tiles`]), each tile's rays gathered and answered by `trace`.
-    fn trace_image<T: Copy + Default>(
-        &self,
-        rays: &[Ray],
-        width: usize,
-        out: &mut [T],
-        trace: impl Fn(&Self, &[Ray], &mut [T]),
-    ) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        if rays.is_empty() {
-            return;
-        }
-        assert!(
-            width > 0 && rays.len().is_multiple_of(width),
-            "rows of {width} rays"
-        );
-        let mut buf = Vec::with_capacity(MAX_PACKET);
-        let mut res = vec![T::default(); MAX_PACKET];
-        image_tiles(width, rays.len() / width, |idx| {
-            buf.clear();
-            buf.extend(idx.iter().map(|&i| rays[i]));
-            trace(self, &buf, &mut res[..buf.len()]);
-            for (&i, r) in idx.iter().zip(&res) {
-                out[i] = *r;
-            }
-        });
+        trace_tiles(rays, width, out, |r, o| self.any_hit_packet(r, o));
     }
 
     /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are
