@@ -60,6 +60,8 @@ pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
 }
 
 const GROUPS: usize = MAX_PACKET / LANES;
+/// All bits set: a true lane of a vector mask.
+const TRUE_BITS: f32 = f32::from_bits(u32::MAX);
 const LEAF_IA: bool = false;
 /// A subtree that at most this many rays of a packet still need is walked ray by ray.
 const SINGLE_BELOW: u32 = 4;
@@ -75,11 +77,12 @@ pub enum PacketMode {
 }
 
 impl PacketMode {
+    /// Whether the rays just loaded into `p` go as a packet.
     #[inline]
-    pub(crate) fn use_packet(self, rays: &[Ray]) -> bool {
+    pub(crate) fn use_packet(self, p: &RayPacket) -> bool {
         match self {
-            PacketMode::Auto => is_coherent(rays),
-            PacketMode::Always => !rays.is_empty(),
+            PacketMode::Auto => p.is_coherent(),
+            PacketMode::Always => !p.is_empty(),
         }
     }
 }
@@ -126,6 +129,8 @@ pub struct RayPacket {
     dir: Vec3,
     /// Rays whose closest hit has been found so far, with its slot and barycentrics.
     found: Mask,
+    /// What [`RayPacket::is_coherent`] answers for the loaded rays.
+    coherent: bool,
     /// Per group: the slot (as the bits of an f32), and the barycentrics.
     slot: [F; GROUPS],
     u: [F; GROUPS],
@@ -156,6 +161,7 @@ impl RayPacket {
             tmax_hi: 0.0,
             dir: Vec3::ZERO,
             found: 0,
+            coherent: false,
             slot: [F::splat(0.0); GROUPS],
             u: [F::splat(0.0); GROUPS],
             v: [F::splat(0.0); GROUPS],
@@ -194,55 +200,146 @@ impl RayPacket {
 
     /// Loads the rays of the mask `which` among `n` lanes, ray `i` being `ray(i)`; the other
     /// lanes are left inactive.
+    ///
+    /// Sixteen rays at a time: each group's rays are gathered into rows, and the watertight
+    /// test's per-ray constants (the same operations as [`RayTriPrecomp::new`], so the same
+    /// bits), the packet's bounds, its direction and its coherence are computed on whole
+    /// vectors.
+    // The lane loops fill a column of several rows at once.
+    #[allow(clippy::needless_range_loop)]
     pub(crate) fn load_with(&mut self, n: usize, which: Mask, mut ray: impl FnMut(usize) -> Ray) {
         debug_assert!(n <= MAX_PACKET);
         self.n = n;
         self.active = which;
         self.found = 0;
-        let mut o_lo = Vec3A::splat(f32::INFINITY);
-        let mut o_hi = Vec3A::splat(f32::NEG_INFINITY);
-        let mut i_lo = o_lo;
-        let mut i_hi = o_hi;
-        let mut tmin_lo = f32::INFINITY;
-        let mut tmax_hi = f32::NEG_INFINITY;
-        let mut dir = Vec3::ZERO;
-        let mut uniform = None;
-        let mut mixed = false;
-        let mut bits = which;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let r = ray(i);
-            let pre = RayTriPrecomp::new(r.dir);
-            self.lanes[i / LANES].set(i % LANES, &r, &pre);
-            self.rays[i] = r;
-            let o = Vec3A::from(r.origin);
-            let inv = Vec3A::from(r.inv_dir);
-            o_lo = o_lo.min(o);
-            o_hi = o_hi.max(o);
-            i_lo = i_lo.min(inv);
-            i_hi = i_hi.max(inv);
-            tmin_lo = tmin_lo.min(r.tmin);
-            tmax_hi = tmax_hi.max(r.tmax);
-            dir += r.dir.normalize_or_zero();
-            let k = [pre.kx, pre.ky, pre.kz];
-            match uniform {
-                None => uniform = Some(k),
-                Some(u) if u != k => mixed = true,
-                _ => {}
+        let inf = F::splat(f32::INFINITY);
+        let ninf = F::splat(f32::NEG_INFINITY);
+        let zero = F::splat(0.0);
+        let (mut o_lo, mut o_hi) = ([inf; 3], [ninf; 3]);
+        let (mut i_lo, mut i_hi) = ([inf; 3], [ninf; 3]);
+        let (mut tmin_lo, mut tmax_hi) = (inf, ninf);
+        let mut dir_sum = [zero; 3];
+        let mut units = [[zero; 3]; GROUPS];
+        // Per row of `RayLanes::k`: some active lane has it set, some has it clear.
+        let (mut k_set, mut k_clear) = ([false; 6], [false; 6]);
+        let groups = n.div_ceil(LANES);
+        for g in 0..groups {
+            let bits = (which >> (g * LANES)) as u32 & 0xFFFF;
+            // Rows: origin, direction, reciprocal, slab_lo, slab_hi (3 each), tmin, tmax, active.
+            let mut rows = [[0f32; LANES]; 18];
+            for l in 0..LANES {
+                if bits >> l & 1 == 0 {
+                    rows[3][l] = 1.0;
+                    rows[6][l] = 1.0;
+                    rows[16][l] = f32::NEG_INFINITY;
+                    continue;
+                }
+                let i = g * LANES + l;
+                let r = ray(i);
+                self.rays[i] = r;
+                let v = [r.origin, r.dir, r.inv_dir, r.slab_lo, r.slab_hi];
+                for (j, v) in v.iter().enumerate() {
+                    rows[3 * j][l] = v.x;
+                    rows[3 * j + 1][l] = v.y;
+                    rows[3 * j + 2][l] = v.z;
+                }
+                rows[15][l] = r.tmin;
+                rows[16][l] = r.tmax;
+                rows[17][l] = TRUE_BITS;
             }
+            let row = |j: usize| F::from(rows[j]);
+            let o = [row(0), row(1), row(2)];
+            let d = [row(3), row(4), row(5)];
+            let inv = [row(6), row(7), row(8)];
+            let on = row(17);
+            // The watertight test's axes (`RayTriPrecomp::new`): kz the largest |d| (the first
+            // on ties), kx and ky the next ones, swapped when d[kz] is negative.
+            let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
+            let kz0 = ax.simd_ge(ay) & ax.simd_ge(az);
+            let kz1 = !kz0 & ay.simd_ge(az);
+            let kz2 = !(kz0 | kz1);
+            let pick = |is0: F, is1: F, v: &[F; 3]| is0.select(v[0], is1.select(v[1], v[2]));
+            let dkz = pick(kz0, kz1, &d);
+            let neg = dkz.simd_lt(zero);
+            let kx0 = (kz2 & !neg) | (kz1 & neg);
+            let kx1 = (kz0 & !neg) | (kz2 & neg);
+            let ky0 = (kz1 & !neg) | (kz2 & neg);
+            let ky1 = (kz2 & !neg) | (kz0 & neg);
+            let sz = F::splat(1.0) / dkz;
+            let lanes = &mut self.lanes[g];
+            lanes.slab_lo = [row(9), row(10), row(11)];
+            lanes.slab_hi = [row(12), row(13), row(14)];
+            lanes.inv = inv;
+            lanes.tmin = row(15);
+            lanes.tmax = row(16);
+            lanes.ok = [pick(kx0, kx1, &o), pick(ky0, ky1, &o), pick(kz0, kz1, &o)];
+            lanes.s = [pick(kx0, kx1, &d) * sz, pick(ky0, ky1, &d) * sz, sz];
+            lanes.k = [kx0, kx1, ky0, ky1, kz0, kz1];
+            for (j, k) in lanes.k.iter().enumerate() {
+                let m = k.to_bitmask() & bits;
+                k_set[j] |= m != 0;
+                k_clear[j] |= m != bits;
+            }
+            // Bounds over the active lanes.
+            for a in 0..3 {
+                o_lo[a] = o_lo[a].fast_min(on.select(o[a], inf));
+                o_hi[a] = o_hi[a].fast_max(on.select(o[a], ninf));
+                i_lo[a] = i_lo[a].fast_min(on.select(inv[a], inf));
+                i_hi[a] = i_hi[a].fast_max(on.select(inv[a], ninf));
+            }
+            tmin_lo = tmin_lo.fast_min(on.select(lanes.tmin, inf));
+            tmax_hi = tmax_hi.fast_max(on.select(lanes.tmax, ninf));
+            // Unit directions (zero for a zero or non-finite length).
+            let rcp = F::splat(1.0) / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let ok = on & rcp.is_finite() & rcp.simd_gt(zero);
+            let u = d.map(|c| ok.select(c * rcp, zero));
+            for a in 0..3 {
+                dir_sum[a] += u[a];
+            }
+            units[g] = u;
         }
-        self.uniform = if mixed { None } else { uniform };
-        (self.o_lo, self.o_hi, self.i_lo, self.i_hi) = (o_lo, o_hi, i_lo, i_hi);
-        self.tmin_lo = tmin_lo;
-        self.tmax_hi = tmax_hi;
+        let lo = |v: F| v.to_array().into_iter().fold(f32::INFINITY, f32::min);
+        let hi = |v: F| v.to_array().into_iter().fold(f32::NEG_INFINITY, f32::max);
+        self.o_lo = Vec3A::from(o_lo.map(lo));
+        self.o_hi = Vec3A::from(o_hi.map(hi));
+        self.i_lo = Vec3A::from(i_lo.map(lo));
+        self.i_hi = Vec3A::from(i_hi.map(hi));
+        self.tmin_lo = lo(tmin_lo);
+        self.tmax_hi = hi(tmax_hi);
+        let dir = Vec3::from(dir_sum.map(F::reduce_add));
         self.dir = dir;
+        self.uniform = (which != 0 && (0..6).all(|j| !(k_set[j] && k_clear[j]))).then(|| {
+            let axis = |j: usize| {
+                if k_set[2 * j] {
+                    0
+                } else if k_set[2 * j + 1] {
+                    1
+                } else {
+                    2
+                }
+            };
+            [axis(0), axis(1), axis(2)]
+        });
+        // Coherent: enough rays, all unit directions within `COHERENT_COS` of their mean.
+        let mean = dir.normalize_or_zero();
+        self.coherent = which.count_ones() as usize >= MIN_PACKET && mean != Vec3::ZERO && {
+            let (mx, my, mz) = (F::splat(mean.x), F::splat(mean.y), F::splat(mean.z));
+            let cos = F::splat(COHERENT_COS);
+            (0..groups).all(|g| {
+                let [ux, uy, uz] = units[g];
+                let bits = (which >> (g * LANES)) as u32 & 0xFFFF;
+                let dot = ux * mx + uy * my + uz * mz;
+                dot.simd_ge(cos).to_bitmask() & bits == bits
+            })
+        };
     }
 
-    /// True when the loaded rays are worth tracing as a packet ([`is_coherent`]).
+    /// True when the loaded rays are worth tracing as a packet: at least [`MIN_PACKET`] of
+    /// them, all unit directions within [`COHERENT_COS`] of their mean (the test of
+    /// [`is_coherent`], computed on vectors when the rays are loaded).
     #[must_use]
     pub fn is_coherent(&self) -> bool {
-        is_coherent(&self.rays[..self.n])
+        self.coherent
     }
 
     /// The current `tmax` of ray `i`: its closest hit so far, or its own `tmax`.
@@ -737,8 +834,8 @@ impl MeshBvh {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
-                p.load(r);
+            p.load(r);
+            if mode.use_packet(&p) {
                 self.closest_packet(&mut p);
                 for (i, h) in h.iter_mut().enumerate() {
                     *h = p.closest(i).map(|(t, u, v, slot)| Hit {
@@ -773,8 +870,8 @@ impl MeshBvh {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
-                p.load(r);
+            p.load(r);
+            if mode.use_packet(&p) {
                 self.any_packet(&mut p);
                 for (i, o) in o.iter_mut().enumerate() {
                     *o = p.occluded(i);

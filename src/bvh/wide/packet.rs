@@ -54,8 +54,8 @@ impl<const K: usize> WideBvh<K> {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
-                p.load(r);
+            p.load(r);
+            if mode.use_packet(&p) {
                 self.closest_packet(&mut p);
                 for (i, h) in h.iter_mut().enumerate() {
                     *h = p.closest(i).map(|(t, u, v, slot)| Hit {
@@ -90,8 +90,8 @@ impl<const K: usize> WideBvh<K> {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let mut p = RayPacket::new();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
-                p.load(r);
+            p.load(r);
+            if mode.use_packet(&p) {
                 self.any_packet(&mut p);
                 for (i, o) in o.iter_mut().enumerate() {
                     *o = p.occluded(i);
