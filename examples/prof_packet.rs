@@ -105,6 +105,9 @@ fn main() {
         });
         println!("single any     {m:.2} Mrays/s cpu ({hits} hits)");
     }
+    if std::env::var_os("LOADONLY").is_some() {
+        load_only(&tiled(&rays, w, 16, 8));
+    }
     let bvh8 = MeshBvh8::from_mesh_bvh(&bvh);
     let trees = std::env::var("TREES").unwrap_or_else(|_| "bin,bvh8".into());
     if single && trees.contains("bvh8") {
@@ -163,4 +166,26 @@ fn main() {
             println!("{name} {tw}x{th} any     {m:.2} Mrays/s cpu ({hits} hits)");
         }
     }
+}
+
+#[allow(dead_code)]
+fn load_only(rays: &[Ray]) {
+    let mut p = dynbvh::bvh::RayPacket::new();
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0;
+        for c in rays.chunks(128) {
+            p.load(c);
+            n += usize::from(p.is_coherent());
+        }
+        n
+    });
+    println!("load only {m:.2} Mrays/s cpu");
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0.0;
+        for r in rays {
+            n += r.origin.x + r.tmax;
+        }
+        n as usize
+    });
+    println!("read only {m:.2} Mrays/s cpu");
 }

@@ -99,7 +99,8 @@ impl RayLanes {
     #[inline(always)]
     #[must_use]
     pub fn permute(&self, tri: &[Vec3; 3]) -> PermutedTri {
-        tri.map(|p| {
+        // Written out rather than with `array::map`, which is not always inlined.
+        let one = |p: Vec3| {
             let (x, y, z) = (F::splat(p.x), F::splat(p.y), F::splat(p.z));
             let pick = |is0: F, is1: F| is0.select(x, is1.select(y, z));
             [
@@ -107,14 +108,16 @@ impl RayLanes {
                 pick(self.k[2], self.k[3]),
                 pick(self.k[4], self.k[5]),
             ]
-        })
+        };
+        [one(tri[0]), one(tri[1]), one(tri[2])]
     }
 
     /// The triangle's vertices permuted by `(kx, ky, kz)`, the same for every lane.
     #[inline(always)]
     #[must_use]
     pub fn permute_uniform(tri: &[Vec3; 3], k: [usize; 3]) -> PermutedTri {
-        tri.map(|p| k.map(|a| F::splat(p[a])))
+        let one = |p: Vec3| [F::splat(p[k[0]]), F::splat(p[k[1]]), F::splat(p[k[2]])];
+        [one(tri[0]), one(tri[1]), one(tri[2])]
     }
 
     /// The watertight test of every lane against one triangle (vertices permuted for the
