@@ -194,6 +194,40 @@ impl Accel for DynWide {
     }
 }
 
+/// dynbvh's 8-wide tree traced as packets of up to 128 consecutive rays (16x8 camera tiles;
+/// incoherent packets fall back to single rays by themselves).
+struct DynWidePackets(DynWide);
+
+impl Accel for DynWidePackets {
+    type Input = TriMesh;
+    type R = Ray;
+    fn prepare(mesh: &TriMesh) -> TriMesh {
+        mesh.clone()
+    }
+    fn ray(r: &Ray) -> Ray {
+        *r
+    }
+    fn closest(&self, ray: &Ray) -> Option<(f32, u32)> {
+        self.0.closest(ray)
+    }
+    fn trace_all(&self, rays: &[Ray]) -> f32 {
+        let mut hits = [None; 128];
+        let mut sum = 0.0;
+        for chunk in rays.chunks(128) {
+            let out = &mut hits[..chunk.len()];
+            self.0.0.closest_hit_packet(chunk, out);
+            sum += out.iter().flatten().map(|h| h.t).sum::<f32>();
+        }
+        sum
+    }
+    fn sah(&self) -> f64 {
+        f64::NAN
+    }
+    fn refit(&mut self, input: &TriMesh) -> bool {
+        self.0.refit(input)
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // obvhs (Bvh2: binary, PLOC builder)
 // ---------------------------------------------------------------------------------------------
@@ -1035,6 +1069,16 @@ fn variants() -> Vec<Variant> {
             make: |i| {
                 measured(i, |m: TriMesh| {
                     DynPackets(Dyn(MeshBvh::build(&m, &BuildParams::BINNED)))
+                })
+            },
+        },
+        Variant {
+            name: "dynbvh packets bvh8",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    DynWidePackets(DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(
+                        &MeshBvh::build(&m, &BuildParams::BINNED),
+                    )))
                 })
             },
         },

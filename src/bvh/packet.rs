@@ -36,6 +36,14 @@ pub const TILE_W: usize = 16;
 /// Height of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
 pub const TILE_H: usize = 8;
 
+/// The first `K` (at most 8) values of a row of a wide node, padded with NaN.
+#[inline(always)]
+pub(crate) fn row8<const K: usize>(r: &[f32; K]) -> wide::f32x8 {
+    let mut a = [f32::NAN; 8];
+    a[..K].copy_from_slice(r);
+    wide::f32x8::from(a)
+}
+
 /// Calls `f` with the pixel indices of each tile of a `width` x `height` image (row-major
 /// pixels), tile by tile ([`TILE_W`] x [`TILE_H`], smaller at the right and bottom edges), each
 /// tile's pixels in 4x4 blocks so that every 16-ray SIMD group of a packet is a compact square.
@@ -394,37 +402,36 @@ impl RayPacket {
     /// (min `+inf`, max `-inf`) may keep its bit: callers mask empty lanes themselves.
     #[inline(always)]
     pub(crate) fn may_hit_lanes<const K: usize>(&self, b: &[[f32; K]; 6]) -> u32 {
+        use wide::f32x8;
         if !self.interval_ok() {
             return u32::MAX;
         }
         let (o_lo, o_hi) = (self.o_lo.to_array(), self.o_hi.to_array());
         let (i_lo, i_hi) = (self.i_lo.to_array(), self.i_hi.to_array());
-        let mut near = [self.tmin_lo; K];
-        let mut far = [self.tmax_hi; K];
-        let mn = |a: f32, b: f32| if a < b { a } else { b };
-        let mx = |a: f32, b: f32| if a > b { a } else { b };
+        let mut near = f32x8::splat(self.tmin_lo);
+        let mut far = f32x8::splat(self.tmax_hi);
         for a in 0..3 {
-            for k in 0..K {
-                // Corner products of (plane - origin) and the reciprocal, both as intervals.
-                let span = |p: f32| {
-                    let (d_lo, d_hi) = (p - o_hi[a], p - o_lo[a]);
-                    let (w, x) = (d_lo * i_lo[a], d_lo * i_hi[a]);
-                    let (y, z) = (d_hi * i_lo[a], d_hi * i_hi[a]);
-                    (mn(mn(w, x), mn(y, z)), mx(mx(w, x), mx(y, z)))
-                };
-                let (t0_lo, t0_hi) = span(b[a][k]);
-                let (t1_lo, t1_hi) = span(b[3 + a][k]);
-                near[k] = mx(near[k], mn(t0_lo, t1_lo));
-                far[k] = mn(far[k], mx(t0_hi, t1_hi));
-            }
+            let (ol, oh) = (f32x8::splat(o_lo[a]), f32x8::splat(o_hi[a]));
+            let (il, ih) = (f32x8::splat(i_lo[a]), f32x8::splat(i_hi[a]));
+            // Corner products of (plane - origin) and the reciprocal, both as intervals. The
+            // minima and maxima keep the second operand on NaN, as `if a < b { a } else { b }`.
+            let span = |p: f32x8| {
+                let (d_lo, d_hi) = (p - oh, p - ol);
+                let (w, x) = (d_lo * il, d_lo * ih);
+                let (y, z) = (d_hi * il, d_hi * ih);
+                (
+                    w.fast_min(x).fast_min(y.fast_min(z)),
+                    w.fast_max(x).fast_max(y.fast_max(z)),
+                )
+            };
+            let (t0_lo, t0_hi) = span(row8(&b[a]));
+            let (t1_lo, t1_hi) = span(row8(&b[3 + a]));
+            near = near.fast_max(t0_lo.fast_min(t1_lo));
+            far = far.fast_min(t0_hi.fast_max(t1_hi));
         }
-        let mut mask = 0;
-        for k in 0..K {
-            // A NaN keeps the box.
-            let culled = near[k] > far[k] * FAR_SCALE;
-            mask |= u32::from(!culled) << k;
-        }
-        mask
+        // A NaN keeps the box.
+        let culled = near.simd_gt(far * f32x8::splat(FAR_SCALE)).to_bitmask();
+        !culled & ((1 << K) - 1)
     }
 
     /// Sum of the rays' unit directions.

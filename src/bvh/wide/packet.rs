@@ -18,9 +18,10 @@
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::MAX_PACKET;
-use crate::bvh::packet::{Mask, PacketMode, RayPacket, trace_tiles};
+use crate::bvh::packet::{Mask, PacketMode, RayPacket, row8, trace_tiles};
 use crate::geom::{Hit, Ray};
 use crate::simd::packet::LANES;
+use wide::f32x8;
 
 /// A subtree that at most this many rays of a packet still need is walked ray by ray.
 const SINGLE_BELOW: u32 = 4;
@@ -148,23 +149,27 @@ impl<const K: usize> WideBvh<K> {
     #[inline(always)]
     fn expand(&self, p: &RayPacket, ni: u32, first: u8, stack: &mut [Entry], sp: &mut usize) {
         let node = &self.nodes[ni as usize];
-        let mut mask = p.may_hit_lanes(&node.bounds) & ((1 << K) - 1);
+        let mut mask = p.may_hit_lanes(&node.bounds);
         for k in 0..K {
             if node.child[k] == EMPTY_CHILD {
                 mask &= !(1 << k);
             }
         }
+        // Twice each box centre, along the packet's direction.
         let d = p.dir();
+        let b = &node.bounds;
+        let c = |a: usize| row8(&b[a]) + row8(&b[3 + a]);
+        let key = (c(0) * f32x8::splat(d.x) + c(1) * f32x8::splat(d.y) + c(2) * f32x8::splat(d.z))
+            .to_array();
         let base = *sp;
         while mask != 0 {
             let k = mask.trailing_zeros() as usize;
             mask &= mask - 1;
-            let key = key_of(node, k, d);
             let e = (node.child[k], ni, k as u8, first);
             self.prefetch(e.0);
             // Insertion by key, largest at the bottom.
             let mut j = *sp;
-            while j > base && key_of(node, stack[j - 1].2 as usize, d) < key {
+            while j > base && key[stack[j - 1].2 as usize] < key[k] {
                 stack[j] = stack[j - 1];
                 j -= 1;
             }
@@ -272,11 +277,4 @@ impl<const K: usize> WideBvh<K> {
         }
         true
     }
-}
-
-/// The ordering key of lane `k` of `node`: its box centre (times two) along `d`.
-#[inline(always)]
-fn key_of<const K: usize>(node: &super::WideNode<K>, k: usize, d: glam::Vec3) -> f32 {
-    let b = &node.bounds;
-    (b[0][k] + b[3][k]) * d.x + (b[1][k] + b[4][k]) * d.y + (b[2][k] + b[5][k]) * d.z
 }
