@@ -398,13 +398,13 @@ impl RayPacket {
 
     /// The interval test of [`RayPacket::may_hit`] on `K` boxes at once (rows min x, y, z, max
     /// x, y, z; one lane per box): bit `k` is clear when no ray of the packet can touch box `k`.
-    /// Every bit is set when the test cannot be used ([`RayPacket::interval_ok`]). An empty box
+    /// All `K` bits are set when the test cannot be used ([`RayPacket::interval_ok`]). An empty box
     /// (min `+inf`, max `-inf`) may keep its bit: callers mask empty lanes themselves.
     #[inline(always)]
     pub(crate) fn may_hit_lanes<const K: usize>(&self, b: &[[f32; K]; 6]) -> u32 {
         use wide::f32x8;
         if !self.interval_ok() {
-            return u32::MAX;
+            return (1 << K) - 1;
         }
         let (o_lo, o_hi) = (self.o_lo.to_array(), self.o_hi.to_array());
         let (i_lo, i_hi) = (self.i_lo.to_array(), self.i_hi.to_array());
