@@ -180,6 +180,16 @@ fn load_only(rays: &[Ray]) {
         n
     });
     println!("load only {m:.2} Mrays/s cpu");
+    let hot = &rays[..128];
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0;
+        for _ in 0..rays.len() / 128 {
+            p.load(std::hint::black_box(hot));
+            n += usize::from(p.is_coherent());
+        }
+        n
+    });
+    println!("load only, cached {m:.2} Mrays/s cpu");
     let (m, _) = mrays(rays.len(), || {
         let mut n = 0.0;
         for r in rays {
