@@ -19,6 +19,15 @@ use std::time::{Duration, Instant};
 #[cfg(feature = "embree")]
 mod embree_ffi;
 
+#[path = "../examples/common/cpu.rs"]
+mod cpu;
+
+/// True when `DYNBVH_PEERS_CPU` is set: ray throughput is measured in the process's CPU time
+/// instead of wall-clock time (for a machine shared with other work).
+fn cpu_timing() -> bool {
+    std::env::var_os("DYNBVH_PEERS_CPU").is_some()
+}
+
 // ---------------------------------------------------------------------------------------------
 // Settings
 // ---------------------------------------------------------------------------------------------
@@ -934,9 +943,14 @@ impl<A: Accel, F: Fn(A::Input) -> A> Measure for Gen<'_, A, F> {
     fn trace(&self, set: usize) -> f64 {
         let accel = self.accel.as_ref().expect("built");
         let rays = &self.rays[set];
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu::cpu_s());
         black_box(accel.trace_all(rays));
-        rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6
+        let secs = if cpu_timing() {
+            cpu::cpu_s() - c
+        } else {
+            t.elapsed().as_secs_f64()
+        };
+        rays.len() as f64 / secs / 1e6
     }
 
     fn check(&self) -> Mismatch {
@@ -1147,10 +1161,15 @@ fn ratio(x: f64, base: f64) -> String {
 fn print_table(input: &Input, rows: &[(&str, Row)]) {
     let base = &rows[0].1;
     println!(
-        "\n## {} ({} triangles), 1 thread; ratios are to {}\n",
+        "\n## {} ({} triangles), 1 thread; ratios are to {}{}\n",
         input.name,
         input.rest.len(),
-        rows[0].0
+        rows[0].0,
+        if cpu_timing() {
+            "; Mrays/s in CPU time"
+        } else {
+            ""
+        }
     );
     let set_names: Vec<&str> = input.sets.iter().map(|s| s.name).collect();
     println!(
