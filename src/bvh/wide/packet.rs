@@ -18,7 +18,7 @@
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::MAX_PACKET;
-use crate::bvh::packet::{Mask, PacketMode, RayPacket, row8, trace_tiles};
+use crate::bvh::packet::{Mask, PacketMode, RayPacket, row8, trace_tiles, with_packet};
 use crate::geom::{Hit, Ray};
 use crate::simd::packet::LANES;
 use wide::f32x8;
@@ -53,25 +53,26 @@ impl<const K: usize> WideBvh<K> {
         mode: PacketMode,
     ) {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
-        let mut p = RayPacket::new();
-        for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-            p.load(r);
-            if mode.use_packet(&p) {
-                self.closest_packet(&mut p);
-                for (i, h) in h.iter_mut().enumerate() {
-                    *h = p.closest(i).map(|(t, u, v, slot)| Hit {
-                        t,
-                        u,
-                        v,
-                        prim: self.blocks[slot as usize / 4].prims[slot as usize % 4],
-                    });
-                }
-            } else {
-                for (r, h) in r.iter().zip(h) {
-                    *h = self.closest_hit(r);
+        with_packet(|p| {
+            for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
+                p.load(r);
+                if mode.use_packet(p) {
+                    self.closest_packet(p);
+                    for (i, h) in h.iter_mut().enumerate() {
+                        *h = p.closest(i).map(|(t, u, v, slot)| Hit {
+                            t,
+                            u,
+                            v,
+                            prim: self.blocks[slot as usize / 4].prims[slot as usize % 4],
+                        });
+                    }
+                } else {
+                    for (r, h) in r.iter().zip(h) {
+                        *h = self.closest_hit(r);
+                    }
                 }
             }
-        }
+        });
     }
 
     /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
@@ -89,20 +90,21 @@ impl<const K: usize> WideBvh<K> {
     /// When the lengths differ.
     pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        let mut p = RayPacket::new();
-        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            p.load(r);
-            if mode.use_packet(&p) {
-                self.any_packet(&mut p);
-                for (i, o) in o.iter_mut().enumerate() {
-                    *o = p.occluded(i);
-                }
-            } else {
-                for (r, o) in r.iter().zip(o) {
-                    *o = self.any_hit(r);
+        with_packet(|p| {
+            for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+                p.load(r);
+                if mode.use_packet(p) {
+                    self.any_packet(p);
+                    for (i, o) in o.iter_mut().enumerate() {
+                        *o = p.occluded(i);
+                    }
+                } else {
+                    for (r, o) in r.iter().zip(o) {
+                        *o = self.any_hit(r);
+                    }
                 }
             }
-        }
+        });
     }
 
     /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
