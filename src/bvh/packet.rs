@@ -68,6 +68,16 @@ pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
 }
 
 const GROUPS: usize = MAX_PACKET / LANES;
+/// What an inactive lane holds.
+const IDLE: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::X,
+    inv_dir: Vec3::ONE,
+    slab_lo: Vec3::ZERO,
+    slab_hi: Vec3::ZERO,
+    tmin: 0.0,
+    tmax: f32::NEG_INFINITY,
+};
 /// All bits set: a true lane of a vector mask.
 const TRUE_BITS: f32 = f32::from_bits(u32::MAX);
 const LEAF_IA: bool = false;
@@ -209,11 +219,11 @@ impl RayPacket {
     /// Loads the rays of the mask `which` among `n` lanes, ray `i` being `ray(i)`; the other
     /// lanes are left inactive.
     ///
-    /// Sixteen rays at a time: each group's rays are gathered into rows, and the watertight
-    /// test's per-ray constants (the same operations as [`RayTriPrecomp::new`], so the same
-    /// bits), the packet's bounds, its direction and its coherence are computed on whole
-    /// vectors.
-    // The lane loops fill a column of several rows at once.
+    /// Sixteen rays at a time: each group's rays are copied in and read back as rows, and the
+    /// watertight test's per-ray constants (the same operations as [`RayTriPrecomp::new`], so
+    /// the same bits), the packet's bounds, its direction and its coherence are computed on
+    /// whole vectors.
+    // The loops index the packet's rays, the lane masks and the unit directions together.
     #[allow(clippy::needless_range_loop)]
     pub(crate) fn load_with(&mut self, n: usize, which: Mask, mut ray: impl FnMut(usize) -> Ray) {
         debug_assert!(n <= MAX_PACKET);
@@ -233,33 +243,48 @@ impl RayPacket {
         let groups = n.div_ceil(LANES);
         for g in 0..groups {
             let bits = (which >> (g * LANES)) as u32 & 0xFFFF;
-            // Rows: origin, direction, reciprocal, slab_lo, slab_hi (3 each), tmin, tmax, active.
-            let mut rows = [[0f32; LANES]; 18];
+            // The group's rays (an idle ray in inactive lanes) and the mask of active lanes.
+            let mut on = [0f32; LANES];
             for l in 0..LANES {
-                if bits >> l & 1 == 0 {
-                    rows[3][l] = 1.0;
-                    rows[6][l] = 1.0;
-                    rows[16][l] = f32::NEG_INFINITY;
-                    continue;
-                }
                 let i = g * LANES + l;
-                let r = ray(i);
-                self.rays[i] = r;
-                let v = [r.origin, r.dir, r.inv_dir, r.slab_lo, r.slab_hi];
-                for (j, v) in v.iter().enumerate() {
-                    rows[3 * j][l] = v.x;
-                    rows[3 * j + 1][l] = v.y;
-                    rows[3 * j + 2][l] = v.z;
+                if bits >> l & 1 == 0 {
+                    self.rays[i] = IDLE;
+                } else {
+                    self.rays[i] = ray(i);
+                    on[l] = TRUE_BITS;
                 }
-                rows[15][l] = r.tmin;
-                rows[16][l] = r.tmax;
-                rows[17][l] = TRUE_BITS;
             }
-            let row = |j: usize| F::from(rows[j]);
+            // Then the rows, one field of the group's 16 rays each (built in registers: cheaper
+            // than storing each ray's fields lane by lane into rows).
+            let rays: &[Ray; LANES] = self.rays[g * LANES..(g + 1) * LANES]
+                .try_into()
+                .expect("a group");
+            let col = |f: &dyn Fn(&Ray) -> f32| F::from(std::array::from_fn(|l| f(&rays[l])));
+            // Rows: origin, direction, reciprocal, slab_lo, slab_hi (3 each), tmin, tmax.
+            let rows: [F; 17] = [
+                col(&|r| r.origin.x),
+                col(&|r| r.origin.y),
+                col(&|r| r.origin.z),
+                col(&|r| r.dir.x),
+                col(&|r| r.dir.y),
+                col(&|r| r.dir.z),
+                col(&|r| r.inv_dir.x),
+                col(&|r| r.inv_dir.y),
+                col(&|r| r.inv_dir.z),
+                col(&|r| r.slab_lo.x),
+                col(&|r| r.slab_lo.y),
+                col(&|r| r.slab_lo.z),
+                col(&|r| r.slab_hi.x),
+                col(&|r| r.slab_hi.y),
+                col(&|r| r.slab_hi.z),
+                col(&|r| r.tmin),
+                col(&|r| r.tmax),
+            ];
+            let row = |j: usize| rows[j];
             let o = [row(0), row(1), row(2)];
             let d = [row(3), row(4), row(5)];
             let inv = [row(6), row(7), row(8)];
-            let on = row(17);
+            let on = F::from(on);
             // The watertight test's axes (`RayTriPrecomp::new`): kz the largest |d| (the first
             // on ties), kx and ky the next ones, swapped when d[kz] is negative.
             let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
