@@ -159,7 +159,8 @@ impl TriBlock {
     #[inline(always)]
     pub fn get(&self, l: usize) -> [Vec3; 3] {
         let r = &self.rows;
-        [0, 3, 6].map(|j| Vec3::new(r[j][l], r[j + 1][l], r[j + 2][l]))
+        let v = |j: usize| Vec3::new(r[j][l], r[j + 1][l], r[j + 2][l]);
+        [v(0), v(3), v(6)]
     }
 
     /// Puts a triangle into lane `l`.

@@ -15,6 +15,7 @@
 //! - every lane's box holds its subtree's triangles.
 
 mod lanes;
+mod packet;
 mod refit;
 mod traverse;
 
