@@ -100,6 +100,13 @@ impl<const K: usize> WideNode<K> {
         lanes::union_lanes(&self.bounds)
     }
 
+    /// A bit per lane that holds a child.
+    #[must_use]
+    #[inline]
+    pub fn occupied(&self) -> u32 {
+        (0..K).fold(0, |m, k| m | (u32::from(self.child[k] != EMPTY_CHILD) << k))
+    }
+
     /// What lane `i` holds.
     #[must_use]
     #[inline(always)]

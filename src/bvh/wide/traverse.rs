@@ -149,6 +149,9 @@ impl<const K: usize> WideBvh<K> {
             } else {
                 let node = &nodes[cur as usize];
                 let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
+                if lanes.nonfinite {
+                    mask &= node.occupied();
+                }
                 if mask != 0 {
                     let hits = mask.count_ones();
                     if hits == 1 {
