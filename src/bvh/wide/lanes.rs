@@ -50,10 +50,10 @@ impl RayLanes {
             tmin: ray.tmin,
             near,
             far,
-            nonfinite: !(ray.origin.is_finite()
-                && ray.dir.is_finite()
-                && !ray.tmin.is_nan()
-                && !ray.tmax.is_nan()),
+            nonfinite: !ray.origin.is_finite()
+                || !ray.dir.is_finite()
+                || ray.tmin.is_nan()
+                || ray.tmax.is_nan(),
         }
     }
 }
