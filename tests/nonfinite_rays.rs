@@ -141,3 +141,37 @@ fn non_finite_rays_match_brute_force_in_every_traversal() {
         }
     }
 }
+
+/// The engine (two levels, rays moved into each instance's space) with the same rays: single
+/// rays and packets agree with each other, any hit agrees with closest hit, and nothing panics.
+#[test]
+fn non_finite_rays_through_the_engine() {
+    use dynbvh::engine::{Engine, EngineConfig};
+    use glam::Affine3A;
+    let mesh = cube_soup();
+    let mut e = Engine::new(EngineConfig::default());
+    let id = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+    e.add_instance(id, Affine3A::IDENTITY);
+    e.add_instance(id, Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)));
+    e.update();
+    let rays = bad_rays();
+    for mode in [PacketMode::Always, PacketMode::Auto] {
+        let mut hits = vec![None; rays.len()];
+        e.closest_hit_packet_mode(&rays, &mut hits, mode);
+        let mut any = vec![false; rays.len()];
+        e.any_hit_packet_mode(&rays, &mut any, mode);
+        for (i, r) in rays.iter().enumerate() {
+            let single = e.closest_hit(r);
+            let key = |h: Option<dynbvh::engine::SceneHit>| h.map(|h| (h.t, h.prim, h.instance));
+            assert_eq!(key(single), key(hits[i]), "{mode:?} {r:?}");
+            assert_eq!(e.any_hit(r), single.is_some(), "{r:?}");
+            assert_eq!(any[i], single.is_some(), "{mode:?} {r:?}");
+            if let Some(h) = single {
+                assert!(
+                    h.t.is_finite() && h.t >= r.tmin && h.t < r.tmax,
+                    "{r:?}: {h:?}"
+                );
+            }
+        }
+    }
+}
