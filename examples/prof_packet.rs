@@ -1,7 +1,9 @@
 //! Times single-threaded packet tracing of a square camera image against single rays:
 //! `cargo run --release --example prof_packet MESH.tri PRIMARY.rays [WxH...]` (tile shapes,
-//! default 4x4 8x8; a tile is one packet, at most `MAX_PACKET` rays, its rays in 4x4 blocks).
-use dynbvh::bvh::{BuildParams, MeshBvh};
+//! default 4x4 8x8; a tile is one packet, at most `MAX_PACKET` rays, its rays in 4x4 blocks),
+//! through the binary tree and the BVH8 collapsed from it (`TREES=bin` or `TREES=bvh8` for one).
+use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8};
+use dynbvh::geom::Hit;
 use dynbvh::geom::Ray;
 
 #[path = "common/cpu.rs"]
@@ -103,29 +105,97 @@ fn main() {
         });
         println!("single any     {m:.2} Mrays/s cpu ({hits} hits)");
     }
+    if std::env::var_os("LOADONLY").is_some() {
+        load_only(&tiled(&rays, w, 16, 8));
+    }
+    let bvh8 = MeshBvh8::from_mesh_bvh(&bvh);
+    let trees = std::env::var("TREES").unwrap_or_else(|_| "bin,bvh8".into());
+    if single && trees.contains("bvh8") {
+        let (m, hits) = mrays(rays.len(), || {
+            rays.iter()
+                .filter(|r| bvh8.closest_hit(r).is_some())
+                .count()
+        });
+        println!("bvh8 single closest {m:.2} Mrays/s cpu ({hits} hits)");
+        let (m, hits) = mrays(rays.len(), || {
+            rays.iter().filter(|r| bvh8.any_hit(r)).count()
+        });
+        println!("bvh8 single any     {m:.2} Mrays/s cpu ({hits} hits)");
+    }
+    type Closest<'a> = Box<dyn Fn(&[Ray], &mut [Option<Hit>]) + 'a>;
+    type Any<'a> = Box<dyn Fn(&[Ray], &mut [bool]) + 'a>;
+    let mut variants: Vec<(&str, Closest, Any)> = Vec::new();
+    if trees.contains("bin") {
+        variants.push((
+            "bin ",
+            Box::new(|r, h| bvh.closest_hit_packet(r, h)),
+            Box::new(|r, o| bvh.any_hit_packet(r, o)),
+        ));
+    }
+    if trees.contains("bvh8") {
+        variants.push((
+            "bvh8",
+            Box::new(|r, h| bvh8.closest_hit_packet(r, h)),
+            Box::new(|r, o| bvh8.any_hit_packet(r, o)),
+        ));
+    }
     for (tw, th) in shapes {
         let t = tiled(&rays, w, tw, th);
         let p = tw * th;
         assert!(p <= dynbvh::bvh::MAX_PACKET);
-        let mut out = vec![None; p];
-        let (m, hits) = mrays(t.len(), || {
-            let mut n = 0;
-            for c in t.chunks(p) {
-                bvh.closest_hit_packet(c, &mut out[..c.len()]);
-                n += out[..c.len()].iter().filter(|h| h.is_some()).count();
-            }
-            n
-        });
-        println!("{tw}x{th} closest {m:.2} Mrays/s cpu ({hits} hits)");
-        let mut out = vec![false; p];
-        let (m, hits) = mrays(t.len(), || {
-            let mut n = 0;
-            for c in t.chunks(p) {
-                bvh.any_hit_packet(c, &mut out[..c.len()]);
-                n += out[..c.len()].iter().filter(|h| **h).count();
-            }
-            n
-        });
-        println!("{tw}x{th} any     {m:.2} Mrays/s cpu ({hits} hits)");
+        for (name, closest, any) in &variants {
+            let mut out = vec![None; p];
+            let (m, hits) = mrays(t.len(), || {
+                let mut n = 0;
+                for c in t.chunks(p) {
+                    closest(c, &mut out[..c.len()]);
+                    n += out[..c.len()].iter().filter(|h| h.is_some()).count();
+                }
+                n
+            });
+            println!("{name} {tw}x{th} closest {m:.2} Mrays/s cpu ({hits} hits)");
+            let mut out = vec![false; p];
+            let (m, hits) = mrays(t.len(), || {
+                let mut n = 0;
+                for c in t.chunks(p) {
+                    any(c, &mut out[..c.len()]);
+                    n += out[..c.len()].iter().filter(|h| **h).count();
+                }
+                n
+            });
+            println!("{name} {tw}x{th} any     {m:.2} Mrays/s cpu ({hits} hits)");
+        }
     }
+}
+
+#[allow(dead_code)]
+fn load_only(rays: &[Ray]) {
+    let mut p = dynbvh::bvh::RayPacket::new();
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0;
+        for c in rays.chunks(128) {
+            p.load(c);
+            n += usize::from(p.is_coherent());
+        }
+        n
+    });
+    println!("load only {m:.2} Mrays/s cpu");
+    let hot = &rays[..128];
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0;
+        for _ in 0..rays.len() / 128 {
+            p.load(std::hint::black_box(hot));
+            n += usize::from(p.is_coherent());
+        }
+        n
+    });
+    println!("load only, cached {m:.2} Mrays/s cpu");
+    let (m, _) = mrays(rays.len(), || {
+        let mut n = 0.0;
+        for r in rays {
+            n += r.origin.x + r.tmax;
+        }
+        n as usize
+    });
+    println!("read only {m:.2} Mrays/s cpu");
 }

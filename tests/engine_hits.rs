@@ -154,7 +154,7 @@ fn same_hit(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hit>) -> b
 }
 
 /// The deforming meshes of engine `e` through the wide trees (refitted to this frame) and
-/// through packets of its binary trees, against brute force in mesh space.
+/// through packets of its binary tree and of the BVH8, against brute force in mesh space.
 fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], wide: &mut [Wide]) {
     for (m, w) in meshes.iter().zip(wide) {
         let (pos, idx) = (e.positions(*m), e.indices(*m));
@@ -175,6 +175,12 @@ fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], w
         let mut packet_any = vec![false; rays.len()];
         e.mesh_bvh(*m)
             .any_hit_packet_mode(&rays, &mut packet_any, PacketMode::Always);
+        let mut packet8 = vec![None; rays.len()];
+        w.bvh8
+            .closest_hit_packet_mode(&rays, &mut packet8, PacketMode::Always);
+        let mut packet8_any = vec![false; rays.len()];
+        w.bvh8
+            .any_hit_packet_mode(&rays, &mut packet8_any, PacketMode::Always);
         for (k, r) in rays.iter().enumerate() {
             let want = brute_force_closest(&mesh, r);
             let any = want.is_some();
@@ -182,6 +188,7 @@ fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], w
                 ("bvh4", w.bvh4.closest_hit(r), w.bvh4.any_hit(r)),
                 ("bvh8", w.bvh8.closest_hit(r), w.bvh8.any_hit(r)),
                 ("packet", packet[k], packet_any[k]),
+                ("bvh8 packet", packet8[k], packet8_any[k]),
             ] {
                 assert!(
                     same_hit(&mesh, r, want, got) && got_any == any,

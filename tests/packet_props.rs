@@ -6,78 +6,13 @@
 use dynbvh::bvh::brute_force_closest;
 use dynbvh::bvh::{BuildParams, MAX_PACKET, MeshBvh, PacketMode, brute_force_any};
 use dynbvh::engine::{Engine, EngineConfig};
-use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use dynbvh::geom::{Ray, TriMesh};
 use glam::{Affine3A, Quat, Vec3};
 use proptest::prelude::*;
 
 mod common;
-use common::strategies::{direction, mesh, rays, vec3};
-
-/// A coherent packet: a pinhole camera's tile (common origin, directions in a narrow cone), or
-/// parallel rays from a patch of origins (shadow rays toward a distant light); the camera
-/// may sit inside the mesh's box. Some packets aim exactly along an axis.
-fn coherent() -> impl Strategy<Value = Vec<Ray>> {
-    (
-        vec3(),
-        direction(),
-        0.0f32..0.3,
-        1usize..=8,
-        1usize..=8,
-        any::<bool>(),
-        prop_oneof![Just(f32::INFINITY), 2.0f32..30.0],
-    )
-        .prop_map(|(eye, fwd, spread, w, h, parallel, tmax)| {
-            let fwd = fwd.normalize();
-            let helper = if fwd.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
-            let right = fwd.cross(helper).normalize();
-            let up = right.cross(fwd);
-            let mut rays = Vec::new();
-            for y in 0..h {
-                for x in 0..w {
-                    let sx = (x as f32 / w as f32 - 0.5) * spread;
-                    let sy = (y as f32 / h as f32 - 0.5) * spread;
-                    rays.push(if parallel {
-                        // Origins on a patch 4 units wide, one direction.
-                        let o = eye + (right * sx + up * sy) * (4.0 / spread.max(1e-3));
-                        Ray::with_range(o, fwd, 0.0, tmax)
-                    } else {
-                        Ray::with_range(eye, fwd + right * sx + up * sy, 0.0, tmax)
-                    });
-                }
-            }
-            rays
-        })
-}
-
-/// Rays from one point aimed at the mesh's vertices: the hardest place for the triangle test.
-fn aimed(mesh: &TriMesh, from: Vec3) -> Vec<Ray> {
-    mesh.positions
-        .iter()
-        .take(MAX_PACKET)
-        .map(|&p| Ray::new(from, p - from))
-        .filter(|r| r.dir.length() > 0.0)
-        .collect()
-}
-
-/// Closest hits compare as in `tests/bvh_props.rs`: the same distance, and the same triangle or
-/// one that is really hit at that distance (a tie).
-fn same_closest(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hit>) -> bool {
-    match (want, got) {
-        (None, None) => true,
-        (Some(w), Some(g)) => {
-            if w.t != g.t {
-                return false;
-            }
-            if w.prim == g.prim {
-                return w.u == g.u && w.v == g.v;
-            }
-            let [a, b, c] = mesh.triangle(g.prim as usize);
-            let pre = RayTriPrecomp::new(ray.dir);
-            intersect_triangle(ray, &pre, a, b, c, f32::INFINITY).map(|h| h.0) == Some(g.t)
-        }
-        _ => false,
-    }
-}
+use common::strategies::{coherent, mesh, rays, vec3};
+use common::{aimed, same_closest};
 
 /// Every mode of the packet queries against single rays and brute force.
 fn check_packet(mesh: &TriMesh, bvh: &MeshBvh, rays: &[Ray]) -> Result<(), TestCaseError> {

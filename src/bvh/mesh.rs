@@ -1,6 +1,7 @@
 //! A BVH over a triangle mesh, with the triangles copied in leaf order so that a leaf's
 //! triangles are contiguous in memory for traversal.
 
+use super::refit::LeafRefit;
 use super::{BuildParams, BuildWorkspace, Bvh, Counters};
 use crate::geom::{Aabb, Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::{Vec3, Vec3A};
@@ -109,13 +110,15 @@ impl MeshBvh {
             self.tris.len(),
             "refit needs the same triangles"
         );
-        // One pass: each leaf copies its triangles' new vertices into its slots and bounds them
-        // on the way.
-        let leaf_indices = &self.leaf_indices;
-        self.bvh.refit_with(&mut self.tris, |tris, first, _| {
-            let idx = &leaf_indices[first as usize..first as usize + tris.len()];
-            gather_bounds(tris, idx, positions)
-        });
+        // The triangles' new vertices are copied into their slots (by subtrees on several
+        // threads), then the leaves are bounded from the copies.
+        self.bvh.refit_with(
+            &mut self.tris,
+            &GatherLeaf {
+                leaf_indices: &self.leaf_indices,
+                positions,
+            },
+        );
     }
 
     /// The underlying tree.
@@ -235,6 +238,26 @@ impl Indexed<'_> {
     }
 }
 
+/// Refits by copying the triangles' moved vertices into their slots, then bounding each leaf's.
+struct GatherLeaf<'a> {
+    leaf_indices: &'a [[u32; 3]],
+    positions: &'a [Vec3],
+}
+
+impl LeafRefit<[Vec3; 3]> for GatherLeaf<'_> {
+    #[inline]
+    fn update(&self, tris: &mut [[Vec3; 3]], first: u32) {
+        let first = first as usize;
+        let idx = &self.leaf_indices[first..first + tris.len()];
+        gather_prefetched(idx, self.positions, tris);
+    }
+
+    #[inline(always)]
+    fn leaf(&self, tris: &[[Vec3; 3]], _: u32, _: u32) -> Aabb {
+        bound_tris(tris)
+    }
+}
+
 /// Copies each triangle into its leaf slot.
 fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
     // Spelled out: `[u32; 3]::map` goes through a temporary on the stack.
@@ -247,10 +270,37 @@ fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]])
     }
 }
 
-/// Copies the triangles with vertex indices `idx` into `tris` and returns their box, the same
-/// box as the union of [`Aabb::of_triangle`] over them.
-#[inline]
-fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -> Aabb {
+/// How many triangles ahead [`gather_prefetched`] asks for vertex positions.
+const PREFETCH_TRIS: usize = 128;
+
+/// [`gather`] for triangles whose vertices are scattered through `positions` (as in leaf
+/// order): the vertices of the triangle [`PREFETCH_TRIS`] slots ahead are asked for at each
+/// slot, so that many loads are in flight at once.
+fn gather_prefetched(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
+    let ask = |idx: &[u32; 3]| {
+        for &v in idx {
+            if let Some(p) = positions.get(v as usize) {
+                crate::simd::prefetch(p);
+            }
+        }
+    };
+    leaf_indices.iter().take(PREFETCH_TRIS).for_each(ask);
+    for (k, (t, &[a, b, c])) in tris.iter_mut().zip(leaf_indices).enumerate() {
+        if let Some(idx) = leaf_indices.get(k + PREFETCH_TRIS) {
+            ask(idx);
+        }
+        *t = [
+            positions[a as usize],
+            positions[b as usize],
+            positions[c as usize],
+        ];
+    }
+}
+
+/// The box of some triangles (at least one), the same box as the union of
+/// [`Aabb::of_triangle`] over them.
+#[inline(always)]
+fn bound_tris(tris: &[[Vec3; 3]]) -> Aabb {
     // SSE `min`/`max` return their second operand when either is NaN, so `v.min(lo)` skips a
     // NaN coordinate exactly as `of_triangle` does; clamping the union to `±f32::MAX` then
     // matches its sanitizing (an axis with no number at all becomes `MAX .. -MAX`). Other
@@ -258,28 +308,24 @@ fn gather_bounds(tris: &mut [[Vec3; 3]], idx: &[[u32; 3]], positions: &[Vec3]) -
     #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
     {
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for (t, &[a, b, c]) in tris.iter_mut().zip(idx) {
-            let (a, b, c) = (
-                positions[a as usize],
-                positions[b as usize],
-                positions[c as usize],
-            );
-            *t = [a, b, c];
+        let mut one = |[a, b, c]: [Vec3; 3]| {
             let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
             lo = c.min(b.min(a.min(lo)));
             hi = c.max(b.max(a.max(hi)));
-        }
+        };
+        // Most leaves hold one or two triangles: the first two (the first one twice in a
+        // one-triangle leaf, which changes nothing) are done without a loop, whose exit would
+        // be mispredicted at about every leaf.
+        one(tris[0]);
+        one(tris[usize::from(tris.len() > 1)]);
+        tris.iter().skip(2).for_each(|&t| one(t));
         let m = Vec3A::splat(f32::MAX);
         Aabb::new(lo.clamp(-m, m).into(), hi.clamp(-m, m).into())
     }
     #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
     {
-        let mut b = Aabb::EMPTY;
-        for (t, i) in tris.iter_mut().zip(idx) {
-            *t = i.map(|v| positions[v as usize]);
-            b = b.union(Aabb::of_triangle(t));
-        }
-        b
+        tris.iter()
+            .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
     }
 }
 

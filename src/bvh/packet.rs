@@ -36,6 +36,14 @@ pub const TILE_W: usize = 16;
 /// Height of the image tiles [`MeshBvh::trace_image_closest`] makes packets of.
 pub const TILE_H: usize = 8;
 
+/// The first `K` (at most 8) values of a row of a wide node, padded with NaN.
+#[inline(always)]
+pub(crate) fn row8<const K: usize>(r: &[f32; K]) -> wide::f32x8 {
+    let mut a = [f32::NAN; 8];
+    a[..K].copy_from_slice(r);
+    wide::f32x8::from(a)
+}
+
 /// Calls `f` with the pixel indices of each tile of a `width` x `height` image (row-major
 /// pixels), tile by tile ([`TILE_W`] x [`TILE_H`], smaller at the right and bottom edges), each
 /// tile's pixels in 4x4 blocks so that every 16-ray SIMD group of a packet is a compact square.
@@ -60,6 +68,18 @@ pub fn image_tiles(width: usize, height: usize, mut f: impl FnMut(&[usize])) {
 }
 
 const GROUPS: usize = MAX_PACKET / LANES;
+/// What an inactive lane holds.
+const IDLE: Ray = Ray {
+    origin: Vec3::ZERO,
+    dir: Vec3::X,
+    inv_dir: Vec3::ONE,
+    slab_lo: Vec3::ZERO,
+    slab_hi: Vec3::ZERO,
+    tmin: 0.0,
+    tmax: f32::NEG_INFINITY,
+};
+/// All bits set: a true lane of a vector mask.
+const TRUE_BITS: f32 = f32::from_bits(u32::MAX);
 const LEAF_IA: bool = false;
 /// A subtree that at most this many rays of a packet still need is walked ray by ray.
 const SINGLE_BELOW: u32 = 4;
@@ -75,11 +95,12 @@ pub enum PacketMode {
 }
 
 impl PacketMode {
+    /// Whether the rays just loaded into `p` go as a packet.
     #[inline]
-    pub(crate) fn use_packet(self, rays: &[Ray]) -> bool {
+    pub(crate) fn use_packet(self, p: &RayPacket) -> bool {
         match self {
-            PacketMode::Auto => is_coherent(rays),
-            PacketMode::Always => !rays.is_empty(),
+            PacketMode::Auto => p.is_coherent(),
+            PacketMode::Always => !p.is_empty(),
         }
     }
 }
@@ -126,6 +147,8 @@ pub struct RayPacket {
     dir: Vec3,
     /// Rays whose closest hit has been found so far, with its slot and barycentrics.
     found: Mask,
+    /// What [`RayPacket::is_coherent`] answers for the loaded rays.
+    coherent: bool,
     /// Per group: the slot (as the bits of an f32), and the barycentrics.
     slot: [F; GROUPS],
     u: [F; GROUPS],
@@ -156,6 +179,7 @@ impl RayPacket {
             tmax_hi: 0.0,
             dir: Vec3::ZERO,
             found: 0,
+            coherent: false,
             slot: [F::splat(0.0); GROUPS],
             u: [F::splat(0.0); GROUPS],
             v: [F::splat(0.0); GROUPS],
@@ -194,55 +218,161 @@ impl RayPacket {
 
     /// Loads the rays of the mask `which` among `n` lanes, ray `i` being `ray(i)`; the other
     /// lanes are left inactive.
+    ///
+    /// Sixteen rays at a time: each group's rays are copied in and read back as rows, and the
+    /// watertight test's per-ray constants (the same operations as [`RayTriPrecomp::new`], so
+    /// the same bits), the packet's bounds, its direction and its coherence are computed on
+    /// whole vectors.
+    // The loops index the packet's rays, the lane masks and the unit directions together.
+    #[allow(clippy::needless_range_loop)]
     pub(crate) fn load_with(&mut self, n: usize, which: Mask, mut ray: impl FnMut(usize) -> Ray) {
         debug_assert!(n <= MAX_PACKET);
         self.n = n;
         self.active = which;
         self.found = 0;
-        let mut o_lo = Vec3A::splat(f32::INFINITY);
-        let mut o_hi = Vec3A::splat(f32::NEG_INFINITY);
-        let mut i_lo = o_lo;
-        let mut i_hi = o_hi;
-        let mut tmin_lo = f32::INFINITY;
-        let mut tmax_hi = f32::NEG_INFINITY;
-        let mut dir = Vec3::ZERO;
-        let mut uniform = None;
-        let mut mixed = false;
-        let mut bits = which;
-        while bits != 0 {
-            let i = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let r = ray(i);
-            let pre = RayTriPrecomp::new(r.dir);
-            self.lanes[i / LANES].set(i % LANES, &r, &pre);
-            self.rays[i] = r;
-            let o = Vec3A::from(r.origin);
-            let inv = Vec3A::from(r.inv_dir);
-            o_lo = o_lo.min(o);
-            o_hi = o_hi.max(o);
-            i_lo = i_lo.min(inv);
-            i_hi = i_hi.max(inv);
-            tmin_lo = tmin_lo.min(r.tmin);
-            tmax_hi = tmax_hi.max(r.tmax);
-            dir += r.dir.normalize_or_zero();
-            let k = [pre.kx, pre.ky, pre.kz];
-            match uniform {
-                None => uniform = Some(k),
-                Some(u) if u != k => mixed = true,
-                _ => {}
+        let inf = F::splat(f32::INFINITY);
+        let ninf = F::splat(f32::NEG_INFINITY);
+        let zero = F::splat(0.0);
+        let (mut o_lo, mut o_hi) = ([inf; 3], [ninf; 3]);
+        let (mut i_lo, mut i_hi) = ([inf; 3], [ninf; 3]);
+        let (mut tmin_lo, mut tmax_hi) = (inf, ninf);
+        let mut dir_sum = [zero; 3];
+        let mut units = [[zero; 3]; GROUPS];
+        // Per row of `RayLanes::k`: some active lane has it set, some has it clear.
+        let (mut k_set, mut k_clear) = ([false; 6], [false; 6]);
+        let groups = n.div_ceil(LANES);
+        for g in 0..groups {
+            let bits = (which >> (g * LANES)) as u32 & 0xFFFF;
+            // The group's rays (an idle ray in inactive lanes) and the mask of active lanes.
+            let mut on = [0f32; LANES];
+            for l in 0..LANES {
+                let i = g * LANES + l;
+                if bits >> l & 1 == 0 {
+                    self.rays[i] = IDLE;
+                } else {
+                    self.rays[i] = ray(i);
+                    on[l] = TRUE_BITS;
+                }
             }
+            // Then the rows, one field of the group's 16 rays each (built in registers: cheaper
+            // than storing each ray's fields lane by lane into rows).
+            let rays: &[Ray; LANES] = self.rays[g * LANES..(g + 1) * LANES]
+                .try_into()
+                .expect("a group");
+            let col = |f: &dyn Fn(&Ray) -> f32| F::from(std::array::from_fn(|l| f(&rays[l])));
+            // Rows: origin, direction, reciprocal, slab_lo, slab_hi (3 each), tmin, tmax.
+            let rows: [F; 17] = [
+                col(&|r| r.origin.x),
+                col(&|r| r.origin.y),
+                col(&|r| r.origin.z),
+                col(&|r| r.dir.x),
+                col(&|r| r.dir.y),
+                col(&|r| r.dir.z),
+                col(&|r| r.inv_dir.x),
+                col(&|r| r.inv_dir.y),
+                col(&|r| r.inv_dir.z),
+                col(&|r| r.slab_lo.x),
+                col(&|r| r.slab_lo.y),
+                col(&|r| r.slab_lo.z),
+                col(&|r| r.slab_hi.x),
+                col(&|r| r.slab_hi.y),
+                col(&|r| r.slab_hi.z),
+                col(&|r| r.tmin),
+                col(&|r| r.tmax),
+            ];
+            let row = |j: usize| rows[j];
+            let o = [row(0), row(1), row(2)];
+            let d = [row(3), row(4), row(5)];
+            let inv = [row(6), row(7), row(8)];
+            let on = F::from(on);
+            // The watertight test's axes (`RayTriPrecomp::new`): kz the largest |d| (the first
+            // on ties), kx and ky the next ones, swapped when d[kz] is negative.
+            let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
+            let kz0 = ax.simd_ge(ay) & ax.simd_ge(az);
+            let kz1 = !kz0 & ay.simd_ge(az);
+            let kz2 = !(kz0 | kz1);
+            let pick = |is0: F, is1: F, v: &[F; 3]| is0.select(v[0], is1.select(v[1], v[2]));
+            let dkz = pick(kz0, kz1, &d);
+            let neg = dkz.simd_lt(zero);
+            let kx0 = (kz2 & !neg) | (kz1 & neg);
+            let kx1 = (kz0 & !neg) | (kz2 & neg);
+            let ky0 = (kz1 & !neg) | (kz2 & neg);
+            let ky1 = (kz2 & !neg) | (kz0 & neg);
+            let sz = F::splat(1.0) / dkz;
+            let lanes = &mut self.lanes[g];
+            lanes.slab_lo = [row(9), row(10), row(11)];
+            lanes.slab_hi = [row(12), row(13), row(14)];
+            lanes.inv = inv;
+            lanes.tmin = row(15);
+            lanes.tmax = row(16);
+            lanes.ok = [pick(kx0, kx1, &o), pick(ky0, ky1, &o), pick(kz0, kz1, &o)];
+            lanes.s = [pick(kx0, kx1, &d) * sz, pick(ky0, ky1, &d) * sz, sz];
+            lanes.k = [kx0, kx1, ky0, ky1, kz0, kz1];
+            for (j, k) in lanes.k.iter().enumerate() {
+                let m = k.to_bitmask() & bits;
+                k_set[j] |= m != 0;
+                k_clear[j] |= m != bits;
+            }
+            // Bounds over the active lanes.
+            for a in 0..3 {
+                o_lo[a] = o_lo[a].fast_min(on.select(o[a], inf));
+                o_hi[a] = o_hi[a].fast_max(on.select(o[a], ninf));
+                i_lo[a] = i_lo[a].fast_min(on.select(inv[a], inf));
+                i_hi[a] = i_hi[a].fast_max(on.select(inv[a], ninf));
+            }
+            tmin_lo = tmin_lo.fast_min(on.select(lanes.tmin, inf));
+            tmax_hi = tmax_hi.fast_max(on.select(lanes.tmax, ninf));
+            // Unit directions (zero for a zero or non-finite length).
+            let rcp = F::splat(1.0) / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let ok = on & rcp.is_finite() & rcp.simd_gt(zero);
+            let u = d.map(|c| ok.select(c * rcp, zero));
+            for a in 0..3 {
+                dir_sum[a] += u[a];
+            }
+            units[g] = u;
         }
-        self.uniform = if mixed { None } else { uniform };
-        (self.o_lo, self.o_hi, self.i_lo, self.i_hi) = (o_lo, o_hi, i_lo, i_hi);
-        self.tmin_lo = tmin_lo;
-        self.tmax_hi = tmax_hi;
+        let lo = |v: F| v.to_array().into_iter().fold(f32::INFINITY, f32::min);
+        let hi = |v: F| v.to_array().into_iter().fold(f32::NEG_INFINITY, f32::max);
+        self.o_lo = Vec3A::from(o_lo.map(lo));
+        self.o_hi = Vec3A::from(o_hi.map(hi));
+        self.i_lo = Vec3A::from(i_lo.map(lo));
+        self.i_hi = Vec3A::from(i_hi.map(hi));
+        self.tmin_lo = lo(tmin_lo);
+        self.tmax_hi = hi(tmax_hi);
+        let dir = Vec3::from(dir_sum.map(F::reduce_add));
         self.dir = dir;
+        self.uniform = (which != 0 && (0..6).all(|j| !(k_set[j] && k_clear[j]))).then(|| {
+            let axis = |j: usize| {
+                if k_set[2 * j] {
+                    0
+                } else if k_set[2 * j + 1] {
+                    1
+                } else {
+                    2
+                }
+            };
+            [axis(0), axis(1), axis(2)]
+        });
+        // Coherent: enough rays, all unit directions within `COHERENT_COS` of their mean.
+        let mean = dir.normalize_or_zero();
+        self.coherent = which.count_ones() as usize >= MIN_PACKET && mean != Vec3::ZERO && {
+            let (mx, my, mz) = (F::splat(mean.x), F::splat(mean.y), F::splat(mean.z));
+            let cos = F::splat(COHERENT_COS);
+            (0..groups).all(|g| {
+                let [ux, uy, uz] = units[g];
+                let bits = (which >> (g * LANES)) as u32 & 0xFFFF;
+                let dot = ux * mx + uy * my + uz * mz;
+                dot.simd_ge(cos).to_bitmask() & bits == bits
+            })
+        };
     }
 
-    /// True when the loaded rays are worth tracing as a packet ([`is_coherent`]).
+    /// True when the loaded rays are worth tracing as a packet: at least [`MIN_PACKET`] of
+    /// them, all unit directions within [`COHERENT_COS`] of their mean (the test of
+    /// [`is_coherent`], computed on vectors when the rays are loaded).
     #[must_use]
     pub fn is_coherent(&self) -> bool {
-        is_coherent(&self.rays[..self.n])
+        self.coherent
     }
 
     /// The current `tmax` of ray `i`: its closest hit so far, or its own `tmax`.
@@ -251,7 +381,7 @@ impl RayPacket {
         self.lanes[i / LANES].tmax.as_array()[i % LANES]
     }
 
-    fn update_tmax_hi(&mut self) {
+    pub(crate) fn update_tmax_hi(&mut self) {
         let mut hi = wide::f32x16::splat(f32::NEG_INFINITY);
         for l in &self.lanes[..self.n.div_ceil(LANES)] {
             hi = hi.fast_max(l.tmax);
@@ -266,11 +396,17 @@ impl RayPacket {
     /// Interval-arithmetic test: false when no ray of the packet can touch the box.
     #[inline(always)]
     fn may_hit(&self, n: &Node) -> bool {
-        if !(self.i_lo.is_finite() && self.i_hi.is_finite()) {
+        self.may_hit_box(n.min, n.max)
+    }
+
+    /// [`RayPacket::may_hit`] of the box `[bmin, bmax]`.
+    #[inline(always)]
+    fn may_hit_box(&self, bmin: [f32; 3], bmax: [f32; 3]) -> bool {
+        if !self.interval_ok() {
             return true;
         }
-        let bmin = Vec3A::from(n.min);
-        let bmax = Vec3A::from(n.max);
+        let bmin = Vec3A::from(bmin);
+        let bmax = Vec3A::from(bmax);
         let corners = |d_lo: Vec3A, d_hi: Vec3A| {
             let a = d_lo * self.i_lo;
             let b = d_lo * self.i_hi;
@@ -285,18 +421,81 @@ impl RayPacket {
         near <= far
     }
 
+    /// The interval test of [`RayPacket::may_hit`] on `K` boxes at once (rows min x, y, z, max
+    /// x, y, z; one lane per box): bit `k` is clear when no ray of the packet can touch box `k`.
+    /// All `K` bits are set when the test cannot be used ([`RayPacket::interval_ok`]). An empty box
+    /// (min `+inf`, max `-inf`) may keep its bit: callers mask empty lanes themselves.
+    #[inline(always)]
+    pub(crate) fn may_hit_lanes<const K: usize>(&self, b: &[[f32; K]; 6]) -> u32 {
+        use wide::f32x8;
+        if !self.interval_ok() {
+            return (1 << K) - 1;
+        }
+        let (o_lo, o_hi) = (self.o_lo.to_array(), self.o_hi.to_array());
+        let (i_lo, i_hi) = (self.i_lo.to_array(), self.i_hi.to_array());
+        let mut near = f32x8::splat(self.tmin_lo);
+        let mut far = f32x8::splat(self.tmax_hi);
+        for a in 0..3 {
+            let (ol, oh) = (f32x8::splat(o_lo[a]), f32x8::splat(o_hi[a]));
+            let (il, ih) = (f32x8::splat(i_lo[a]), f32x8::splat(i_hi[a]));
+            // Corner products of (plane - origin) and the reciprocal, both as intervals. The
+            // minima and maxima keep the second operand on NaN, as `if a < b { a } else { b }`.
+            let span = |p: f32x8| {
+                let (d_lo, d_hi) = (p - oh, p - ol);
+                let (w, x) = (d_lo * il, d_lo * ih);
+                let (y, z) = (d_hi * il, d_hi * ih);
+                (
+                    w.fast_min(x).fast_min(y.fast_min(z)),
+                    w.fast_max(x).fast_max(y.fast_max(z)),
+                )
+            };
+            let (t0_lo, t0_hi) = span(row8(&b[a]));
+            let (t1_lo, t1_hi) = span(row8(&b[3 + a]));
+            near = near.fast_max(t0_lo.fast_min(t1_lo));
+            far = far.fast_min(t0_hi.fast_max(t1_hi));
+        }
+        // A NaN keeps the box.
+        let culled = near.simd_gt(far * f32x8::splat(FAR_SCALE)).to_bitmask();
+        !culled & ((1 << K) - 1)
+    }
+
+    /// Sum of the rays' unit directions.
+    #[inline(always)]
+    pub(crate) fn dir(&self) -> Vec3 {
+        self.dir
+    }
+
+    /// True when the interval test may be used: every reciprocal direction is finite.
+    #[inline(always)]
+    pub(crate) fn interval_ok(&self) -> bool {
+        self.i_lo.is_finite() && self.i_hi.is_finite()
+    }
+
     /// Index of the first ray of `live` whose slab test touches the box.
     #[inline(always)]
     fn first_hit(&self, n: &Node, live: Mask) -> Option<u8> {
+        self.first_hit_box(n.min, n.max, live, true)
+    }
+
+    /// Index of the first ray of `live` whose slab test touches the box `[bmin, bmax]`; with
+    /// `cull`, the interval test may reject the box after the first live ray's group missed.
+    #[inline(always)]
+    pub(crate) fn first_hit_box(
+        &self,
+        bmin: [f32; 3],
+        bmax: [f32; 3],
+        live: Mask,
+        cull: bool,
+    ) -> Option<u8> {
         let mut g = live.trailing_zeros() as usize / LANES;
         // The group of the first live ray usually hits: test it before anything else.
         let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
-        let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+        let m = self.lanes[g].hit_box(bmin, bmax) & bits;
         if m != 0 {
             return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
         }
         // Then cull the node for the whole packet before testing the other groups.
-        if !self.may_hit(n) {
+        if cull && !self.may_hit_box(bmin, bmax) {
             return None;
         }
         g += 1;
@@ -307,7 +506,7 @@ impl RayPacket {
             }
             let bits = rest as u32 & 0xFFFF;
             if bits != 0 {
-                let m = self.lanes[g].hit_box(n.min, n.max) & bits;
+                let m = self.lanes[g].hit_box(bmin, bmax) & bits;
                 if m != 0 {
                     return Some((g * LANES) as u8 + m.trailing_zeros() as u8);
                 }
@@ -320,12 +519,18 @@ impl RayPacket {
     /// Every ray of `live` whose slab test touches the box.
     #[inline(always)]
     fn hit_mask(&self, n: &Node, live: Mask) -> Mask {
+        self.hit_mask_box(n.min, n.max, live)
+    }
+
+    /// Every ray of `live` whose slab test touches the box `[bmin, bmax]`.
+    #[inline(always)]
+    pub(crate) fn hit_mask_box(&self, bmin: [f32; 3], bmax: [f32; 3], live: Mask) -> Mask {
         let mut mask: Mask = 0;
         let mut g = live.trailing_zeros() as usize / LANES;
         while g < GROUPS && live >> (g * LANES) != 0 {
             let bits = (live >> (g * LANES)) as u32 & 0xFFFF;
             if bits != 0 {
-                mask |= Mask::from(self.lanes[g].hit_box(n.min, n.max) & bits) << (g * LANES);
+                mask |= Mask::from(self.lanes[g].hit_box(bmin, bmax) & bits) << (g * LANES);
             }
             g += 1;
         }
@@ -336,7 +541,12 @@ impl RayPacket {
     /// (`ANY == false`): shortens each ray that hits it and records the hit; returns true when
     /// some ray was shortened. Any hit: retires the rays that hit it.
     #[inline(always)]
-    fn test_triangle<const ANY: bool>(&mut self, tri: &[Vec3; 3], slot: u32, rays: Mask) -> bool {
+    pub(crate) fn test_triangle<const ANY: bool>(
+        &mut self,
+        tri: &[Vec3; 3],
+        slot: u32,
+        rays: Mask,
+    ) -> bool {
         let uniform = self.uniform.map(|k| RayLanes::permute_uniform(tri, k));
         let mut changed = false;
         for g in 0..GROUPS {
@@ -403,7 +613,7 @@ impl RayPacket {
 impl RayPacket {
     /// Records a closest hit `(t, u, v)` in `slot` for lane `l` of group `g`.
     #[inline]
-    fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
+    pub(crate) fn record(&mut self, g: usize, l: usize, slot: u32, (t, u, v): (f32, f32, f32)) {
         self.lanes[g].tmax.as_mut_array()[l] = t;
         self.found |= (1 as Mask) << (g * LANES + l);
         self.slot[g].as_mut_array()[l] = f32::from_bits(slot);
@@ -600,6 +810,53 @@ impl Bvh {
     }
 }
 
+thread_local! {
+    /// A packet kept per thread between calls of the packet queries.
+    static SPARE: std::cell::RefCell<Option<Box<RayPacket>>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with this thread's spare packet (a new one the first time, or when a call inside
+/// `f` needs one too): setting up the 20 KiB of a packet costs about 2% of tracing 128 rays.
+pub(crate) fn with_packet<R>(f: impl FnOnce(&mut RayPacket) -> R) -> R {
+    let mut p = SPARE
+        .with(|s| s.borrow_mut().take())
+        .unwrap_or_else(|| Box::new(RayPacket::new()));
+    let r = f(&mut p);
+    SPARE.with(|s| *s.borrow_mut() = Some(p));
+    r
+}
+
+/// The rays of an image given row by row (`width` rays a row) in tiles ([`image_tiles`]), each
+/// tile's rays gathered and answered by `trace`; `out[i]` answers `rays[i]`.
+///
+/// # Panics
+/// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+pub(crate) fn trace_tiles<T: Copy + Default>(
+    rays: &[Ray],
+    width: usize,
+    out: &mut [T],
+    mut trace: impl FnMut(&[Ray], &mut [T]),
+) {
+    assert_eq!(rays.len(), out.len(), "one output per ray");
+    if rays.is_empty() {
+        return;
+    }
+    assert!(
+        width > 0 && rays.len().is_multiple_of(width),
+        "rows of {width} rays"
+    );
+    let mut buf = Vec::with_capacity(MAX_PACKET);
+    let mut res = vec![T::default(); MAX_PACKET];
+    image_tiles(width, rays.len() / width, |idx| {
+        buf.clear();
+        buf.extend(idx.iter().map(|&i| rays[i]));
+        trace(&buf, &mut res[..buf.len()]);
+        for (&i, r) in idx.iter().zip(&res) {
+            out[i] = *r;
+        }
+    });
+}
+
 impl MeshBvh {
     /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
     /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
@@ -623,25 +880,26 @@ impl MeshBvh {
         mode: PacketMode,
     ) {
         assert_eq!(rays.len(), hits.len(), "one output per ray");
-        let mut p = RayPacket::new();
-        for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
+        with_packet(|p| {
+            for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
                 p.load(r);
-                self.closest_packet(&mut p);
-                for (i, h) in h.iter_mut().enumerate() {
-                    *h = p.closest(i).map(|(t, u, v, slot)| Hit {
-                        t,
-                        u,
-                        v,
-                        prim: self.bvh.prim_indices()[slot as usize],
-                    });
-                }
-            } else {
-                for (r, h) in r.iter().zip(h) {
-                    *h = self.closest_hit(r);
+                if mode.use_packet(p) {
+                    self.closest_packet(p);
+                    for (i, h) in h.iter_mut().enumerate() {
+                        *h = p.closest(i).map(|(t, u, v, slot)| Hit {
+                            t,
+                            u,
+                            v,
+                            prim: self.bvh.prim_indices()[slot as usize],
+                        });
+                    }
+                } else {
+                    for (r, h) in r.iter().zip(h) {
+                        *h = self.closest_hit(r);
+                    }
                 }
             }
-        }
+        });
     }
 
     /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
@@ -659,20 +917,21 @@ impl MeshBvh {
     /// When the lengths differ.
     pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        let mut p = RayPacket::new();
-        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            if mode.use_packet(r) {
+        with_packet(|p| {
+            for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
                 p.load(r);
-                self.any_packet(&mut p);
-                for (i, o) in o.iter_mut().enumerate() {
-                    *o = p.occluded(i);
-                }
-            } else {
-                for (r, o) in r.iter().zip(o) {
-                    *o = self.any_hit(r);
+                if mode.use_packet(p) {
+                    self.any_packet(p);
+                    for (i, o) in o.iter_mut().enumerate() {
+                        *o = p.occluded(i);
+                    }
+                } else {
+                    for (r, o) in r.iter().zip(o) {
+                        *o = self.any_hit(r);
+                    }
                 }
             }
-        }
+        });
     }
 
     /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
@@ -681,7 +940,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
-        self.trace_image(rays, width, hits, Self::closest_hit_packet);
+        trace_tiles(rays, width, hits, |r, h| self.closest_hit_packet(r, h));
     }
 
     /// Any-hit answers of an image's rays given row by row, as packets of [`TILE_W`] x
@@ -690,35 +949,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
-        self.trace_image(rays, width, out, Self::any_hit_packet);
-    }
-
-    /// The image in tiles ([`image_tiles`]), each tile's rays gathered and answered by `trace`.
-    fn trace_image<T: Copy + Default>(
-        &self,
-        rays: &[Ray],
-        width: usize,
-        out: &mut [T],
-        trace: impl Fn(&Self, &[Ray], &mut [T]),
-    ) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        if rays.is_empty() {
-            return;
-        }
-        assert!(
-            width > 0 && rays.len().is_multiple_of(width),
-            "rows of {width} rays"
-        );
-        let mut buf = Vec::with_capacity(MAX_PACKET);
-        let mut res = vec![T::default(); MAX_PACKET];
-        image_tiles(width, rays.len() / width, |idx| {
-            buf.clear();
-            buf.extend(idx.iter().map(|&i| rays[i]));
-            trace(self, &buf, &mut res[..buf.len()]);
-            for (&i, r) in idx.iter().zip(&res) {
-                out[i] = *r;
-            }
-        });
+        trace_tiles(rays, width, out, |r, o| self.any_hit_packet(r, o));
     }
 
     /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are

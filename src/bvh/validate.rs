@@ -2,6 +2,7 @@
 
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{Aabb, TriMesh};
+use glam::Vec3;
 
 impl Bvh {
     /// Checks every invariant of the module docs; the message names the first broken one.
@@ -141,7 +142,7 @@ impl<F: Fn(u32) -> Option<Aabb>> Walk<'_, F> {
 
 impl MeshBvh {
     /// [`Bvh::validate`], plus: leaf boxes hold their triangles, and the leaf-ordered copy
-    /// equals `mesh`'s triangles.
+    /// equals `mesh`'s triangles bit for bit.
     pub fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
         mesh.check()?;
         if mesh.len() != self.bvh.prim_count() {
@@ -153,8 +154,10 @@ impl MeshBvh {
         }
         self.bvh
             .validate_with(|p| Some(mesh.triangle_bounds(p as usize)))?;
+        // Bit for bit: a NaN coordinate is copied as it is.
+        let bits = |t: [Vec3; 3]| t.map(|v| v.to_array().map(f32::to_bits));
         for (slot, &p) in self.bvh.prim_indices().iter().enumerate() {
-            if self.tris[slot] != mesh.triangle(p as usize) {
+            if bits(self.tris[slot]) != bits(mesh.triangle(p as usize)) {
                 return Err(format!("slot {slot} holds a stale copy of triangle {p}"));
             }
         }

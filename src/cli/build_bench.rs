@@ -228,7 +228,7 @@ fn print_table(rows: &[Row]) {
 
 fn print_wide_table(rows: &[WideRow]) {
     println!(
-        "{:<16} {:>11} {:>9} {:>8} {:>5} {:>6} {:>9} {:<14} {:>8} {:>8} {:>9}",
+        "{:<16} {:>11} {:>9} {:>8} {:>5} {:>6} {:>9} {:<14} {:>8} {:>8} {:>8} {:>8} {:>9}",
         "wide tree",
         "collapse ms",
         "refit ms",
@@ -239,11 +239,13 @@ fn print_wide_table(rows: &[WideRow]) {
         "rays",
         "Mrays/s",
         "any Mr/s",
+        "pkt Mr/s",
+        "pkt any",
         "mismatch"
     );
     for r in rows {
         println!(
-            "{:<16} {:>11.1} {:>9.2} {:>8} {:>5.2} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            "{:<16} {:>11.1} {:>9.2} {:>8} {:>5.2} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>5}/{:<3}",
             format!("{} ({})", r.tree, r.from),
             r.collapse_ms,
             r.refit_ms,
@@ -254,6 +256,8 @@ fn print_wide_table(rows: &[WideRow]) {
             r.rays,
             r.mrays,
             r.any_mrays,
+            r.packet_mrays,
+            r.packet_any_mrays,
             r.mismatches,
             r.checked
         );

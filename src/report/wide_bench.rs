@@ -3,7 +3,7 @@
 
 use super::build_bench::Options;
 use super::rays::RaySet;
-use crate::bvh::{BuildParams, MeshBvh, WideBvh, brute_force_closest};
+use crate::bvh::{BuildParams, MeshBvh, TILE_H, WideBvh, brute_force_closest};
 use crate::geom::{Hit, Ray, TriMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -36,8 +36,14 @@ pub struct WideRow {
     pub mrays: f64,
     /// Any-hit rays per second, millions.
     pub any_mrays: f64,
-    /// Sampled rays whose closest hit differs from brute force (ties at the same t aside), or
-    /// whose any hit differs from the closest hit's existence.
+    /// Closest-hit rays per second traced as packets over the wide tree (16x8 tiles of a
+    /// square camera image, else runs of 128 consecutive rays, each traced ray by ray unless
+    /// coherent), millions.
+    pub packet_mrays: f64,
+    /// Any-hit rays per second traced as packets over the wide tree, millions.
+    pub packet_any_mrays: f64,
+    /// Sampled rays whose closest hit (single ray or packet) differs from brute force (ties at
+    /// the same t aside), or whose any hit differs from the closest hit's existence.
     pub mismatches: usize,
     /// How many rays were compared with brute force.
     pub checked: usize,
@@ -64,6 +70,45 @@ fn trace_mrays(rays: &[Ray], f: impl Fn(&Ray) -> bool + Sync) -> f64 {
         std::hint::black_box(n);
     });
     rays.len() as f64 / (ms * 1e3)
+}
+
+/// Side of the square image a ray set is, if it is one (camera sets are rows of pixels).
+fn image_side(rays: &[Ray]) -> Option<usize> {
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    (side * side == rays.len() && side > 0).then_some(side)
+}
+
+/// Closest hits of the whole set through the wide tree's packets, in parallel bands of tiles
+/// (a square image in tiles, else runs of 4096 consecutive rays in packets of 128).
+fn packet_closest<const K: usize>(rays: &[Ray], w: &WideBvh<K>) -> Vec<Option<Hit>> {
+    let mut hits = vec![None; rays.len()];
+    match image_side(rays) {
+        Some(side) => hits
+            .par_chunks_mut(TILE_H * side)
+            .zip(rays.par_chunks(TILE_H * side))
+            .for_each(|(h, r)| w.trace_image_closest(r, side, h)),
+        None => hits
+            .par_chunks_mut(4096)
+            .zip(rays.par_chunks(4096))
+            .for_each(|(h, r)| w.closest_hit_packet(r, h)),
+    }
+    hits
+}
+
+/// Any-hit answers of the whole set through the wide tree's packets, as [`packet_closest`].
+fn packet_any<const K: usize>(rays: &[Ray], w: &WideBvh<K>) -> Vec<bool> {
+    let mut out = vec![false; rays.len()];
+    match image_side(rays) {
+        Some(side) => out
+            .par_chunks_mut(TILE_H * side)
+            .zip(rays.par_chunks(TILE_H * side))
+            .for_each(|(o, r)| w.trace_image_any(r, side, o)),
+        None => out
+            .par_chunks_mut(4096)
+            .zip(rays.par_chunks(4096))
+            .for_each(|(o, r)| w.any_hit_packet(r, o)),
+    }
+    out
 }
 
 /// Builds the binary tree with `params`, collapses it into BVH4 and BVH8, and measures both on
@@ -139,12 +184,35 @@ fn measure<const K: usize>(
         let any = (0..runs)
             .map(|_| trace_mrays(&set.rays, |r| w.any_hit(r)))
             .collect();
+        let n = set.rays.len() as f64;
+        let packet = (0..runs)
+            .map(|_| {
+                let ms = time_ms(|| {
+                    std::hint::black_box(packet_closest(&set.rays, &w));
+                });
+                n / (ms * 1e3)
+            })
+            .collect();
+        let packet_any_runs = (0..runs)
+            .map(|_| {
+                let ms = time_ms(|| {
+                    std::hint::black_box(packet_any(&set.rays, &w));
+                });
+                n / (ms * 1e3)
+            })
+            .collect();
+        let packet_hits = packet_closest(&set.rays, &w);
+        let packet_occluded = packet_any(&set.rays, &w);
         let mismatches = sample
             .iter()
             .filter(|(i, want)| {
                 let r = &set.rays[*i];
                 let got = w.closest_hit(r);
-                got.map(|h| h.t) != want.map(|h| h.t) || w.any_hit(r) != want.is_some()
+                let want_t = want.map(|h| h.t);
+                got.map(|h| h.t) != want_t
+                    || packet_hits[*i].map(|h| h.t) != want_t
+                    || w.any_hit(r) != want.is_some()
+                    || packet_occluded[*i] != want.is_some()
             })
             .count();
         rows.push(WideRow {
@@ -160,6 +228,8 @@ fn measure<const K: usize>(
             ray_count: set.rays.len(),
             mrays: median(closest),
             any_mrays: median(any),
+            packet_mrays: median(packet),
+            packet_any_mrays: median(packet_any_runs),
             mismatches,
             checked: sample.len(),
         });

@@ -8,7 +8,7 @@
 //! repeats it with the scalar test (which redoes such edges in f64): the packet then reports
 //! bit for bit the distance and barycentrics a single ray does.
 
-use crate::geom::{FAR_SCALE, Ray, RayTriPrecomp};
+use crate::geom::FAR_SCALE;
 use glam::Vec3;
 use wide::f32x16;
 
@@ -16,9 +16,6 @@ use wide::f32x16;
 pub const LANES: usize = 16;
 
 type F = f32x16;
-
-/// All bits set: a true lane of a mask.
-const TRUE: f32 = f32::from_bits(u32::MAX);
 
 /// 16 rays in structure-of-arrays form, with the per-ray constants of the watertight test.
 #[derive(Clone, Copy, Debug)]
@@ -82,32 +79,6 @@ pub struct TriHits {
 pub type PermutedTri = [[F; 3]; 3];
 
 impl RayLanes {
-    /// Writes `ray` (with its precomputation `pre`) into lane `lane`.
-    #[inline]
-    pub fn set(&mut self, lane: usize, ray: &Ray, pre: &RayTriPrecomp) {
-        let o = ray.origin.to_array();
-        let inv = ray.inv_dir.to_array();
-        let (lo, hi) = (ray.slab_lo.to_array(), ray.slab_hi.to_array());
-        for a in 0..3 {
-            self.slab_lo[a].as_mut_array()[lane] = lo[a];
-            self.slab_hi[a].as_mut_array()[lane] = hi[a];
-            self.inv[a].as_mut_array()[lane] = inv[a];
-        }
-        self.tmin.as_mut_array()[lane] = ray.tmin;
-        self.tmax.as_mut_array()[lane] = ray.tmax;
-        let (kx, ky, kz) = (pre.kx, pre.ky, pre.kz);
-        self.ok[0].as_mut_array()[lane] = o[kx];
-        self.ok[1].as_mut_array()[lane] = o[ky];
-        self.ok[2].as_mut_array()[lane] = o[kz];
-        self.s[0].as_mut_array()[lane] = pre.sx;
-        self.s[1].as_mut_array()[lane] = pre.sy;
-        self.s[2].as_mut_array()[lane] = pre.sz;
-        for (i, k) in [kx, ky, kz].into_iter().enumerate() {
-            self.k[2 * i].as_mut_array()[lane] = if k == 0 { TRUE } else { 0.0 };
-            self.k[2 * i + 1].as_mut_array()[lane] = if k == 1 { TRUE } else { 0.0 };
-        }
-    }
-
     /// The slab test of every lane against `[bmin, bmax]` within `[tmin, tmax]`: bit `i` is set
     /// when lane `i` touches the box (conservative as [`Ray::hit_box`]).
     #[inline(always)]
@@ -128,7 +99,8 @@ impl RayLanes {
     #[inline(always)]
     #[must_use]
     pub fn permute(&self, tri: &[Vec3; 3]) -> PermutedTri {
-        tri.map(|p| {
+        // Written out rather than with `array::map`, which is not always inlined.
+        let one = |p: Vec3| {
             let (x, y, z) = (F::splat(p.x), F::splat(p.y), F::splat(p.z));
             let pick = |is0: F, is1: F| is0.select(x, is1.select(y, z));
             [
@@ -136,14 +108,16 @@ impl RayLanes {
                 pick(self.k[2], self.k[3]),
                 pick(self.k[4], self.k[5]),
             ]
-        })
+        };
+        [one(tri[0]), one(tri[1]), one(tri[2])]
     }
 
     /// The triangle's vertices permuted by `(kx, ky, kz)`, the same for every lane.
     #[inline(always)]
     #[must_use]
     pub fn permute_uniform(tri: &[Vec3; 3], k: [usize; 3]) -> PermutedTri {
-        tri.map(|p| k.map(|a| F::splat(p[a])))
+        let one = |p: Vec3| [F::splat(p[k[0]]), F::splat(p[k[1]]), F::splat(p[k[2]])];
+        [one(tri[0]), one(tri[1]), one(tri[2])]
     }
 
     /// The watertight test of every lane against one triangle (vertices permuted for the

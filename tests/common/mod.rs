@@ -3,8 +3,8 @@
 
 pub mod strategies;
 
-use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
-use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+use dynbvh::bvh::{BuildParams, MAX_PACKET, MeshBvh, brute_force_any, brute_force_closest};
+use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 
 /// Compares one ray's closest and any hit through the tree with brute force. Ties (two
@@ -139,4 +139,34 @@ pub fn soup_with_nan_and_inf() -> TriMesh {
         tris.push(t);
     }
     TriMesh::from_soup(&tris)
+}
+
+/// Rays from one point aimed at the mesh's vertices: the hardest place for the triangle test.
+pub fn aimed(mesh: &TriMesh, from: Vec3) -> Vec<Ray> {
+    mesh.positions
+        .iter()
+        .take(MAX_PACKET)
+        .map(|&p| Ray::new(from, p - from))
+        .filter(|r| r.dir.length() > 0.0)
+        .collect()
+}
+
+/// Closest hits compare as in `tests/bvh_props.rs`: the same distance, and the same triangle or
+/// one that is really hit at that distance (a tie).
+pub fn same_closest(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hit>) -> bool {
+    match (want, got) {
+        (None, None) => true,
+        (Some(w), Some(g)) => {
+            if w.t != g.t {
+                return false;
+            }
+            if w.prim == g.prim {
+                return w.u == g.u && w.v == g.v;
+            }
+            let [a, b, c] = mesh.triangle(g.prim as usize);
+            let pre = RayTriPrecomp::new(ray.dir);
+            intersect_triangle(ray, &pre, a, b, c, f32::INFINITY).map(|h| h.0) == Some(g.t)
+        }
+        _ => false,
+    }
 }

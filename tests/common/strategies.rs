@@ -83,3 +83,39 @@ pub fn rays(len: impl Into<SizeRange>) -> impl Strategy<Value = Vec<Ray>> {
             .collect()
     })
 }
+
+/// A coherent packet: a pinhole camera's tile (common origin, directions in a narrow cone), or
+/// parallel rays from a patch of origins (shadow rays toward a distant light); the camera
+/// may sit inside the mesh's box. Some packets aim exactly along an axis.
+pub fn coherent() -> impl Strategy<Value = Vec<Ray>> {
+    (
+        vec3(),
+        direction(),
+        0.0f32..0.3,
+        1usize..=8,
+        1usize..=8,
+        any::<bool>(),
+        prop_oneof![Just(f32::INFINITY), 2.0f32..30.0],
+    )
+        .prop_map(|(eye, fwd, spread, w, h, parallel, tmax)| {
+            let fwd = fwd.normalize();
+            let helper = if fwd.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+            let right = fwd.cross(helper).normalize();
+            let up = right.cross(fwd);
+            let mut rays = Vec::new();
+            for y in 0..h {
+                for x in 0..w {
+                    let sx = (x as f32 / w as f32 - 0.5) * spread;
+                    let sy = (y as f32 / h as f32 - 0.5) * spread;
+                    rays.push(if parallel {
+                        // Origins on a patch 4 units wide, one direction.
+                        let o = eye + (right * sx + up * sy) * (4.0 / spread.max(1e-3));
+                        Ray::with_range(o, fwd, 0.0, tmax)
+                    } else {
+                        Ray::with_range(eye, fwd + right * sx + up * sy, 0.0, tmax)
+                    });
+                }
+            }
+            rays
+        })
+}

@@ -17,6 +17,10 @@ pub(super) struct RayLanes {
     tmin: f32,
     near: [usize; 3],
     far: [usize; 3],
+    /// The slab distances may be NaN (a NaN or infinite origin or direction, a NaN range):
+    /// an empty lane's infinite bounds can then pass the test, so the traversal masks the
+    /// test's answer with the occupied lanes.
+    pub(super) nonfinite: bool,
 }
 
 impl RayLanes {
@@ -46,6 +50,10 @@ impl RayLanes {
             tmin: ray.tmin,
             near,
             far,
+            nonfinite: !ray.origin.is_finite()
+                || !ray.dir.is_finite()
+                || ray.tmin.is_nan()
+                || ray.tmax.is_nan(),
         }
     }
 }
@@ -159,7 +167,8 @@ impl TriBlock {
     #[inline(always)]
     pub fn get(&self, l: usize) -> [Vec3; 3] {
         let r = &self.rows;
-        [0, 3, 6].map(|j| Vec3::new(r[j][l], r[j + 1][l], r[j + 2][l]))
+        let v = |j: usize| Vec3::new(r[j][l], r[j + 1][l], r[j + 2][l]);
+        [v(0), v(3), v(6)]
     }
 
     /// Puts a triangle into lane `l`.

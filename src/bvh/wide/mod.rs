@@ -15,6 +15,7 @@
 //! - every lane's box holds its subtree's triangles.
 
 mod lanes;
+mod packet;
 mod refit;
 mod traverse;
 
@@ -97,6 +98,13 @@ impl<const K: usize> WideNode<K> {
     #[must_use]
     pub fn bounds(&self) -> Aabb {
         lanes::union_lanes(&self.bounds)
+    }
+
+    /// A bit per lane that holds a child.
+    #[must_use]
+    #[inline]
+    pub fn occupied(&self) -> u32 {
+        (0..K).fold(0, |m, k| m | (u32::from(self.child[k] != EMPTY_CHILD) << k))
     }
 
     /// What lane `i` holds.

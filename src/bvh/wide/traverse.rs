@@ -11,7 +11,7 @@ use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
 
 /// Stack entries of the traversal for trees whose bound fits (nearly all); deeper trees use
 /// [`BIG_STACK`].
-const SMALL_STACK: usize = 64;
+pub(super) const SMALL_STACK: usize = 64;
 /// Enough for any tree: the binary depth is at most `MAX_DEPTH`, splitting binary leaves too
 /// large for one lane adds at most 27 levels, and each level leaves at most 7 siblings pending.
 pub(super) const BIG_STACK: usize = (crate::bvh::MAX_DEPTH + 32) * 8;
@@ -20,7 +20,7 @@ pub(super) const BIG_STACK: usize = (crate::bvh::MAX_DEPTH + 32) * 8;
 const PREFETCH: bool = true;
 
 /// The closest hit so far: block lane (`4 * block + lane`), distance, barycentrics.
-type Best = Option<(usize, f32, f32, f32)>;
+pub(super) type Best = Option<(usize, f32, f32, f32)>;
 
 impl<const K: usize> WideBvh<K> {
     /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
@@ -35,9 +35,9 @@ impl<const K: usize> WideBvh<K> {
     #[inline]
     pub fn closest_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> Option<Hit> {
         let best = if self.stack_need < SMALL_STACK {
-            self.traverse::<false, SMALL_STACK>(ray, counters)
+            self.traverse::<false, SMALL_STACK>(0, ray, ray.tmax, counters)
         } else {
-            self.traverse::<false, BIG_STACK>(ray, counters)
+            self.traverse::<false, BIG_STACK>(0, ray, ray.tmax, counters)
         };
         best.map(|(slot, t, u, v)| Hit {
             t,
@@ -59,9 +59,9 @@ impl<const K: usize> WideBvh<K> {
     #[inline]
     pub fn any_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> bool {
         if self.stack_need < SMALL_STACK {
-            self.traverse::<true, SMALL_STACK>(ray, counters)
+            self.traverse::<true, SMALL_STACK>(0, ray, ray.tmax, counters)
         } else {
-            self.traverse::<true, BIG_STACK>(ray, counters)
+            self.traverse::<true, BIG_STACK>(0, ray, ray.tmax, counters)
         }
         .is_some()
     }
@@ -69,7 +69,7 @@ impl<const K: usize> WideBvh<K> {
     /// Asks for the cache lines of a child that is likely visited soon: the whole node, or a
     /// leaf's first block (prefetching every block of a leaf measured no better).
     #[inline(always)]
-    fn prefetch(&self, c: u32) {
+    pub(super) fn prefetch(&self, c: u32) {
         if c & LEAF_BIT != 0 {
             let (first, _) = leaf_range(c);
             if let Some(b) = self.blocks.get(first as usize) {
@@ -80,12 +80,16 @@ impl<const K: usize> WideBvh<K> {
         }
     }
 
-    /// The traversal both queries share. `ANY` returns at the first hit and visits children in
-    /// lane order; otherwise hit children are visited nearest first.
+    /// The traversal both queries share, from the child reference `start` (0: the root; an
+    /// interior node's box is not tested, its children's are) with hits closer than `tmax`.
+    /// `ANY` returns at the first hit and visits children in lane order; otherwise hit children
+    /// are visited nearest first.
     #[inline(always)]
-    fn traverse<const ANY: bool, const N: usize>(
+    pub(super) fn traverse<const ANY: bool, const N: usize>(
         &self,
+        start: u32,
         ray: &Ray,
+        mut tmax: f32,
         counters: &mut impl Counters,
     ) -> Best {
         let nodes = self.nodes.as_slice();
@@ -96,13 +100,11 @@ impl<const K: usize> WideBvh<K> {
         let lanes = RayLanes::new(ray);
         let tri_lanes = TriLanes::new(ray);
         let pre = RayTriPrecomp::new(ray.dir);
-        let mut tmax = ray.tmax;
         let mut best: Best = None;
         let mut stack = [(0u32, 0f32); N];
         let mut sp = 0usize;
         let mut dist = [0f32; K];
-        // The root, as an interior reference.
-        let mut cur = 0u32;
+        let mut cur = start;
         loop {
             counters.node();
             if cur & LEAF_BIT != 0 {
@@ -147,6 +149,9 @@ impl<const K: usize> WideBvh<K> {
             } else {
                 let node = &nodes[cur as usize];
                 let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
+                if lanes.nonfinite {
+                    mask &= node.occupied();
+                }
                 if mask != 0 {
                     let hits = mask.count_ones();
                     if hits == 1 {

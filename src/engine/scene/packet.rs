@@ -33,13 +33,13 @@ impl Engine {
         let mut local = RayPacket::new();
         let prims = self.tlas.prim_indices();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            if !mode.use_packet(r) {
+            world.load(r);
+            if !mode.use_packet(&world) {
                 for (r, o) in r.iter().zip(o.iter_mut()) {
                     *o = self.closest_hit(r);
                 }
                 continue;
             }
-            world.load(r);
             o.fill(None);
             self.tlas.traverse_packet::<false>(
                 &mut world,
@@ -94,13 +94,13 @@ impl Engine {
         let mut local = RayPacket::new();
         let prims = self.tlas.prim_indices();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-            if !mode.use_packet(r) {
+            world.load(r);
+            if !mode.use_packet(&world) {
                 for (r, o) in r.iter().zip(o.iter_mut()) {
                     *o = self.any_hit(r);
                 }
                 continue;
             }
-            world.load(r);
             self.tlas.traverse_packet::<true>(
                 &mut world,
                 |_| {},

@@ -1,0 +1,282 @@
+//! Packet traversal of the wide tree: up to [`MAX_PACKET`] coherent rays walk a [`WideBvh`]
+//! together, as they walk the binary tree in `crate::bvh::packet`.
+//!
+//! - An interior node is expanded once for the packet: one interval-arithmetic test of the
+//!   packet's origin and reciprocal-direction bounds against all `K` child boxes culls the
+//!   children no ray can reach, and the others go on the stack ordered by the packet's mean
+//!   direction (the child whose centre lies furthest along it at the bottom).
+//! - A stack entry is a child lane with the index of the first ray that may still need it
+//!   (first-active-ray traversal). When it is popped, its box is tested against the rays from
+//!   that one on (16 rays per SIMD test, stopping at the first group with a hit) with their
+//!   current `tmax`, so a child behind the hits found meanwhile is skipped.
+//! - A leaf's rays are those whose slab test touches its box; its triangle blocks are tested
+//!   triangle by triangle against them with the watertight 16-ray kernel, which reports bit for
+//!   bit the single-ray test's distances.
+//! - A subtree that at most [`SINGLE_BELOW`] rays still need is walked by each of them alone with
+//!   the single-ray wide traversal; packets that are not coherent are traced ray by ray.
+
+use super::traverse::{BIG_STACK, SMALL_STACK};
+use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
+use crate::bvh::MAX_PACKET;
+use crate::bvh::packet::{Mask, PacketMode, RayPacket, row8, trace_tiles, with_packet};
+use crate::geom::{Hit, Ray};
+use crate::simd::packet::LANES;
+use wide::f32x8;
+
+/// A subtree that at most this many rays of a packet still need is walked ray by ray.
+const SINGLE_BELOW: u32 = 4;
+
+/// A pending child: its reference, its parent node, its lane there, and the first ray that may
+/// need it.
+type Entry = (u32, u32, u8, u8);
+
+impl<const K: usize> WideBvh<K> {
+    /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
+    /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
+    /// of a camera image; [`WideBvh::trace_image_closest`] does the tiling). Exactly the hits of
+    /// [`WideBvh::closest_hit`]; packets that are not coherent are traced ray by ray.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.closest_hit_packet_mode(rays, hits, PacketMode::Auto);
+    }
+
+    /// [`WideBvh::closest_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packet_mode(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        mode: PacketMode,
+    ) {
+        assert_eq!(rays.len(), hits.len(), "one output per ray");
+        with_packet(|p| {
+            for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
+                p.load(r);
+                if mode.use_packet(p) {
+                    self.closest_packet(p);
+                    for (i, h) in h.iter_mut().enumerate() {
+                        *h = p.closest(i).map(|(t, u, v, slot)| Hit {
+                            t,
+                            u,
+                            v,
+                            prim: self.blocks[slot as usize / 4].prims[slot as usize % 4],
+                        });
+                    }
+                } else {
+                    for (r, h) in r.iter().zip(h) {
+                        *h = self.closest_hit(r);
+                    }
+                }
+            }
+        });
+    }
+
+    /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
+    /// consecutive rays; exactly the answers of [`WideBvh::any_hit`].
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet(&self, rays: &[Ray], out: &mut [bool]) {
+        self.any_hit_packet_mode(rays, out, PacketMode::Auto);
+    }
+
+    /// [`WideBvh::any_hit_packet`], choosing when to trace packets by `mode`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        with_packet(|p| {
+            for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+                p.load(r);
+                if mode.use_packet(p) {
+                    self.any_packet(p);
+                    for (i, o) in o.iter_mut().enumerate() {
+                        *o = p.occluded(i);
+                    }
+                } else {
+                    for (r, o) in r.iter().zip(o) {
+                        *o = self.any_hit(r);
+                    }
+                }
+            }
+        });
+    }
+
+    /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
+    /// packets of [`TILE_W`](crate::bvh::TILE_W) x [`TILE_H`](crate::bvh::TILE_H) pixels
+    /// ([`image_tiles`](crate::bvh::image_tiles)). `hits[i]` answers `rays[i]`.
+    ///
+    /// # Panics
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+    pub fn trace_image_closest(&self, rays: &[Ray], width: usize, hits: &mut [Option<Hit>]) {
+        trace_tiles(rays, width, hits, |r, h| self.closest_hit_packet(r, h));
+    }
+
+    /// Any-hit answers of an image's rays given row by row, as packets of
+    /// [`TILE_W`](crate::bvh::TILE_W) x [`TILE_H`](crate::bvh::TILE_H) pixels.
+    ///
+    /// # Panics
+    /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
+    pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
+        trace_tiles(rays, width, out, |r, o| self.any_hit_packet(r, o));
+    }
+
+    /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are
+    /// recorded in the packet (slot `4 * block + lane`).
+    pub(crate) fn closest_packet(&self, p: &mut RayPacket) {
+        if self.stack_need < SMALL_STACK - 1 {
+            self.traverse_packet::<false, SMALL_STACK>(p);
+        } else {
+            self.traverse_packet::<false, BIG_STACK>(p);
+        }
+    }
+
+    /// Packet any-hit traversal: retires every ray that hits something.
+    pub(crate) fn any_packet(&self, p: &mut RayPacket) {
+        if self.stack_need < SMALL_STACK - 1 {
+            self.traverse_packet::<true, SMALL_STACK>(p);
+        } else {
+            self.traverse_packet::<true, BIG_STACK>(p);
+        }
+    }
+
+    /// Pushes the children of node `ni` that some ray from `first` on may reach (the interval
+    /// test), the one furthest along the packet's direction first (so the nearest is on top),
+    /// and prefetches them.
+    #[inline(always)]
+    fn expand(&self, p: &RayPacket, ni: u32, first: u8, stack: &mut [Entry], sp: &mut usize) {
+        let node = &self.nodes[ni as usize];
+        let mut mask = p.may_hit_lanes(&node.bounds);
+        for k in 0..K {
+            if node.child[k] == EMPTY_CHILD {
+                mask &= !(1 << k);
+            }
+        }
+        // Twice each box centre, along the packet's direction.
+        let d = p.dir();
+        let b = &node.bounds;
+        let c = |a: usize| row8(&b[a]) + row8(&b[3 + a]);
+        let key = (c(0) * f32x8::splat(d.x) + c(1) * f32x8::splat(d.y) + c(2) * f32x8::splat(d.z))
+            .to_array();
+        let base = *sp;
+        while mask != 0 {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let e = (node.child[k], ni, k as u8, first);
+            self.prefetch(e.0);
+            // Insertion by key, largest at the bottom.
+            let mut j = *sp;
+            while j > base && key[stack[j - 1].2 as usize] < key[k] {
+                stack[j] = stack[j - 1];
+                j -= 1;
+            }
+            stack[j] = e;
+            *sp += 1;
+        }
+    }
+
+    /// Walks the tree with the packet's active rays; closest hit (`ANY == false`) records each
+    /// ray's nearest hit in the packet, any hit retires the rays that hit something.
+    fn traverse_packet<const ANY: bool, const N: usize>(&self, p: &mut RayPacket) {
+        let nodes = self.nodes.as_slice();
+        if nodes.is_empty() || p.active() == 0 {
+            return;
+        }
+        let blocks = self.blocks.as_slice();
+        let mut stack: [Entry; N] = [(0, 0, 0, 0); N];
+        let mut sp = 0;
+        self.expand(p, 0, 0, &mut stack, &mut sp);
+        while sp > 0 {
+            sp -= 1;
+            let (c, parent, lane, first) = stack[sp];
+            let live = p.active() & (Mask::MAX << first);
+            if live == 0 {
+                continue;
+            }
+            let pb = &nodes[parent as usize].bounds;
+            let k = lane as usize;
+            let (bmin, bmax) = (
+                [pb[0][k], pb[1][k], pb[2][k]],
+                [pb[3][k], pb[4][k], pb[5][k]],
+            );
+            if c & LEAF_BIT != 0 {
+                let rays = p.hit_mask_box(bmin, bmax, live);
+                if rays == 0 {
+                    continue;
+                }
+                let (fb, count) = leaf_range(c);
+                let mut changed = false;
+                let run = fb as usize..(fb + count) as usize;
+                'blocks: for (b, block) in run.clone().zip(&blocks[run]) {
+                    for l in 0..4 {
+                        // Unused lanes come last in a block.
+                        if block.prims[l] == NO_PRIM {
+                            break;
+                        }
+                        let rays = rays & p.active();
+                        if rays == 0 {
+                            break 'blocks;
+                        }
+                        changed |= p.test_triangle::<ANY>(&block.get(l), (b * 4 + l) as u32, rays);
+                    }
+                }
+                if ANY {
+                    if p.active() == 0 {
+                        return;
+                    }
+                } else if changed {
+                    p.update_tmax_hi();
+                }
+            } else {
+                if live.count_ones() <= SINGLE_BELOW {
+                    // Too few rays left for the packet to pay: each goes on alone.
+                    let mut changed = false;
+                    let mut bits = live;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        changed |= self.walk_single::<ANY, N>(p, i, c);
+                    }
+                    if ANY {
+                        if p.active() == 0 {
+                            return;
+                        }
+                    } else if changed {
+                        p.update_tmax_hi();
+                    }
+                    continue;
+                }
+                let Some(f) = p.first_hit_box(bmin, bmax, live, true) else {
+                    continue;
+                };
+                self.expand(p, c, f, &mut stack, &mut sp);
+            }
+        }
+    }
+
+    /// Walks the subtree of node `c` with ray `i` of the packet alone (the single-ray wide
+    /// traversal, from the ray's current `tmax`) and records what it finds. Returns true when
+    /// the ray found a (closer) hit.
+    fn walk_single<const ANY: bool, const N: usize>(
+        &self,
+        p: &mut RayPacket,
+        i: usize,
+        c: u32,
+    ) -> bool {
+        let ray = *p.ray(i);
+        let Some((slot, t, u, v)) = self.traverse::<ANY, N>(c, &ray, p.tmax(i), &mut ()) else {
+            return false;
+        };
+        if ANY {
+            p.retire((1 as Mask) << i);
+        } else {
+            p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
+        }
+        true
+    }
+}

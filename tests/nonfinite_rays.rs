@@ -1,0 +1,177 @@
+//! Rays with NaN or infinite origins, directions or ranges: every traversal (binary trees of
+//! every builder, BVH4, BVH8, and packets over each) returns what brute force returns and
+//! never panics. Such rays reach a library from simulators whose state has gone bad; they must
+//! not crash the caller.
+
+use dynbvh::bvh::{
+    MeshBvh, MeshBvh4, MeshBvh8, PacketMode, WideBvh, brute_force_any, brute_force_closest,
+};
+use dynbvh::geom::{Ray, TriMesh};
+use glam::Vec3;
+
+mod common;
+use common::{builders, rays_around, same_closest, soup_with_nan_and_inf};
+
+/// Rays around the unit cube with one component of the origin, the direction or the range
+/// replaced by NaN, +inf or -inf, a few of each kind in one packet.
+fn bad_rays() -> Vec<Ray> {
+    let base = rays_around(Vec3::ZERO, 1.0, 40, 7);
+    let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    let mut rays = Vec::new();
+    for (i, r) in base.iter().enumerate() {
+        let v = bad[i % 3];
+        let a = i % 3;
+        let mut o = r.origin.to_array();
+        let mut d = r.dir.to_array();
+        match (i / 3) % 5 {
+            0 => o[a] = v,
+            1 => d[a] = v,
+            2 => {
+                o = [v; 3];
+            }
+            3 => {
+                d = [v; 3];
+            }
+            _ => {
+                rays.push(Ray::with_range(r.origin, r.dir, v, f32::INFINITY));
+                rays.push(Ray::with_range(r.origin, r.dir, 0.0, v));
+                continue;
+            }
+        }
+        rays.push(Ray::new(Vec3::from(o), Vec3::from(d)));
+    }
+    // Also whole packets of one kind, so that no finite ray leads them.
+    for v in bad {
+        for r in base.iter().take(20) {
+            rays.push(Ray::new(Vec3::new(v, r.origin.y, r.origin.z), r.dir));
+        }
+    }
+    rays
+}
+
+/// 500 small finite triangles in the unit cube.
+fn cube_soup() -> TriMesh {
+    let mut rng = common::Rng(3);
+    let tris: Vec<[Vec3; 3]> = (0..500)
+        .map(|_| {
+            let p = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            );
+            [p, p + rng.unit_vector() * 0.3, p + rng.unit_vector() * 0.3]
+        })
+        .collect();
+    TriMesh::from_soup(&tris)
+}
+
+fn check_wide<const K: usize>(
+    mesh: &TriMesh,
+    wide: &WideBvh<K>,
+    rays: &[Ray],
+    what: &str,
+) -> Result<(), String> {
+    for mode in [PacketMode::Always, PacketMode::Auto] {
+        let mut hits = vec![None; rays.len()];
+        wide.closest_hit_packet_mode(rays, &mut hits, mode);
+        let mut any = vec![false; rays.len()];
+        wide.any_hit_packet_mode(rays, &mut any, mode);
+        for (i, r) in rays.iter().enumerate() {
+            let want = brute_force_closest(mesh, r);
+            let single = wide.closest_hit(r);
+            if !same_closest(mesh, r, want, single) {
+                return Err(format!(
+                    "{what} single {r:?}: want {want:?}, got {single:?}"
+                ));
+            }
+            if !same_closest(mesh, r, want, hits[i]) {
+                return Err(format!(
+                    "{what} {mode:?} packet {r:?}: want {want:?}, got {:?}",
+                    hits[i]
+                ));
+            }
+            let want_any = brute_force_any(mesh, r);
+            if wide.any_hit(r) != want_any || any[i] != want_any {
+                return Err(format!("{what} {mode:?} any hit {r:?}: want {want_any}"));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn non_finite_rays_match_brute_force_in_every_traversal() {
+    let rays = bad_rays();
+    let meshes = [
+        ("cube soup", cube_soup()),
+        ("NaN/inf soup", soup_with_nan_and_inf()),
+    ];
+    for (name, mesh) in &meshes {
+        for params in builders() {
+            let bin = MeshBvh::build(mesh, &params);
+            for mode in [PacketMode::Always, PacketMode::Auto] {
+                let mut hits = vec![None; rays.len()];
+                bin.closest_hit_packet_mode(&rays, &mut hits, mode);
+                let mut any = vec![false; rays.len()];
+                bin.any_hit_packet_mode(&rays, &mut any, mode);
+                for (i, r) in rays.iter().enumerate() {
+                    let want = brute_force_closest(mesh, r);
+                    let got = bin.closest_hit(r);
+                    assert!(
+                        same_closest(mesh, r, want, got),
+                        "{name} {params:?} binary {r:?}: want {want:?}, got {got:?}"
+                    );
+                    assert!(
+                        same_closest(mesh, r, want, hits[i]),
+                        "{name} {params:?} {mode:?} binary packet {r:?}: want {want:?}, got {:?}",
+                        hits[i]
+                    );
+                    let want_any = brute_force_any(mesh, r);
+                    assert_eq!(bin.any_hit(r), want_any, "{name} {params:?} any {r:?}");
+                    assert_eq!(
+                        any[i], want_any,
+                        "{name} {params:?} {mode:?} packet any {r:?}"
+                    );
+                }
+            }
+            let w8 = MeshBvh8::from_mesh_bvh(&bin);
+            check_wide(mesh, &w8, &rays, &format!("{name} {params:?} BVH8")).unwrap();
+            let w4 = MeshBvh4::from_mesh_bvh(&bin);
+            check_wide(mesh, &w4, &rays, &format!("{name} {params:?} BVH4")).unwrap();
+        }
+    }
+}
+
+/// The engine (two levels, rays moved into each instance's space) with the same rays: single
+/// rays and packets agree with each other, any hit agrees with closest hit, and nothing panics.
+#[test]
+fn non_finite_rays_through_the_engine() {
+    use dynbvh::engine::{Engine, EngineConfig};
+    use glam::Affine3A;
+    let mesh = cube_soup();
+    let mut e = Engine::new(EngineConfig::default());
+    let id = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+    e.add_instance(id, Affine3A::IDENTITY);
+    e.add_instance(id, Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)));
+    e.update();
+    let rays = bad_rays();
+    for mode in [PacketMode::Always, PacketMode::Auto] {
+        let mut hits = vec![None; rays.len()];
+        e.closest_hit_packet_mode(&rays, &mut hits, mode);
+        let mut any = vec![false; rays.len()];
+        e.any_hit_packet_mode(&rays, &mut any, mode);
+        for (i, r) in rays.iter().enumerate() {
+            let single = e.closest_hit(r);
+            let key = |h: Option<dynbvh::engine::SceneHit>| h.map(|h| (h.t, h.prim, h.instance));
+            assert_eq!(key(single), key(hits[i]), "{mode:?} {r:?}");
+            assert_eq!(e.any_hit(r), single.is_some(), "{r:?}");
+            assert_eq!(any[i], single.is_some(), "{mode:?} {r:?}");
+            if let Some(h) = single {
+                assert!(
+                    h.t.is_finite() && h.t >= r.tmin && h.t < r.tmax,
+                    "{r:?}: {h:?}"
+                );
+            }
+        }
+    }
+}
