@@ -51,8 +51,11 @@ impl Engine {
                         return false;
                     }
                     local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
-                    let mesh = &self.meshes[inst.mesh as usize].bvh;
-                    mesh.closest_packet(&mut local);
+                    let m = &self.meshes[inst.mesh as usize];
+                    match &m.wide {
+                        Some(w) => w.closest_packet(&mut local),
+                        None => m.bvh.closest_packet(&mut local),
+                    }
                     let mut found = local.found();
                     let changed = found != 0;
                     while found != 0 {
@@ -64,7 +67,10 @@ impl Engine {
                                 t,
                                 u,
                                 v,
-                                prim: mesh.bvh().prim_indices()[s as usize],
+                                prim: match &m.wide {
+                                    Some(w) => w.slot_prim(s),
+                                    None => m.bvh.bvh().prim_indices()[s as usize],
+                                },
                                 instance: InstanceId(k),
                             });
                         }
@@ -111,7 +117,11 @@ impl Engine {
                         return false;
                     }
                     local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
-                    self.meshes[inst.mesh as usize].bvh.any_packet(&mut local);
+                    let m = &self.meshes[inst.mesh as usize];
+                    match &m.wide {
+                        Some(w) => w.any_packet(&mut local),
+                        None => m.bvh.any_packet(&mut local),
+                    }
                     let hit = lanes & !local.active();
                     wp.retire(hit);
                     hit != 0
