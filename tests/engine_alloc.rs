@@ -3,9 +3,11 @@
 //! batches. Rebuilds go into the existing trees with the engine's one build workspace, which
 //! the meshes' first builds sized, so they allocate nothing either; only `amortized`, which
 //! keeps the tree a rebuild replaced, makes a mesh's second tree at its first rebuild. Counting
-//! covers every thread (rayon's workers too), so this binary holds a single test.
+//! covers every thread (rayon's workers too), so this binary holds a single test. Everything
+//! runs with both traversals: with the 8-wide trees, refits refit them too and rebuilds
+//! collapse into their storage, still allocating nothing.
 
-use dynbvh::engine::{Engine, EngineConfig, Policy, SceneHit, TlasPolicy};
+use dynbvh::engine::{Engine, EngineConfig, Policy, SceneHit, TlasPolicy, Traversal};
 use dynbvh::geom::shapes::{bumpy_sphere, sine_deform};
 use dynbvh::report::rays::camera_rays;
 use glam::{Affine3A, Quat, Vec3};
@@ -25,20 +27,31 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 /// builder keeps spare bins per thread, made by a thread's first build tasks: with one thread,
 /// the scene's first builds make them all; with several, a worker that steals its first build
 /// task makes its own then, once, at a frame the scheduler picks.
-fn run(policy: Policy, tlas: TlasPolicy, frames: usize) -> Vec<(usize, u32, bool)> {
+fn run(
+    policy: Policy,
+    tlas: TlasPolicy,
+    traversal: Traversal,
+    frames: usize,
+) -> Vec<(usize, u32, bool)> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .unwrap();
-    pool.install(|| run_frames(policy, tlas, frames))
+    pool.install(|| run_frames(policy, tlas, traversal, frames))
 }
 
-fn run_frames(policy: Policy, tlas: TlasPolicy, frames: usize) -> Vec<(usize, u32, bool)> {
+fn run_frames(
+    policy: Policy,
+    tlas: TlasPolicy,
+    traversal: Traversal,
+    frames: usize,
+) -> Vec<(usize, u32, bool)> {
     let big = bumpy_sphere(200_000);
     let small = bumpy_sphere(500);
     let mut e = Engine::new(EngineConfig {
         policy,
         tlas,
+        traversal,
         ..EngineConfig::default()
     });
     let bm = e.add_mesh(big.positions.clone(), big.indices.clone());
@@ -90,10 +103,21 @@ fn run_frames(policy: Policy, tlas: TlasPolicy, frames: usize) -> Vec<(usize, u3
 /// One test function: the counter is global, so nothing else may run meanwhile.
 #[test]
 fn frames_after_the_first_allocate_nothing_even_to_rebuild() {
-    let frames = run(Policy::Refit, TlasPolicy::Refit, 40);
+    for traversal in [Traversal::Binary, Traversal::Wide] {
+        frames_allocate_nothing(traversal);
+    }
+}
+
+fn frames_allocate_nothing(traversal: Traversal) {
+    let frames = run(Policy::Refit, TlasPolicy::Refit, traversal, 40);
     for (f, &(n, rebuilds, tlas)) in frames.iter().enumerate() {
         assert!(rebuilds == 0 && !tlas);
-        assert_eq!(n, 0, "refit: frame {} allocated {n} times", f + 1);
+        assert_eq!(
+            n,
+            0,
+            "{traversal} refit: frame {} allocated {n} times",
+            f + 1
+        );
     }
     for (policy, tlas, frames) in [
         (Policy::Rebuild, TlasPolicy::Rebuild, 6),
@@ -101,7 +125,7 @@ fn frames_after_the_first_allocate_nothing_even_to_rebuild() {
         (Policy::Threshold(1.05), TlasPolicy::Threshold(1.2), 9),
         (Policy::Amortized, TlasPolicy::DEFAULT, 40),
     ] {
-        let frames = run(policy, tlas, frames);
+        let frames = run(policy, tlas, traversal, frames);
         // Amortized's first rebuild makes the mesh's second tree.
         let first = frames.iter().position(|f| f.1 > 0);
         for (f, &(n, rebuilds, tlas)) in frames.iter().enumerate() {
@@ -111,7 +135,7 @@ fn frames_after_the_first_allocate_nothing_even_to_rebuild() {
             assert_eq!(
                 n,
                 0,
-                "{policy}: frame {} allocated {n} times ({rebuilds} mesh rebuilds, top-level \
+                "{traversal} {policy}: frame {} allocated {n} times ({rebuilds} mesh rebuilds, top-level \
                  rebuilt: {tlas})",
                 f + 1
             );

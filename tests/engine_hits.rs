@@ -1,6 +1,7 @@
 //! Traversal correctness of the engine after every deformation: for every shipped animation
-//! and every animated glTF sample, on every frame (capped) and under every policy, rays through
-//! the engine hit what brute force over the posed world triangles hits. On the same frames,
+//! and every animated glTF sample, on every frame (capped), under every policy and with both
+//! traversals (binary and 8-wide mesh trees), rays through the engine hit what brute force over
+//! the posed world triangles hits, and its packet queries give exactly its single-ray answers. On the same frames,
 //! each deforming mesh's 4- and 8-wide trees (built on the first frame, refitted on every
 //! later one) and its packet queries give exactly brute force's hits in mesh space.
 //!
@@ -13,7 +14,7 @@ use dynbvh::anim::Scene;
 use dynbvh::bvh::{MeshBvh4, MeshBvh8, PacketMode, brute_force_any, brute_force_closest};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy};
+use dynbvh::engine::{Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal};
 use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use dynbvh::report::rays::{camera_rays, random_rays};
 use std::path::{Path, PathBuf};
@@ -202,16 +203,20 @@ fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], w
 
 /// Runs every policy in lockstep over `frames` frames of one animation and checks each frame.
 fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mut Tally) {
-    let policies = policies();
+    let policies: Vec<(Policy, Traversal)> = [Traversal::Binary, Traversal::Wide]
+        .into_iter()
+        .flat_map(|t| policies().into_iter().map(move |p| (p, t)))
+        .collect();
     let mut src = GltfSource::new(scene, anim, FrameTimes::Count(frames)).unwrap();
     let mut engines: Vec<Engine> = policies
         .iter()
-        .map(|&policy| {
+        .map(|&(policy, traversal)| {
             src.build(
                 0,
                 EngineConfig {
                     policy,
                     tlas: TlasPolicy::Threshold(1.2),
+                    traversal,
                     ..EngineConfig::default()
                 },
             )
@@ -251,13 +256,32 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
             .iter()
             .map(|r| (brute_force_closest(&flat, r), brute_force_any(&flat, r)))
             .collect();
-        for (e, p) in engines.iter_mut().zip(&policies) {
+        let mut packet = vec![None; rays.len()];
+        let mut packet_any = vec![false; rays.len()];
+        for (e, &(p, t)) in engines.iter_mut().zip(&policies) {
+            e.closest_hit_packet_mode(&rays, &mut packet, PacketMode::Always);
+            e.any_hit_packet_mode(&rays, &mut packet_any, PacketMode::Always);
             // Rays shorter than the scene test any-hit with a finite range too.
             for (k, (ray, &(w, w_any))) in rays.iter().zip(&want).enumerate() {
                 let tol = 2e-4 * diag / ray.dir.length();
                 let got = e.closest_hit(ray);
+                assert_eq!(
+                    packet[k],
+                    got,
+                    "{} frame {f} policy {p} {t} ray {k}: packet closest hit",
+                    src.name()
+                );
+                assert_eq!(
+                    packet_any[k],
+                    e.any_hit(ray),
+                    "{} frame {f} policy {p} {t} ray {k}: packet any hit",
+                    src.name()
+                );
                 compare(&src, &flat, ray, w, got, tol, tally).unwrap_or_else(|m| {
-                    panic!("{} frame {f} policy {p} ray {k} {ray:?}: {m}", src.name())
+                    panic!(
+                        "{} frame {f} policy {p} {t} ray {k} {ray:?}: {m}",
+                        src.name()
+                    )
                 });
                 let any = e.any_hit(ray);
                 if any != w_any {
@@ -267,7 +291,7 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
                     );
                     assert!(
                         grazing,
-                        "{} frame {f} policy {p} ray {k}: any hit {any}, brute force {w_any}",
+                        "{} frame {f} policy {p} {t} ray {k}: any hit {any}, brute force {w_any}",
                         src.name()
                     );
                 }
@@ -276,6 +300,10 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
             for m in src.deforming() {
                 let mesh = TriMesh::new(e.positions(*m).to_vec(), e.indices(*m).to_vec());
                 e.mesh_bvh(*m).validate(&mesh).unwrap();
+                if let Some(w) = e.mesh_bvh8(*m) {
+                    w.validate(&mesh).unwrap();
+                }
+                assert_eq!(e.mesh_bvh8(*m).is_some(), t == Traversal::Wide);
             }
             e.record_trace(0.01, rays.len() as u64);
         }

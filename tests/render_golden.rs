@@ -11,7 +11,7 @@ use dynbvh::anim::Scene;
 use dynbvh::anim::generate::{Kind, generate};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{EngineConfig, Policy};
+use dynbvh::engine::{EngineConfig, Policy, Traversal};
 use dynbvh::render::{
     Camera, EngineShading, FrameCounts, Renderer, Settings, Stage, animation_bounds,
 };
@@ -53,8 +53,11 @@ fn render(
     let bounds = animation_bounds(scene, Some(0), src.times()).unwrap();
     let camera = Camera::framing(&bounds, W as f32 / H as f32);
     let stage = Stage::new(camera, &bounds, ground);
+    // The golden work figures are the binary trees' (the wide ones visit other nodes; their
+    // images are the same, `tests/render_packets.rs`).
     let config = EngineConfig {
         policy: Policy::Refit,
+        traversal: Traversal::Binary,
         ..EngineConfig::default()
     };
     let mut engine = src.build(0, config);

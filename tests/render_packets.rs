@@ -1,11 +1,13 @@
 //! Frames traced with packets (camera rays, shadow rays, both) equal frames traced ray by ray,
 //! pixel for pixel and count for count, on the shipped animations: deforming meshes after
-//! refits, and rigid instances placed by transforms (packets moved into instance space).
+//! refits, and rigid instances placed by transforms (packets moved into instance space). The
+//! engine walking 8-wide mesh trees renders the same frames as the binary one, pixel for pixel,
+//! ray by ray and as packets.
 
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{EngineConfig, Policy};
+use dynbvh::engine::{EngineConfig, Policy, Traversal};
 use dynbvh::render::{
     Camera, EngineShading, PacketUse, Renderer, Settings, Stage, animation_bounds,
 };
@@ -27,19 +29,28 @@ fn packets_render_the_same_pixels_as_single_rays() {
         // An image whose sides are not multiples of the 16-pixel tile.
         let (w, h) = (83, 61);
         let stage = Stage::new(Camera::framing(&bounds, w as f32 / h as f32), &bounds, true);
-        let mut engine = src.build(
+        let config = EngineConfig {
+            policy: Policy::Refit,
+            ..EngineConfig::default()
+        };
+        let mut engine = src.build(0, config);
+        let mut wide = src.build(
             0,
             EngineConfig {
-                policy: Policy::Refit,
-                ..EngineConfig::default()
+                traversal: Traversal::Wide,
+                ..config
             },
         );
         for f in 1..=frame {
-            src.advance(&mut engine, f);
-            engine.update();
+            for e in [&mut engine, &mut wide] {
+                src.advance(e, f);
+                e.update();
+            }
         }
         let mut shading = EngineShading::new();
         shading.refresh_all(&engine);
+        let mut wide_shading = EngineShading::new();
+        wide_shading.refresh_all(&wide);
         for smooth in [true, false] {
             let mut r = Renderer::new(Settings {
                 width: w,
@@ -59,30 +70,37 @@ fn packets_render_the_same_pixels_as_single_rays() {
                 "{file}: the camera sees the scene ({} hits)",
                 want_counts.hits
             );
-            for packets in [
-                PacketUse::DEFAULT,
-                PacketUse {
-                    primary: true,
-                    shadow: false,
-                },
-                PacketUse {
-                    primary: false,
-                    shadow: true,
-                },
+            for (packets, e, sh) in [
+                (PacketUse::DEFAULT, &engine, &shading),
+                (
+                    PacketUse {
+                        primary: true,
+                        shadow: false,
+                    },
+                    &engine,
+                    &shading,
+                ),
+                (
+                    PacketUse {
+                        primary: false,
+                        shadow: true,
+                    },
+                    &engine,
+                    &shading,
+                ),
+                (PacketUse::NONE, &wide, &wide_shading),
+                (PacketUse::DEFAULT, &wide, &wide_shading),
             ] {
+                let t = e.config().traversal;
                 let mut got = RgbImage::new(1, 1);
-                let counts = r.render(
-                    &shading.tracer(&engine).with_packets(packets),
-                    &stage,
-                    &mut got,
-                );
-                assert_eq!(counts, want_counts, "{file} {packets:?}");
+                let counts = r.render(&sh.tracer(e).with_packets(packets), &stage, &mut got);
+                assert_eq!(counts, want_counts, "{file} {t} {packets:?}");
                 let differing = got
                     .pixels()
                     .zip(want.pixels())
                     .filter(|(a, b)| a != b)
                     .count();
-                assert_eq!(differing, 0, "{file} {packets:?} smooth {smooth}");
+                assert_eq!(differing, 0, "{file} {t} {packets:?} smooth {smooth}");
             }
         }
     }

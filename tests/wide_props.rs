@@ -285,3 +285,25 @@ fn large_trees_refit_in_parallel_and_on_one_thread() {
         });
     }
 }
+
+#[test]
+fn collapse_into_used_storage_gives_the_fresh_collapse() {
+    // Into the storage of a larger tree, then of a smaller one (the storage grows).
+    let big = dynbvh::geom::shapes::bumpy_sphere(20_000);
+    let small = dynbvh::geom::shapes::bumpy_sphere(3_000);
+    let bin_big = MeshBvh::build(&big, &BuildParams::BINNED);
+    let bin_small = MeshBvh::build(&small, &BuildParams::BINNED);
+    for (from, to, mesh) in [(&bin_big, &bin_small, &small), (&bin_small, &bin_big, &big)] {
+        let mut w = WideBvh::<8>::from_mesh_bvh(from);
+        w.collapse_from(to);
+        let fresh = WideBvh::<8>::from_mesh_bvh(to);
+        assert_eq!(w.nodes(), fresh.nodes());
+        assert_eq!(w.blocks().len(), fresh.blocks().len());
+        assert_eq!(w.prim_count(), fresh.prim_count());
+        w.validate(mesh).unwrap();
+        let rays = dynbvh::report::rays::random_rays(&mesh.bounds(), 100, 7);
+        for ray in &rays {
+            check_ray(mesh, to, &w, ray).unwrap();
+        }
+    }
+}

@@ -14,6 +14,7 @@ mod cost;
 mod mesh;
 mod node;
 mod packet;
+pub(crate) use packet::with_packet;
 mod refit;
 mod traverse;
 mod validate;

@@ -3,9 +3,9 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::anim::Scene;
-use dynbvh::engine::Policy;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere};
+use dynbvh::engine::{Policy, Traversal};
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
 use std::path::{Path, PathBuf};
 
@@ -67,6 +67,9 @@ pub struct BenchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones).
+    #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
+    traversal: Traversal,
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
@@ -91,6 +94,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let mut opts = Options {
         trace_repeats: a.repeats.max(1),
         oracle: !a.no_oracle,
+        traversal: a.traversal,
         ..Options::default()
     };
     if a.no_builders {

@@ -6,7 +6,7 @@ use clap::Args;
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Action, Engine, EngineConfig, Policy};
+use dynbvh::engine::{Action, Engine, EngineConfig, Policy, Traversal};
 use dynbvh::render::{
     Camera, EngineShading, FrameCounts, GltfCamera, PacketUse, Renderer, Settings, Stage,
     animation_bounds, font, gltf_cameras,
@@ -76,6 +76,10 @@ pub struct RenderArgs {
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
     #[arg(long, value_name = "WHICH", default_value = "both")]
     pub packets: String,
+    /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones;
+    /// the pictures are the same).
+    #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
+    pub traversal: Traversal,
 }
 
 /// Parses `--packets`.
@@ -226,6 +230,7 @@ struct Pipeline<'s> {
     img: RgbImage,
     timings: Vec<FrameTiming>,
     packets: PacketUse,
+    traversal: Traversal,
 }
 
 impl<'s> Pipeline<'s> {
@@ -245,6 +250,7 @@ impl<'s> Pipeline<'s> {
             img: RgbImage::new(settings.width, settings.height),
             timings: Vec::new(),
             packets: PacketUse::DEFAULT,
+            traversal: Traversal::DEFAULT,
         })
     }
 
@@ -259,6 +265,7 @@ impl<'s> Pipeline<'s> {
             None => {
                 let config = EngineConfig {
                     policy: self.policy,
+                    traversal: self.traversal,
                     ..EngineConfig::default()
                 };
                 self.engine = Some(self.src.build(f, config));
@@ -422,6 +429,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         .map(|&p| {
             Pipeline::new(&scene, anim, times, p, settings).map(|mut pl| {
                 pl.packets = packets;
+                pl.traversal = a.traversal;
                 pl
             })
         })

@@ -13,6 +13,7 @@ pub mod stats;
 
 pub use policy::{Action, ParsePolicyError, Policy};
 pub use scene::{
-    Engine, EngineConfig, InstanceId, MeshId, SceneHit, Timing, TlasPolicy, expected_work, tree_sah,
+    Engine, EngineConfig, InstanceId, MeshId, SceneHit, Timing, TlasPolicy, Traversal,
+    expected_work, tree_sah,
 };
 pub use stats::{FrameStats, MeshStats};

@@ -1,5 +1,7 @@
 //! The two-level scene: one bottom-level tree (BLAS, a [`MeshBvh`]) per mesh, one top-level
-//! tree (TLAS, a [`Bvh`]) over the world boxes of the mesh instances.
+//! tree (TLAS, a [`Bvh`]) over the world boxes of the mesh instances. With
+//! [`Traversal::Wide`] (the default) each mesh also keeps an 8-wide tree ([`MeshBvh8`]) that
+//! the rays walk, collapsed from the binary one after each (re)build and refitted with it.
 //!
 //! A mesh whose vertices are written ([`Engine::set_positions`], [`Engine::positions_mut`]) is
 //! refitted or rebuilt in the next [`Engine::update`] as the [`Policy`] decides, each mesh on
@@ -10,7 +12,8 @@
 //!
 //! After the first frame, [`Engine::update`] allocates nothing, rebuilds included: a tree is
 //! rebuilt into its own storage with the engine's one [`BuildWorkspace`] (shared by every mesh
-//! and the top-level tree, sized by the first builds), and ray casting never allocates. The
+//! and the top-level tree, sized by the first builds), a wide tree is collapsed into its own
+//! storage ([`MeshBvh8::collapse_from`]), and ray casting never allocates. The
 //! exception is [`Policy::Amortized`], which keeps the tree a rebuild replaced for a while (see
 //! [`Policy::Amortized`]): a mesh's first rebuild makes its second tree, and later ones
 //! alternate between the two. Two
@@ -23,7 +26,9 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::stats::{FrameStats, MeshStats};
-use crate::bvh::{BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, Node, TraversalStats};
+use crate::bvh::{
+    BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats,
+};
 use crate::geom::{Aabb, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
@@ -74,6 +79,54 @@ pub struct EngineConfig {
     pub tlas: TlasPolicy,
     /// Where the policy's costs of refits, rebuilds and estimates come from.
     pub timing: Timing,
+    /// Which mesh trees rays walk.
+    pub traversal: Traversal,
+}
+
+/// Which tree of each mesh the engine's rays walk (the top-level tree is binary either way).
+///
+/// With [`Traversal::Wide`] every mesh keeps, beside its binary tree, an 8-wide tree
+/// ([`MeshBvh8`]) that all ray queries (single rays and packets) walk: it is collapsed from the
+/// binary tree after each build or rebuild (into its own storage, allocating nothing once
+/// warm) and refitted after each refit. The binary tree stays: its SAH is what the policy
+/// weighs, and rebuilds build it. The wide tree's refit and collapse are part of the update
+/// and counted in the refit and rebuild times the policy sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum Traversal {
+    /// Rays walk the binary trees.
+    Binary,
+    /// Rays walk 8-wide trees kept beside the binary ones.
+    Wide,
+}
+
+impl Traversal {
+    /// The engine's default, [`Traversal::Wide`], chosen by measurement (`docs/packets.md`,
+    /// "The engine on the wide trees"): on the shipped animations and `CesiumMan` the
+    /// `dynbvh bench` totals (single rays, update included) drop by 30-40%, and `dynbvh render
+    /// --shadows` (packets) takes about 2% less CPU time a frame; the collapse makes each
+    /// rebuild dearer (about 60 ns a triangle), which the policy sees.
+    pub const DEFAULT: Traversal = Traversal::Wide;
+}
+
+impl std::str::FromStr for Traversal {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "binary" => Ok(Self::Binary),
+            "wide" => Ok(Self::Wide),
+            _ => Err(format!("traversal {s:?}: expected binary or wide")),
+        }
+    }
+}
+
+impl std::fmt::Display for Traversal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Binary => "binary",
+            Self::Wide => "wide",
+        })
+    }
 }
 
 impl Default for EngineConfig {
@@ -83,6 +136,7 @@ impl Default for EngineConfig {
             policy: Policy::DEFAULT,
             tlas: TlasPolicy::DEFAULT,
             timing: Timing::Measured,
+            traversal: Traversal::DEFAULT,
         }
     }
 }
@@ -164,6 +218,8 @@ struct MeshEntry {
     positions: Vec<Vec3>,
     indices: Vec<[u32; 3]>,
     bvh: MeshBvh,
+    /// With [`Traversal::Wide`], the 8-wide tree rays walk, collapsed from `bvh`.
+    wide: Option<MeshBvh8>,
     /// While probing, the tree the last rebuild replaced, refitted alongside; otherwise spare
     /// storage the next probed rebuild goes into.
     prev: MeshBvh,
@@ -312,6 +368,8 @@ impl Engine {
             &mut self.workspace,
         );
         let sah = tree_sah(bvh.bvh());
+        let wide =
+            (self.config.traversal == Traversal::Wide).then(|| MeshBvh8::from_mesh_bvh(&bvh));
         let ms = ms_since(t);
         let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
         let t = Instant::now();
@@ -324,6 +382,7 @@ impl Engine {
             positions,
             indices,
             bvh,
+            wide,
             prev: MeshBvh::default(),
             probe: None,
             sah,
@@ -493,6 +552,8 @@ impl Engine {
             }
             let decided = m.state.before_refit(policy);
             let mut refit_ms = 0.0;
+            // The binary tree changed under the wide one (a revert to the replaced tree).
+            let mut recollapse = false;
             let rebuild = if decided == Some(true) {
                 true
             } else {
@@ -504,6 +565,7 @@ impl Engine {
                     && probe_step(m, p, timing)
                 {
                     stats.reverts += 1;
+                    recollapse = true;
                 }
                 let ratio = ratio(m.sah, m.state.build_sah);
                 m.stats.sah_ratio = ratio;
@@ -544,6 +606,9 @@ impl Engine {
                 }
                 m.bvh
                     .rebuild_indexed(&m.positions, &m.indices, &build, &mut self.workspace);
+                if let Some(w) = &mut m.wide {
+                    w.collapse_from(&m.bvh);
+                }
                 m.sah = tree_sah(m.bvh.bvh());
                 let est = if estimate {
                     m.fresh.estimate(&m.positions, &m.indices)
@@ -583,6 +648,19 @@ impl Engine {
                 m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
                 stats.rebuilds += 1;
             } else {
+                // The wide tree follows the refitted (or reverted-to) binary tree; its time is
+                // part of the refit's.
+                if let Some(w) = &mut m.wide {
+                    let t = Instant::now();
+                    if recollapse {
+                        w.collapse_from(&m.bvh);
+                    } else {
+                        w.refit_indexed(&m.positions, &m.indices);
+                    }
+                    let ms = ms_since(t);
+                    refit_ms += ms;
+                    m.estimate_budget += ESTIMATE_SHARE * timing.refit_ms(ms, m.indices.len());
+                }
                 stats.refits += 1;
             }
             m.stats.action = if rebuild {
@@ -712,6 +790,12 @@ impl Engine {
         &self.meshes[mesh.0 as usize].bvh
     }
 
+    /// The 8-wide tree of `mesh` rays walk, with [`Traversal::Wide`].
+    #[must_use]
+    pub fn mesh_bvh8(&self, mesh: MeshId) -> Option<&MeshBvh8> {
+        self.meshes[mesh.0 as usize].wide.as_ref()
+    }
+
     /// The top-level tree; its primitive `p` is the `p`-th instance whose mesh has triangles.
     #[must_use]
     pub fn tlas(&self) -> &Bvh {
@@ -758,9 +842,11 @@ impl Engine {
                     return None;
                 }
                 let local = local_ray(inst, ray, tmax);
-                let h = self.meshes[inst.mesh as usize]
-                    .bvh
-                    .closest_hit_counted(&local, c)?;
+                let m = &self.meshes[inst.mesh as usize];
+                let h = match &m.wide {
+                    Some(w) => w.closest_hit_counted(&local, c),
+                    None => m.bvh.closest_hit_counted(&local, c),
+                }?;
                 best = Some(SceneHit {
                     t: h.t,
                     u: h.u,
@@ -803,10 +889,12 @@ impl Engine {
                         return None;
                     }
                     let local = local_ray(inst, ray, tmax);
-                    self.meshes[inst.mesh as usize]
-                        .bvh
-                        .any_hit_counted(&local, c)
-                        .then_some(0.0)
+                    let m = &self.meshes[inst.mesh as usize];
+                    match &m.wide {
+                        Some(w) => w.any_hit_counted(&local, c),
+                        None => m.bvh.any_hit_counted(&local, c),
+                    }
+                    .then_some(0.0)
                 },
                 top,
             )

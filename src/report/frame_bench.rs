@@ -4,7 +4,9 @@
 use crate::bvh::{BuildParams, TraversalStats};
 use crate::engine::oracle::{self, MeshCosts};
 use crate::engine::source::FrameSource;
-use crate::engine::{Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy};
+use crate::engine::{
+    Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal,
+};
 use crate::geom::{Aabb, Ray};
 use crate::report::rays::camera_rays;
 use serde::Serialize;
@@ -61,6 +63,8 @@ pub struct Options {
     /// Also run the default mesh policy under each top-level tree policy (refit, rebuild, the
     /// configured one) and report what the top-level tree costs.
     pub tlas_compare: bool,
+    /// Which mesh trees the rays walk.
+    pub traversal: Traversal,
 }
 
 impl Default for Options {
@@ -83,6 +87,7 @@ impl Default for Options {
             builder_frames: 8,
             oracle: true,
             tlas_compare: true,
+            traversal: Traversal::DEFAULT,
         }
     }
 }
@@ -419,6 +424,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         build: opts.build,
         policy,
         tlas: opts.tlas,
+        traversal: opts.traversal,
         ..EngineConfig::default()
     };
     let rays = {
@@ -575,6 +581,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 build: *b,
                 policy: Policy::Rebuild,
                 tlas: opts.tlas,
+                traversal: opts.traversal,
                 ..EngineConfig::default()
             };
             let r = run_lockstep(src, &[cfg], &rays, opts, bf).remove(0);

@@ -167,6 +167,18 @@ pub struct WideBvh<const K: usize> {
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
     /// path of each node's child count minus one).
     stack_need: usize,
+    /// Scratch of [`WideBvh::collapse_from`]: the triangle slots under each binary node.
+    ranges: Vec<(u32, u32)>,
+    /// Scratch of the stack-need computation.
+    need: Vec<usize>,
+}
+
+/// After a collapse into a vector that had `before` capacity: when it was empty storage or the
+/// collapse outgrew it, leaves a quarter of headroom for later collapses.
+fn headroom<T>(v: &mut Vec<T>, before: usize) {
+    if before == 0 || v.len() > before {
+        v.reserve_exact(v.len() / 4);
+    }
 }
 
 /// The triangle index of an unused block lane.
@@ -210,53 +222,76 @@ impl<const K: usize> WideBvh<K> {
     /// When the tree has more than [`MAX_WIDE_PRIMS`] triangles.
     #[must_use]
     pub fn from_mesh_bvh(m: &MeshBvh) -> Self {
+        let mut w = Self::default();
+        w.collapse_from(m);
+        w
+    }
+
+    /// [`WideBvh::from_mesh_bvh`] into this tree's storage: the collapse of a rebuilt binary
+    /// tree, which allocates nothing once the storage has grown to the tree's size. The first
+    /// collapse into empty storage (and any that outgrows it) leaves a quarter of headroom in
+    /// the node and block arrays, so later collapses of rebuilds of the same mesh fit.
+    ///
+    /// # Panics
+    /// As [`WideBvh::from_mesh_bvh`].
+    pub fn collapse_from(&mut self, m: &MeshBvh) {
         let () = Self::WIDTH_OK;
         let bvh = &m.bvh;
         assert!(
             bvh.prim_count() <= MAX_WIDE_PRIMS,
             "a wide BVH holds at most {MAX_WIDE_PRIMS} triangles"
         );
-        let mut w = Self {
-            prim_count: bvh.prim_count(),
-            ..Self::default()
-        };
+        let caps = (self.nodes.capacity(), self.blocks.capacity());
+        self.nodes.clear();
+        self.blocks.clear();
+        self.block_indices.clear();
+        self.prim_count = bvh.prim_count();
+        self.stack_need = 0;
         if bvh.nodes().is_empty() {
-            return w;
+            return;
         }
-        let c = Collapse::new(bvh, &m.tris, MERGE);
+        let mut ranges = std::mem::take(&mut self.ranges);
+        let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
         let root = Item::Node(0);
-        let first = if c.fits_leaf(root) {
-            vec![root]
+        if c.fits_leaf(root) {
+            c.node(&[root], &mut self.nodes);
         } else {
-            c.open(root).to_vec()
-        };
-        c.node(first, &mut w.nodes);
+            c.node(&c.open(root), &mut self.nodes);
+        }
+        self.ranges = ranges;
         // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
         // subtree's blocks are contiguous too).
         let prims = bvh.prim_indices();
-        for n in &mut w.nodes {
+        for n in &mut self.nodes {
             for k in 0..K {
                 if let Child::Leaf { first, count } = n.child(k) {
-                    let start = w.blocks.len() as u32;
-                    for chunk in (first..first + count).collect::<Vec<_>>().chunks(4) {
+                    let start = self.blocks.len() as u32;
+                    let end = first + count;
+                    let mut s = first;
+                    while s < end {
                         let mut b = TriBlock::EMPTY;
                         let mut idx = [[UNUSED; 3]; 4];
-                        for (l, &slot) in chunk.iter().enumerate() {
+                        for (l, slot) in (s..end.min(s + 4)).enumerate() {
                             b.set(l, &m.tris[slot as usize]);
                             b.prims[l] = prims[slot as usize];
                             idx[l] = m.leaf_indices[slot as usize];
                         }
-                        w.blocks.push(b);
-                        w.block_indices.push(idx);
+                        self.blocks.push(b);
+                        self.block_indices.push(idx);
+                        s += 4;
                     }
-                    n.child[k] = encode_leaf(start, w.blocks.len() as u32 - start);
+                    n.child[k] = encode_leaf(start, self.blocks.len() as u32 - start);
                 }
             }
         }
-        w.refit_boxes();
-        w.stack_need = w.compute_stack_need();
-        assert!(w.stack_need < traverse::BIG_STACK, "tree too deep");
-        w
+        headroom(&mut self.nodes, caps.0);
+        headroom(&mut self.blocks, caps.1);
+        headroom(&mut self.block_indices, caps.1);
+        self.refit_boxes();
+        let mut need = std::mem::take(&mut self.need);
+        self.stack_need = self.stack_need_with(&mut need);
+        self.need = need;
+        assert!(self.stack_need < traverse::BIG_STACK, "tree too deep");
     }
 
     /// The nodes; node 0 is the root (none for the empty mesh). A leaf child's `first` and
@@ -320,7 +355,14 @@ impl<const K: usize> WideBvh<K> {
     }
 
     fn compute_stack_need(&self) -> usize {
-        let mut need = vec![0usize; self.nodes.len()];
+        self.stack_need_with(&mut Vec::new())
+    }
+
+    /// [`WideBvh::compute_stack_need`] with `need` as scratch.
+    fn stack_need_with(&self, need: &mut Vec<usize>) -> usize {
+        need.clear();
+        need.reserve(self.nodes.capacity());
+        need.resize(self.nodes.len(), 0);
         for i in (0..self.nodes.len()).rev() {
             let n = &self.nodes[i];
             let mut used = 0usize;
@@ -485,15 +527,24 @@ struct Collapse<'a> {
     bvh: &'a Bvh,
     tris: &'a [[Vec3; 3]],
     /// Triangle slots `(first, count)` under each binary node.
-    ranges: Vec<(u32, u32)>,
+    ranges: &'a [(u32, u32)],
     /// Binary subtrees with at most this many triangles may become one leaf lane.
     merge: u32,
 }
 
 impl<'a> Collapse<'a> {
-    fn new(bvh: &'a Bvh, tris: &'a [[Vec3; 3]], merge: u32) -> Self {
+    fn new(
+        bvh: &'a Bvh,
+        tris: &'a [[Vec3; 3]],
+        merge: u32,
+        ranges: &'a mut Vec<(u32, u32)>,
+    ) -> Self {
         let nodes = bvh.nodes();
-        let mut ranges = vec![(0u32, 0u32); nodes.len()];
+        ranges.clear();
+        // Room for the most nodes a binary tree over these triangles has (2n - 1), so that the
+        // collapses of its rebuilds fit.
+        ranges.reserve((2 * bvh.prim_count()).saturating_sub(1));
+        ranges.resize(nodes.len(), (0, 0));
         for (i, n) in nodes.iter().enumerate().rev() {
             ranges[i] = if n.is_leaf() {
                 (n.first, n.count)
@@ -576,11 +627,14 @@ impl<'a> Collapse<'a> {
         }
     }
 
-    /// Writes a wide node over `items` (1 ..= K of them) and its subtree, depth first; returns
+    /// Writes a wide node over `start` (1 ..= K items) and its subtree, depth first; returns
     /// its index. Opens the largest-area openable item until there are `K` items.
-    fn node<const K: usize>(&self, mut items: Vec<Item>, out: &mut Vec<WideNode<K>>) -> u32 {
-        while items.len() < K {
-            let best = items
+    fn node<const K: usize>(&self, start: &[Item], out: &mut Vec<WideNode<K>>) -> u32 {
+        let mut items = [Item::Range(0, 0); K];
+        items[..start.len()].copy_from_slice(start);
+        let mut len = start.len();
+        while len < K {
+            let best = items[..len]
                 .iter()
                 .enumerate()
                 .filter(|(_, it)| self.can_open(**it))
@@ -588,17 +642,19 @@ impl<'a> Collapse<'a> {
                 .max_by(|a, b| a.1.total_cmp(&b.1));
             let Some((k, _)) = best else { break };
             let [a, b] = self.open(items[k]);
+            items.copy_within(k + 1..len, k + 2);
             items[k] = a;
-            items.insert(k + 1, b);
+            items[k + 1] = b;
+            len += 1;
         }
         let idx = out.len();
         out.push(WideNode::EMPTY);
-        for (k, it) in items.into_iter().enumerate() {
+        for (k, &it) in items[..len].iter().enumerate() {
             let child = if self.fits_leaf(it) {
                 let (first, count) = self.slots(it);
                 encode_leaf(first, count)
             } else {
-                self.node(self.open(it).to_vec(), out)
+                self.node(&self.open(it), out)
             };
             out[idx].child[k] = child;
         }

@@ -63,7 +63,7 @@ impl<const K: usize> WideBvh<K> {
                             t,
                             u,
                             v,
-                            prim: self.blocks[slot as usize / 4].prims[slot as usize % 4],
+                            prim: self.slot_prim(slot),
                         });
                     }
                 } else {
@@ -124,6 +124,12 @@ impl<const K: usize> WideBvh<K> {
     /// When the lengths differ, or `rays` is not a whole number of rows of `width`.
     pub fn trace_image_any(&self, rays: &[Ray], width: usize, out: &mut [bool]) {
         trace_tiles(rays, width, out, |r, o| self.any_hit_packet(r, o));
+    }
+
+    /// The triangle index of a packet hit's slot (`4 * block + lane`).
+    #[inline]
+    pub(crate) fn slot_prim(&self, slot: u32) -> u32 {
+        self.blocks[slot as usize / 4].prims[slot as usize % 4]
     }
 
     /// Packet closest-hit traversal of the loaded rays, each from its current `tmax`; hits are

@@ -3,13 +3,13 @@
 //! moved vertices into the blocks and bounding them in the same pass, with the scattered vertex
 //! loads prefetched a few blocks ahead; then every interior lane as the union of its node's
 //! lanes, in one reverse sweep (children come after their parent). On several threads the leaf
-//! pass runs on chunks of nodes in parallel (each chunk owns a contiguous run of blocks).
+//! pass runs on chunks of nodes in parallel (each chunk owns a contiguous run of blocks), split
+//! with `rayon::join`.
 
 use super::lanes::bound_lanes;
 use super::{Child, TriBlock, UNUSED, WideBvh, WideNode};
 use crate::geom::{Aabb, TriMesh};
 use glam::Vec3;
-use rayon::prelude::*;
 
 /// Trees with at least this many nodes refit their leaves in parallel.
 const PARALLEL_NODES: usize = 1 << 11;
@@ -17,7 +17,8 @@ const PARALLEL_NODES: usize = 1 << 11;
 const PREFETCH_BLOCKS: usize = 8;
 
 impl<const K: usize> WideBvh<K> {
-    /// Refits for new vertex positions of the same topology. No allocation on one thread.
+    /// Refits for new vertex positions of the same topology. Allocates nothing itself (on
+    /// several threads, `rayon::join` from outside a pool queues jobs as rayon does).
     ///
     /// # Panics
     /// When `mesh` has another triangle count than the tree, or a vertex index is out of range.
@@ -39,36 +40,14 @@ impl<const K: usize> WideBvh<K> {
         let threads = rayon::current_num_threads();
         if threads > 1 && self.nodes.len() >= PARALLEL_NODES {
             let chunk = self.nodes.len().div_ceil(4 * threads);
-            // Split the blocks where each chunk of nodes starts using them.
-            let mut tasks = Vec::with_capacity(4 * threads);
-            let mut blocks = self.blocks.as_mut_slice();
-            let mut base = 0usize;
-            for nodes in self.nodes.chunks_mut(chunk) {
-                let end = nodes
-                    .iter()
-                    .flat_map(|n| (0..K).map(move |k| n.child(k)))
-                    .filter_map(|c| match c {
-                        Child::Leaf { first, count } => Some((first + count) as usize),
-                        _ => None,
-                    })
-                    .max()
-                    .unwrap_or(base);
-                let (mine, rest) = std::mem::take(&mut blocks).split_at_mut(end - base);
-                tasks.push((nodes, mine, base));
-                blocks = rest;
-                base = end;
-            }
-            let indices = &self.block_indices;
-            tasks.into_par_iter().for_each(|(nodes, blocks, base)| {
-                let mut g = Gather {
-                    positions,
-                    indices,
-                    blocks,
-                    base,
-                    prefetched: 0,
-                };
-                leaf_pass(nodes, &mut g);
-            });
+            par_leaf_pass(
+                &mut self.nodes,
+                &mut self.blocks,
+                0,
+                positions,
+                &self.block_indices,
+                chunk,
+            );
         } else {
             let mut g = Gather {
                 positions,
@@ -183,6 +162,47 @@ fn bound(blocks: &[TriBlock]) -> Aabb {
 }
 
 /// Sets every leaf lane's box, in node order.
+/// The leaf pass over `nodes` (whose leaves own `blocks`, the blocks from `base` on) in
+/// parallel, split in halves with `rayon::join` down to `chunk` nodes: each half's nodes own a
+/// contiguous run of blocks (blocks are given out in node order), found by scanning the first
+/// half's leaves. Allocates nothing.
+fn par_leaf_pass<const K: usize>(
+    nodes: &mut [WideNode<K>],
+    blocks: &mut [TriBlock],
+    base: usize,
+    positions: &[Vec3],
+    indices: &[[[u32; 3]; 4]],
+    chunk: usize,
+) {
+    if nodes.len() <= chunk {
+        let mut g = Gather {
+            positions,
+            indices,
+            blocks,
+            base,
+            prefetched: 0,
+        };
+        leaf_pass(nodes, &mut g);
+        return;
+    }
+    let mid = (nodes.len() / chunk / 2).max(1) * chunk;
+    let (a, b) = nodes.split_at_mut(mid);
+    let end = a
+        .iter()
+        .flat_map(|n| (0..K).map(move |k| n.child(k)))
+        .filter_map(|c| match c {
+            Child::Leaf { first, count } => Some((first + count) as usize),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(base);
+    let (ba, bb) = blocks.split_at_mut(end - base);
+    rayon::join(
+        || par_leaf_pass(a, ba, base, positions, indices, chunk),
+        || par_leaf_pass(b, bb, end, positions, indices, chunk),
+    );
+}
+
 fn leaf_pass<const K: usize>(nodes: &mut [WideNode<K>], leaf: &mut impl LeafBox) {
     for node in nodes.iter_mut() {
         for k in 0..K {

@@ -3,7 +3,7 @@
 //! exactly as a single ray is, through the instance's mesh tree as a packet of their own.
 
 use super::{Engine, InstanceId, SceneHit, local_ray};
-use crate::bvh::{MAX_PACKET, PacketMode, RayPacket};
+use crate::bvh::{MAX_PACKET, PacketMode, RayPacket, with_packet};
 use crate::geom::Ray;
 
 impl Engine {
@@ -29,12 +29,23 @@ impl Engine {
         mode: PacketMode,
     ) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        let mut world = RayPacket::new();
-        let mut local = RayPacket::new();
+        with_packet(|world| {
+            with_packet(|local| self.closest_packets(rays, out, mode, world, local))
+        });
+    }
+
+    fn closest_packets(
+        &self,
+        rays: &[Ray],
+        out: &mut [Option<SceneHit>],
+        mode: PacketMode,
+        world: &mut RayPacket,
+        local: &mut RayPacket,
+    ) {
         let prims = self.tlas.prim_indices();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
             world.load(r);
-            if !mode.use_packet(&world) {
+            if !mode.use_packet(world) {
                 for (r, o) in r.iter().zip(o.iter_mut()) {
                     *o = self.closest_hit(r);
                 }
@@ -42,7 +53,7 @@ impl Engine {
             }
             o.fill(None);
             self.tlas.traverse_packet::<false>(
-                &mut world,
+                world,
                 |_| {},
                 |wp, slot, lanes| {
                     let k = self.tlas_instances[prims[slot] as usize];
@@ -51,8 +62,11 @@ impl Engine {
                         return false;
                     }
                     local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
-                    let mesh = &self.meshes[inst.mesh as usize].bvh;
-                    mesh.closest_packet(&mut local);
+                    let m = &self.meshes[inst.mesh as usize];
+                    match &m.wide {
+                        Some(w) => w.closest_packet(local),
+                        None => m.bvh.closest_packet(local),
+                    }
                     let mut found = local.found();
                     let changed = found != 0;
                     while found != 0 {
@@ -64,7 +78,10 @@ impl Engine {
                                 t,
                                 u,
                                 v,
-                                prim: mesh.bvh().prim_indices()[s as usize],
+                                prim: match &m.wide {
+                                    Some(w) => w.slot_prim(s),
+                                    None => m.bvh.bvh().prim_indices()[s as usize],
+                                },
                                 instance: InstanceId(k),
                             });
                         }
@@ -90,19 +107,28 @@ impl Engine {
     /// When the lengths differ.
     pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        let mut world = RayPacket::new();
-        let mut local = RayPacket::new();
+        with_packet(|world| with_packet(|local| self.any_packets(rays, out, mode, world, local)));
+    }
+
+    fn any_packets(
+        &self,
+        rays: &[Ray],
+        out: &mut [bool],
+        mode: PacketMode,
+        world: &mut RayPacket,
+        local: &mut RayPacket,
+    ) {
         let prims = self.tlas.prim_indices();
         for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
             world.load(r);
-            if !mode.use_packet(&world) {
+            if !mode.use_packet(world) {
                 for (r, o) in r.iter().zip(o.iter_mut()) {
                     *o = self.any_hit(r);
                 }
                 continue;
             }
             self.tlas.traverse_packet::<true>(
-                &mut world,
+                world,
                 |_| {},
                 |wp, slot, lanes| {
                     let k = self.tlas_instances[prims[slot] as usize];
@@ -111,7 +137,11 @@ impl Engine {
                         return false;
                     }
                     local.load_with(wp.len(), lanes, |i| local_ray(inst, wp.ray(i), wp.tmax(i)));
-                    self.meshes[inst.mesh as usize].bvh.any_packet(&mut local);
+                    let m = &self.meshes[inst.mesh as usize];
+                    match &m.wide {
+                        Some(w) => w.any_packet(local),
+                        None => m.bvh.any_packet(local),
+                    }
                     let hit = lanes & !local.active();
                     wp.retire(hit);
                     hit != 0
