@@ -34,17 +34,22 @@ struct Ctx {
     intersection_cost: f32,
     max_leaf_size: usize,
     parallel_threshold: usize,
+    /// The pool's thread count. With one thread no subtree is made a task of its own: the
+    /// whole tree is packed, already in its final order.
+    threads: usize,
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
-/// the root into `desc` and returns the root and the tree's node count.
+/// the root into `desc` and returns the root, the tree's node count, and whether the nodes are
+/// packed (the tree is then `[root, desc[..count - 1]]` as it stands, in its final order:
+/// a build on one thread runs no task and packs every subtree).
 /// `rb` bounds `refs`.
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
     rb: RangeBounds,
     desc: &mut [Node],
-) -> (Node, usize) {
+) -> (Node, usize, bool) {
     let ctx = Ctx {
         bins: p.bins.clamp(2, MAX_BINS),
         all_axes: p.all_axes,
@@ -52,6 +57,7 @@ pub(crate) fn build(
         intersection_cost: p.intersection_cost,
         max_leaf_size: p.max_leaf_size.max(1) as usize,
         parallel_threshold: p.parallel_threshold.max(1),
+        threads: rayon::current_num_threads(),
     };
     let info = Info {
         bounds: rb.bounds,
@@ -72,7 +78,7 @@ pub(crate) fn build(
         0,
         0,
     );
-    (root, desc_count as usize + 1)
+    (root, desc_count as usize + 1, ctx.threads == 1)
 }
 
 /// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
@@ -359,7 +365,7 @@ impl Ctx {
         let (lrefs, rrefs) = refs.split_at_mut(mid);
         let lbase = out.desc_base + 2;
         let rprim = out.prim_offset + mid as u32;
-        let (l, r) = if n >= self.parallel_threshold {
+        let (l, r) = if n >= self.parallel_threshold && self.threads > 1 {
             // The right child becomes a task of its own, with its bins in a stack of its own.
             // (Its stack is taken when the task starts, so that a thread holds one stack per
             // task it has in progress, not one per pending sibling.)
@@ -521,7 +527,7 @@ impl Ctx {
         let goes_left = |r: &PrimRef| (r.bins() >> shift) & 0xff <= bin;
         // The top levels, whose subtrees are still fewer than the threads, partition in
         // parallel blocks, so that every thread has work before there are subtrees for all.
-        let threads = rayon::current_num_threads();
+        let threads = self.threads;
         let (mid, lcb, rcb) = if threads > 1
             && (depth as usize) < usize::BITS as usize - 1
             && (1usize << depth) < threads
