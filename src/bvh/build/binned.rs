@@ -24,7 +24,9 @@ use wide::f32x8;
 
 /// Nodes of at most this many primitives are split by pricing every way to cut them
 /// ([`Ctx::small_node`]) rather than by binning.
-const SMALL: usize = 5;
+const SMALL: usize = 6;
+// `Ctx::small_node` builds its subset boxes from tables over the first three and the rest.
+const _: () = assert!(SMALL >= 3 && SMALL <= 8);
 
 /// The binned builder's settings.
 struct Ctx {
@@ -34,17 +36,22 @@ struct Ctx {
     intersection_cost: f32,
     max_leaf_size: usize,
     parallel_threshold: usize,
+    /// The pool's thread count. With one thread no subtree is made a task of its own: the
+    /// whole tree is packed, already in its final order.
+    threads: usize,
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
-/// the root into `desc` and returns the root and the tree's node count.
+/// the root into `desc` and returns the root, the tree's node count, and whether the nodes are
+/// packed (the tree is then `[root, desc[..count - 1]]` as it stands, in its final order:
+/// a build on one thread runs no task and packs every subtree).
 /// `rb` bounds `refs`.
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
     rb: RangeBounds,
     desc: &mut [Node],
-) -> (Node, usize) {
+) -> (Node, usize, bool) {
     let ctx = Ctx {
         bins: p.bins.clamp(2, MAX_BINS),
         all_axes: p.all_axes,
@@ -52,6 +59,7 @@ pub(crate) fn build(
         intersection_cost: p.intersection_cost,
         max_leaf_size: p.max_leaf_size.max(1) as usize,
         parallel_threshold: p.parallel_threshold.max(1),
+        threads: rayon::current_num_threads(),
     };
     let info = Info {
         bounds: rb.bounds,
@@ -72,7 +80,7 @@ pub(crate) fn build(
         0,
         0,
     );
-    (root, desc_count as usize + 1)
+    (root, desc_count as usize + 1, ctx.threads == 1)
 }
 
 /// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
@@ -287,6 +295,15 @@ impl Drop for Stack {
     }
 }
 
+/// A small node's primitive boxes, the areas of all their subsets (by bit set), and the leaf
+/// order of its primitives as [`Ctx::small_node`] finds it.
+struct Subsets {
+    prims: [f32x8; SMALL],
+    areas: [f32; 1 << SMALL],
+    order: [u8; SMALL],
+    len: usize,
+}
+
 /// A split: `refs[..mid]` go left; both children's [`Info`], their bins filled in the stack's
 /// next level when their maps are set.
 struct Split {
@@ -359,7 +376,7 @@ impl Ctx {
         let (lrefs, rrefs) = refs.split_at_mut(mid);
         let lbase = out.desc_base + 2;
         let rprim = out.prim_offset + mid as u32;
-        let (l, r) = if n >= self.parallel_threshold {
+        let (l, r) = if n >= self.parallel_threshold && self.threads > 1 {
             // The right child becomes a task of its own, with its bins in a stack of its own.
             // (Its stack is taken when the task starts, so that a thread holds one stack per
             // task it has in progress, not one per pending sibling.)
@@ -521,7 +538,7 @@ impl Ctx {
         let goes_left = |r: &PrimRef| (r.bins() >> shift) & 0xff <= bin;
         // The top levels, whose subtrees are still fewer than the threads, partition in
         // parallel blocks, so that every thread has work before there are subtrees for all.
-        let threads = rayon::current_num_threads();
+        let threads = self.threads;
         let (mid, lcb, rcb) = if threads > 1
             && (depth as usize) < usize::BITS as usize - 1
             && (1usize << depth) < threads
@@ -594,95 +611,141 @@ impl Ctx {
 
     /// Builds the subtree of a node of at most [`SMALL`] primitives (bounded by `bounds`),
     /// packed at the start of its slots, by a lean recursion of its own: every way to cut such
-    /// a node in two is priced (3 for 3 primitives, 7 for 4, 15 for 5), which costs less than
-    /// clearing, filling and pricing bins, and finds the best split there is. Returns the
-    /// subtree's root and the number of its descendants.
+    /// a node in two is priced (3 for 3 primitives, 7 for 4, 15 for 5, 31 for 6), which costs less than
+    /// clearing, filling and pricing bins, and finds the best split there is. The areas of all
+    /// subsets of the node's primitives are made once (each box the union of two from tables
+    /// over the first three and the last two primitives) and serve every node below it;
+    /// the references are put in leaf order at the end. Returns the subtree's root and the
+    /// number of its descendants.
     fn small_node(&self, refs: &mut [PrimRef], bounds: Box3, out: Slots<'_>) -> (Node, u32) {
         let n = refs.len();
         debug_assert!((1..=SMALL).contains(&n));
-        let leaf = Node::leaf(bounds.to_aabb(), out.prim_offset, n as u32);
         if n == 1 {
-            return (leaf, 0);
+            return (Node::leaf(bounds.to_aabb(), out.prim_offset, 1), 0);
         }
-        let mut boxes = [EMPTY8; SMALL];
-        for (b, r) in boxes.iter_mut().zip(refs.iter()) {
+        let mut t = Subsets {
+            prims: [EMPTY8; SMALL],
+            areas: [0.0; 1 << SMALL],
+            order: [0; SMALL],
+            len: 0,
+        };
+        for (b, r) in t.prims.iter_mut().zip(refs.iter()) {
             *b = r.packed();
         }
-        // Left sides as bit masks over `refs`; the last primitive always goes right, so each
-        // way to cut is priced once.
-        let (mut best_cost, mut best_mask) = (f32::INFINITY, 0u32);
-        for mask in 1..1u32 << (n - 1) {
-            let (mut l, mut r) = (EMPTY8, EMPTY8);
-            for (i, b) in boxes[..n].iter().enumerate() {
-                if mask >> i & 1 != 0 {
-                    l = l.fast_min(*b);
-                } else {
-                    r = r.fast_min(*b);
-                }
+        // The boxes of the subsets of the first three and of the last two primitives; a
+        // subset's box is the union of one of each.
+        let mut lo = [EMPTY8; 8];
+        for m in 1..1usize << n.min(3) {
+            lo[m] = lo[m & (m - 1)].fast_min(t.prims[m.trailing_zeros() as usize]);
+        }
+        let mut hi = [EMPTY8; 1 << (SMALL - 3)];
+        for m in 1..1usize << n.saturating_sub(3) {
+            hi[m] = hi[m & (m - 1)].fast_min(t.prims[3 + m.trailing_zeros() as usize]);
+        }
+        for m in 1..1usize << n {
+            t.areas[m] = half_area8(lo[m & 7].fast_min(hi[m >> 3]));
+        }
+        let all = (1u32 << n) - 1;
+        t.areas[all as usize] = bounds.half_area();
+        let root = self.small_subtree(&mut t, all, bounds.to_aabb(), out);
+        let mut old = [PrimRef::zeroed(); SMALL];
+        old[..n].copy_from_slice(refs);
+        for (r, &i) in refs.iter_mut().zip(&t.order[..n]) {
+            *r = old[i as usize];
+        }
+        root
+    }
+
+    /// The subtree of [`Ctx::small_node`] over the primitives in the bit set `set`, bounded by
+    /// `bounds`: its leaves' primitives are appended to `t.order`.
+    fn small_subtree(
+        &self,
+        t: &mut Subsets,
+        set: u32,
+        bounds: crate::geom::Aabb,
+        out: Slots<'_>,
+    ) -> (Node, u32) {
+        let n = set.count_ones();
+        let leaf = |t: &mut Subsets| {
+            let mut s = set;
+            while s != 0 {
+                t.order[t.len] = s.trailing_zeros() as u8;
+                t.len += 1;
+                s &= s - 1;
             }
-            let nl = mask.count_ones();
-            let c = half_area8(l) * nl as f32 + half_area8(r) * (n as u32 - nl) as f32;
+            (Node::leaf(bounds, out.prim_offset, n), 0)
+        };
+        if n == 1 {
+            return leaf(t);
+        }
+        // Left sides: the subsets of `set` without its highest primitive (which always goes
+        // right, so that each way to cut is priced once), in increasing order.
+        let rest = set & !(1 << (31 - set.leading_zeros()));
+        let (mut best_cost, mut best) = (f32::INFINITY, 0u32);
+        let mut s = 0u32;
+        loop {
+            s = (s | !rest).wrapping_add(1) & rest;
+            if s == 0 {
+                break;
+            }
+            let nl = s.count_ones();
+            let c = t.areas[s as usize] * nl as f32 + t.areas[(set ^ s) as usize] * (n - nl) as f32;
             if c < best_cost {
                 best_cost = c;
-                best_mask = mask;
+                best = s;
             }
         }
-        let area = bounds.half_area();
+        let area = t.areas[set as usize];
         let split_cost = self.traversal_cost * area + self.intersection_cost * best_cost;
         let leaf_cost = self.intersection_cost * area * n as f32;
         if !best_cost.is_finite() || split_cost >= leaf_cost {
-            if n <= self.max_leaf_size {
-                return (leaf, 0);
+            if n as usize <= self.max_leaf_size {
+                return leaf(t);
             }
             if !best_cost.is_finite() {
-                // No split has a price (infinite areas): cut by count.
-                best_mask = (1 << (n / 2)) - 1;
-            }
-        }
-        // The left side first, each side in its old order.
-        let mut old = [PrimRef::zeroed(); SMALL];
-        old[..n].copy_from_slice(refs);
-        let mid = best_mask.count_ones() as usize;
-        let (mut li, mut ri) = (0, mid);
-        let (mut lb, mut rb) = (EMPTY8, EMPTY8);
-        for (i, r) in old[..n].iter().enumerate() {
-            if best_mask >> i & 1 != 0 {
-                refs[li] = *r;
-                li += 1;
-                lb = lb.fast_min(r.packed());
-            } else {
-                refs[ri] = *r;
-                ri += 1;
-                rb = rb.fast_min(r.packed());
+                // No split has a price (infinite areas): cut by count (the lowest half).
+                best = 0;
+                let mut s = set;
+                for _ in 0..n / 2 {
+                    best |= s & s.wrapping_neg();
+                    s &= s - 1;
+                }
             }
         }
         let (pair, rest) = out.desc.split_at_mut(2);
-        let (lrefs, rrefs) = refs.split_at_mut(mid);
         let lbase = out.desc_base + 2;
-        let l = self.small_node(
-            lrefs,
-            unpack(lb),
+        let union = |mut s: u32| {
+            let mut b = EMPTY8;
+            while s != 0 {
+                b = b.fast_min(t.prims[s.trailing_zeros() as usize]);
+                s &= s - 1;
+            }
+            unpack(b).to_aabb()
+        };
+        let (lbounds, rbounds) = (union(best), union(set ^ best));
+        let l = self.small_subtree(
+            t,
+            best,
+            lbounds,
             Slots {
                 prim_offset: out.prim_offset,
                 desc: &mut *rest,
                 desc_base: lbase,
             },
         );
-        let r = self.small_node(
-            rrefs,
-            unpack(rb),
+        let r = self.small_subtree(
+            t,
+            set ^ best,
+            rbounds,
             Slots {
-                prim_offset: out.prim_offset + mid as u32,
+                prim_offset: out.prim_offset + best.count_ones(),
                 desc: &mut rest[l.1 as usize..],
                 desc_base: lbase + l.1,
             },
         );
         pair[0] = l.0;
         pair[1] = r.0;
-        (
-            Node::interior(bounds.to_aabb(), out.desc_base),
-            2 + l.1 + r.1,
-        )
+        (Node::interior(bounds, out.desc_base), 2 + l.1 + r.1)
     }
 
     /// Bins `refs` with `map` into `bins` (in parallel chunks for large nodes).

@@ -381,17 +381,17 @@ impl Bvh {
         let slots = &mut ws.slots;
         grow_zeroed(slots, 2 * n - 1);
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
-        let count;
-        (root[0], count) = match params.method {
+        let (count, packed);
+        (root[0], count, packed) = match params.method {
             Method::Binned => {
-                let (root, count) = binned::build(params, refs, rb, desc);
-                (root, Some(count))
+                let (root, count, packed) = binned::build(params, refs, rb, desc);
+                (root, Some(count), packed)
             }
             Method::Median => {
                 let m = median::Median(params.max_leaf_size as usize);
-                (build_range(&m, params, refs, rb, desc), None)
+                (build_range(&m, params, refs, rb, desc), None, false)
             }
-            Method::Sweep => (sweep::build(params, refs, desc), None),
+            Method::Sweep => (sweep::build(params, refs, desc), None, false),
         };
         if n >= params.parallel_threshold.saturating_mul(8) {
             // Written in place by parallel chunks.
@@ -404,10 +404,23 @@ impl Bvh {
             // A cold build: no copy into fresh pages.
             let mut slots = std::mem::take(&mut ws.slots);
             slots.truncate(2 * n - 1);
-            compact_in_place(&mut slots, count);
+            if packed {
+                // Already in final order: the tree is the slots' first `count`.
+                slots.truncate(count.unwrap_or(2 * n - 1));
+            } else {
+                compact_in_place(&mut slots, count);
+            }
             let count = slots.len();
             slots.shrink_to((count + count / 8 + 8).min(2 * n - 1));
             self.nodes = slots;
+        } else if let (true, Some(count)) = (packed, count) {
+            debug_assert_eq!(count, count_nodes(&slots[..2 * n - 1], 0));
+            self.nodes.clear();
+            if count > self.nodes.capacity() {
+                self.nodes
+                    .reserve_exact((count + count / 8 + 8).min(2 * n - 1).max(count));
+            }
+            self.nodes.extend_from_slice(&slots[..count]);
         } else {
             compact(&slots[..2 * n - 1], count, &mut self.nodes);
         }
