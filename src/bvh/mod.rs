@@ -25,7 +25,8 @@ pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
 pub use packet::{
-    MAX_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H, TILE_W, image_tiles, is_coherent,
+    COHERENT_COS, MAX_PACKET, MIN_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H,
+    TILE_W, image_tiles, is_coherent,
 };
 pub use traverse::{Counters, TraversalStats};
 pub use wide::{MeshBvh4, MeshBvh8, WideBvh, WideNode};

@@ -828,6 +828,66 @@ pub(crate) fn with_packet<R>(f: impl FnOnce(&mut RayPacket) -> R) -> R {
     r
 }
 
+/// The loop every tree's packet closest-hit query shares: `rays` in packets of up to
+/// [`MAX_PACKET`], each traced by `packet` when `mode` says so (its hits' slots turned into
+/// triangle indices by `prim`), else ray by ray by `single`.
+pub(crate) fn packets_closest(
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+    mode: PacketMode,
+    packet: impl Fn(&mut RayPacket),
+    prim: impl Fn(u32) -> u32,
+    single: impl Fn(&Ray) -> Option<Hit>,
+) {
+    assert_eq!(rays.len(), hits.len(), "one output per ray");
+    with_packet(|p| {
+        for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
+            p.load(r);
+            if mode.use_packet(p) {
+                packet(p);
+                for (i, h) in h.iter_mut().enumerate() {
+                    *h = p.closest(i).map(|(t, u, v, slot)| Hit {
+                        t,
+                        u,
+                        v,
+                        prim: prim(slot),
+                    });
+                }
+            } else {
+                for (r, h) in r.iter().zip(h) {
+                    *h = single(r);
+                }
+            }
+        }
+    });
+}
+
+/// The any-hit twin of [`packets_closest`].
+pub(crate) fn packets_any(
+    rays: &[Ray],
+    out: &mut [bool],
+    mode: PacketMode,
+    packet: impl Fn(&mut RayPacket),
+    single: impl Fn(&Ray) -> bool,
+) {
+    assert_eq!(rays.len(), out.len(), "one output per ray");
+    with_packet(|p| {
+        for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
+            p.load(r);
+            if mode.use_packet(p) {
+                packet(p);
+                for (i, o) in o.iter_mut().enumerate() {
+                    *o = p.occluded(i);
+                }
+            } else {
+                for (r, o) in r.iter().zip(o) {
+                    *o = single(r);
+                }
+            }
+        }
+    });
+}
+
 /// The rays of an image given row by row (`width` rays a row) in tiles ([`image_tiles`]), each
 /// tile's rays gathered and answered by `trace`; `out[i]` answers `rays[i]`.
 ///
@@ -881,27 +941,14 @@ impl MeshBvh {
         hits: &mut [Option<Hit>],
         mode: PacketMode,
     ) {
-        assert_eq!(rays.len(), hits.len(), "one output per ray");
-        with_packet(|p| {
-            for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-                p.load(r);
-                if mode.use_packet(p) {
-                    self.closest_packet(p);
-                    for (i, h) in h.iter_mut().enumerate() {
-                        *h = p.closest(i).map(|(t, u, v, slot)| Hit {
-                            t,
-                            u,
-                            v,
-                            prim: self.bvh.prim_indices()[slot as usize],
-                        });
-                    }
-                } else {
-                    for (r, h) in r.iter().zip(h) {
-                        *h = self.closest_hit(r);
-                    }
-                }
-            }
-        });
+        packets_closest(
+            rays,
+            hits,
+            mode,
+            |p| self.closest_packet(p),
+            |slot| self.bvh.prim_indices()[slot as usize],
+            |r| self.closest_hit(r),
+        );
     }
 
     /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
@@ -918,22 +965,7 @@ impl MeshBvh {
     /// # Panics
     /// When the lengths differ.
     pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        with_packet(|p| {
-            for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-                p.load(r);
-                if mode.use_packet(p) {
-                    self.any_packet(p);
-                    for (i, o) in o.iter_mut().enumerate() {
-                        *o = p.occluded(i);
-                    }
-                } else {
-                    for (r, o) in r.iter().zip(o) {
-                        *o = self.any_hit(r);
-                    }
-                }
-            }
-        });
+        packets_any(rays, out, mode, |p| self.any_packet(p), |r| self.any_hit(r));
     }
 
     /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as

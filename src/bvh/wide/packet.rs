@@ -1,4 +1,4 @@
-//! Packet traversal of the wide tree: up to [`MAX_PACKET`] coherent rays walk a [`WideBvh`]
+//! Packet traversal of the wide tree: up to [`MAX_PACKET`](crate::bvh::MAX_PACKET) coherent rays walk a [`WideBvh`]
 //! together, as they walk the binary tree in `crate::bvh::packet`.
 //!
 //! - An interior node is expanded once for the packet: one interval-arithmetic test of the
@@ -17,8 +17,9 @@
 
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
-use crate::bvh::MAX_PACKET;
-use crate::bvh::packet::{Mask, PacketMode, RayPacket, row8, trace_tiles, with_packet};
+use crate::bvh::packet::{
+    Mask, PacketMode, RayPacket, packets_any, packets_closest, row8, trace_tiles,
+};
 use crate::geom::{Hit, Ray};
 use crate::simd::packet::LANES;
 use wide::f32x8;
@@ -32,7 +33,7 @@ type Entry = (u32, u32, u8, u8);
 
 impl<const K: usize> WideBvh<K> {
     /// Closest hits of `rays` (`hits[i]` for `rays[i]`), traced as packets of up to
-    /// [`MAX_PACKET`] consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
+    /// [`MAX_PACKET`](crate::bvh::MAX_PACKET) consecutive rays: give coherent rays next to each other (e.g. a 16x8 tile
     /// of a camera image; [`WideBvh::trace_image_closest`] does the tiling). Exactly the hits of
     /// [`WideBvh::closest_hit`]; packets that are not coherent are traced ray by ray.
     ///
@@ -52,30 +53,17 @@ impl<const K: usize> WideBvh<K> {
         hits: &mut [Option<Hit>],
         mode: PacketMode,
     ) {
-        assert_eq!(rays.len(), hits.len(), "one output per ray");
-        with_packet(|p| {
-            for (r, h) in rays.chunks(MAX_PACKET).zip(hits.chunks_mut(MAX_PACKET)) {
-                p.load(r);
-                if mode.use_packet(p) {
-                    self.closest_packet(p);
-                    for (i, h) in h.iter_mut().enumerate() {
-                        *h = p.closest(i).map(|(t, u, v, slot)| Hit {
-                            t,
-                            u,
-                            v,
-                            prim: self.slot_prim(slot),
-                        });
-                    }
-                } else {
-                    for (r, h) in r.iter().zip(h) {
-                        *h = self.closest_hit(r);
-                    }
-                }
-            }
-        });
+        packets_closest(
+            rays,
+            hits,
+            mode,
+            |p| self.closest_packet(p),
+            |slot| self.slot_prim(slot),
+            |r| self.closest_hit(r),
+        );
     }
 
-    /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`]
+    /// Any-hit answers of `rays` (`out[i]` for `rays[i]`), as packets of up to [`MAX_PACKET`](crate::bvh::MAX_PACKET)
     /// consecutive rays; exactly the answers of [`WideBvh::any_hit`].
     ///
     /// # Panics
@@ -89,22 +77,7 @@ impl<const K: usize> WideBvh<K> {
     /// # Panics
     /// When the lengths differ.
     pub fn any_hit_packet_mode(&self, rays: &[Ray], out: &mut [bool], mode: PacketMode) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        with_packet(|p| {
-            for (r, o) in rays.chunks(MAX_PACKET).zip(out.chunks_mut(MAX_PACKET)) {
-                p.load(r);
-                if mode.use_packet(p) {
-                    self.any_packet(p);
-                    for (i, o) in o.iter_mut().enumerate() {
-                        *o = p.occluded(i);
-                    }
-                } else {
-                    for (r, o) in r.iter().zip(o) {
-                        *o = self.any_hit(r);
-                    }
-                }
-            }
-        });
+        packets_any(rays, out, mode, |p| self.any_packet(p), |r| self.any_hit(r));
     }
 
     /// Closest hits of a camera image's rays given row by row (`width` rays a row), traced as
