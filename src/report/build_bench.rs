@@ -111,37 +111,44 @@ fn image_side(rays: &[crate::geom::Ray]) -> Option<usize> {
     (side * side == rays.len() && side > 0).then_some(side)
 }
 
-/// Closest hits of the whole set through packets, in parallel bands of tiles (a square image
-/// in tiles, else runs of `MAX_PACKET` consecutive rays).
-fn packet_closest(set: &RaySet, bvh: &MeshBvh) -> Vec<Option<Hit>> {
-    let mut hits = vec![None; set.rays.len()];
-    match image_side(&set.rays) {
-        Some(w) => hits
-            .par_chunks_mut(TILE_H * w)
-            .zip(set.rays.par_chunks(TILE_H * w))
-            .for_each(|(h, r)| bvh.trace_image_closest(r, w, h)),
-        None => hits
-            .par_chunks_mut(4096)
-            .zip(set.rays.par_chunks(4096))
-            .for_each(|(h, r)| bvh.closest_hit_packet(r, h)),
-    }
-    hits
-}
-
-/// Any-hit answers of the whole set through packets, as [`packet_closest`].
-fn packet_any(set: &RaySet, bvh: &MeshBvh) -> Vec<bool> {
-    let mut out = vec![false; set.rays.len()];
-    match image_side(&set.rays) {
+/// Answers for the whole set through a tree's packet queries, in parallel bands: a square image
+/// in bands of [`TILE_H`] rows through `image` (which tiles them), else runs of 4096
+/// consecutive rays through `run` (packets of consecutive rays).
+pub(super) fn trace_in_packets<T: Copy + Default + Send>(
+    rays: &[crate::geom::Ray],
+    image: impl Fn(&[crate::geom::Ray], usize, &mut [T]) + Sync,
+    run: impl Fn(&[crate::geom::Ray], &mut [T]) + Sync,
+) -> Vec<T> {
+    let mut out = vec![T::default(); rays.len()];
+    match image_side(rays) {
         Some(w) => out
             .par_chunks_mut(TILE_H * w)
-            .zip(set.rays.par_chunks(TILE_H * w))
-            .for_each(|(o, r)| bvh.trace_image_any(r, w, o)),
+            .zip(rays.par_chunks(TILE_H * w))
+            .for_each(|(o, r)| image(r, w, o)),
         None => out
             .par_chunks_mut(4096)
-            .zip(set.rays.par_chunks(4096))
-            .for_each(|(o, r)| bvh.any_hit_packet(r, o)),
+            .zip(rays.par_chunks(4096))
+            .for_each(|(o, r)| run(r, o)),
     }
     out
+}
+
+/// Closest hits of the whole set through the binary tree's packets.
+fn packet_closest(set: &RaySet, bvh: &MeshBvh) -> Vec<Option<Hit>> {
+    trace_in_packets(
+        &set.rays,
+        |r, w, h| bvh.trace_image_closest(r, w, h),
+        |r, h| bvh.closest_hit_packet(r, h),
+    )
+}
+
+/// Any-hit answers of the whole set through the binary tree's packets.
+fn packet_any(set: &RaySet, bvh: &MeshBvh) -> Vec<bool> {
+    trace_in_packets(
+        &set.rays,
+        |r, w, o| bvh.trace_image_any(r, w, o),
+        |r, o| bvh.any_hit_packet(r, o),
+    )
 }
 
 /// Traces the set as packets in parallel and returns Mrays/s; `any`: any hit, else closest.

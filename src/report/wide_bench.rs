@@ -1,9 +1,9 @@
 //! The wide-tree rows of `build-bench`: BVH4 and BVH8 collapsed from one binary tree, with
 //! collapse time, refit time, size, trace speed and agreement with brute force.
 
-use super::build_bench::Options;
+use super::build_bench::{Options, trace_in_packets};
 use super::rays::RaySet;
-use crate::bvh::{BuildParams, MeshBvh, TILE_H, WideBvh, brute_force_closest};
+use crate::bvh::{BuildParams, MeshBvh, WideBvh, brute_force_closest};
 use crate::geom::{Hit, Ray, TriMesh};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -72,43 +72,22 @@ fn trace_mrays(rays: &[Ray], f: impl Fn(&Ray) -> bool + Sync) -> f64 {
     rays.len() as f64 / (ms * 1e3)
 }
 
-/// Side of the square image a ray set is, if it is one (camera sets are rows of pixels).
-fn image_side(rays: &[Ray]) -> Option<usize> {
-    let side = (rays.len() as f64).sqrt().round() as usize;
-    (side * side == rays.len() && side > 0).then_some(side)
-}
-
-/// Closest hits of the whole set through the wide tree's packets, in parallel bands of tiles
-/// (a square image in tiles, else runs of 4096 consecutive rays in packets of 128).
+/// Closest hits of the whole set through the wide tree's packets.
 fn packet_closest<const K: usize>(rays: &[Ray], w: &WideBvh<K>) -> Vec<Option<Hit>> {
-    let mut hits = vec![None; rays.len()];
-    match image_side(rays) {
-        Some(side) => hits
-            .par_chunks_mut(TILE_H * side)
-            .zip(rays.par_chunks(TILE_H * side))
-            .for_each(|(h, r)| w.trace_image_closest(r, side, h)),
-        None => hits
-            .par_chunks_mut(4096)
-            .zip(rays.par_chunks(4096))
-            .for_each(|(h, r)| w.closest_hit_packet(r, h)),
-    }
-    hits
+    trace_in_packets(
+        rays,
+        |r, side, h| w.trace_image_closest(r, side, h),
+        |r, h| w.closest_hit_packet(r, h),
+    )
 }
 
-/// Any-hit answers of the whole set through the wide tree's packets, as [`packet_closest`].
+/// Any-hit answers of the whole set through the wide tree's packets.
 fn packet_any<const K: usize>(rays: &[Ray], w: &WideBvh<K>) -> Vec<bool> {
-    let mut out = vec![false; rays.len()];
-    match image_side(rays) {
-        Some(side) => out
-            .par_chunks_mut(TILE_H * side)
-            .zip(rays.par_chunks(TILE_H * side))
-            .for_each(|(o, r)| w.trace_image_any(r, side, o)),
-        None => out
-            .par_chunks_mut(4096)
-            .zip(rays.par_chunks(4096))
-            .for_each(|(o, r)| w.any_hit_packet(r, o)),
-    }
-    out
+    trace_in_packets(
+        rays,
+        |r, side, o| w.trace_image_any(r, side, o),
+        |r, o| w.any_hit_packet(r, o),
+    )
 }
 
 /// Builds the binary tree with `params`, collapses it into BVH4 and BVH8, and measures both on
