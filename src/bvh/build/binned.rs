@@ -642,8 +642,26 @@ impl Ctx {
         for m in 1..1usize << n.saturating_sub(3) {
             hi[m] = hi[m & (m - 1)].fast_min(t.prims[3 + m.trailing_zeros() as usize]);
         }
-        for m in 1..1usize << n {
-            t.areas[m] = half_area8(lo[m & 7].fast_min(hi[m >> 3]));
+        // Eight subsets at a time: the table over the first three, transposed, each coordinate
+        // of its eight boxes in one vector, against one box of the last primitives.
+        let lo_t: [f32x8; 6] = std::array::from_fn(|c| {
+            let c = if c < 3 { c } else { c + 1 };
+            f32x8::new(std::array::from_fn(|m| lo[m].as_array()[c]))
+        });
+        let zero = f32x8::splat(0.0);
+        for (h, areas) in hi[..1 << n.saturating_sub(3)]
+            .iter()
+            .zip(t.areas.chunks_exact_mut(8))
+        {
+            let h = h.as_array();
+            let side = |c: usize| {
+                let min = lo_t[c].fast_min(f32x8::splat(h[c]));
+                let nmax = lo_t[c + 3].fast_min(f32x8::splat(h[c + 4]));
+                // max - min = -(-max + min), as `half_area8` has it
+                (-(nmax + min)).fast_max(zero)
+            };
+            let (x, y, z) = (side(0), side(1), side(2));
+            areas.copy_from_slice(&(x * y + y * z + z * x).to_array());
         }
         let all = (1u32 << n) - 1;
         t.areas[all as usize] = bounds.half_area();
