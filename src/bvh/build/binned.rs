@@ -295,11 +295,25 @@ impl Drop for Stack {
     }
 }
 
+/// The number of primitives in each subset of a small node, by bit set.
+const SUBSET_COUNTS: [f32; 1 << SMALL] = {
+    let mut c = [0.0; 1 << SMALL];
+    let mut m = 0;
+    while m < c.len() {
+        c[m] = (m as u32).count_ones() as f32;
+        m += 1;
+    }
+    c
+};
+
 /// A small node's primitive boxes, the areas of all their subsets (by bit set), and the leaf
 /// order of its primitives as [`Ctx::small_node`] finds it.
 struct Subsets {
     prims: [f32x8; SMALL],
     areas: [f32; 1 << SMALL],
+    /// Each subset's area times its primitive count: a cut's price is the sum of its two
+    /// sides'.
+    weighted: [f32; 1 << SMALL],
     order: [u8; SMALL],
     len: usize,
 }
@@ -626,6 +640,7 @@ impl Ctx {
         let mut t = Subsets {
             prims: [EMPTY8; SMALL],
             areas: [0.0; 1 << SMALL],
+            weighted: [0.0; 1 << SMALL],
             order: [0; SMALL],
             len: 0,
         };
@@ -649,9 +664,11 @@ impl Ctx {
             f32x8::new(std::array::from_fn(|m| lo[m].as_array()[c]))
         });
         let zero = f32x8::splat(0.0);
-        for (h, areas) in hi[..1 << n.saturating_sub(3)]
+        for (((h, areas), weighted), counts) in hi[..1 << n.saturating_sub(3)]
             .iter()
             .zip(t.areas.chunks_exact_mut(8))
+            .zip(t.weighted.chunks_exact_mut(8))
+            .zip(SUBSET_COUNTS.chunks_exact(8))
         {
             let h = h.as_array();
             let side = |c: usize| {
@@ -661,10 +678,13 @@ impl Ctx {
                 (-(nmax + min)).fast_max(zero)
             };
             let (x, y, z) = (side(0), side(1), side(2));
-            areas.copy_from_slice(&(x * y + y * z + z * x).to_array());
+            let a = x * y + y * z + z * x;
+            areas.copy_from_slice(&a.to_array());
+            weighted.copy_from_slice(&(a * f32x8::new(counts.try_into().unwrap())).to_array());
         }
         let all = (1u32 << n) - 1;
         t.areas[all as usize] = bounds.half_area();
+        t.weighted[all as usize] = t.areas[all as usize] * n as f32;
         let root = self.small_subtree(&mut t, all, bounds.to_aabb(), out);
         let mut old = [PrimRef::zeroed(); SMALL];
         old[..n].copy_from_slice(refs);
@@ -706,8 +726,7 @@ impl Ctx {
             if s == 0 {
                 break;
             }
-            let nl = s.count_ones();
-            let c = t.areas[s as usize] * nl as f32 + t.areas[(set ^ s) as usize] * (n - nl) as f32;
+            let c = t.weighted[s as usize] + t.weighted[(set ^ s) as usize];
             if c < best_cost {
                 best_cost = c;
                 best = s;
