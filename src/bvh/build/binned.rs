@@ -20,7 +20,7 @@ use super::{
 use bytemuck::Zeroable;
 use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
-use wide::f32x8;
+use wide::{f32x8, i32x8};
 
 /// Nodes of at most this many primitives are split by pricing every way to cut them
 /// ([`Ctx::small_node`]) rather than by binning.
@@ -83,21 +83,58 @@ pub(crate) fn build(
     (root, desc_count as usize + 1, ctx.threads == 1)
 }
 
-/// Bins on the three axes: boxes (as [`PrimRef::packed`]: `[min, -max]`, so that growing one
-/// is a single lane-wise minimum) and counts; only the first `k` of each axis are in use.
+/// Bins on the three axes, each one vector: its box in the `[min, -max]` form of
+/// [`PrimRef::packed`] (lanes 0-2 and 4-6, so that growing it is a single lane-wise minimum) and
+/// its count, as integer bits, in lane 7 (lane 3 is junk); only the first `k` of each axis are
+/// in use.
 #[derive(Clone, Copy)]
 struct Bins {
     b: [[f32x8; MAX_BINS]; 3],
-    n: [[u32; MAX_BINS]; 3],
 }
 
 /// The empty box in `[min, -max]` form.
 const EMPTY8: f32x8 = f32x8::new([f32::INFINITY; 8]);
 
-const EMPTY_BINS: Bins = Bins {
-    b: [[EMPTY8; MAX_BINS]; 3],
-    n: [[0; MAX_BINS]; 3],
+/// An empty bin: the empty box, count 0.
+const EMPTY_BIN: f32x8 = {
+    let mut v = [f32::INFINITY; 8];
+    v[7] = 0.0;
+    f32x8::new(v)
 };
+
+/// Added to a bin's integer bits, adds 1 to its count and nothing elsewhere.
+const COUNT_ONE: i32x8 = i32x8::new([0, 0, 0, 0, 0, 0, 0, 1]);
+
+/// Selects a bin's count lane from its integer bits.
+const COUNT_MASK: i32x8 = i32x8::new([0, 0, 0, 0, 0, 0, 0, -1]);
+
+/// A lane-wise maximum with this keeps a box's lanes and makes lane 7 `+inf`, so that a minimum
+/// of a bin with the result leaves the bin's count as it is (a count's bits, as a float, are
+/// below infinity).
+const KEEP_COUNT: f32x8 = {
+    let mut v = [f32::NEG_INFINITY; 8];
+    v[7] = f32::INFINITY;
+    f32x8::new(v)
+};
+
+const EMPTY_BINS: Bins = Bins {
+    b: [[EMPTY_BIN; MAX_BINS]; 3],
+};
+
+/// A bin's count.
+#[inline(always)]
+fn count_of(bin: f32x8) -> u32 {
+    bin.as_array()[7].to_bits()
+}
+
+/// The union of two bins: the box around both, the sum of their counts.
+#[inline(always)]
+fn merge_bin(a: f32x8, b: f32x8) -> f32x8 {
+    let counts: f32x8 = bytemuck::cast(
+        bytemuck::cast::<_, i32x8>(a) + (bytemuck::cast::<_, i32x8>(b) & COUNT_MASK),
+    );
+    counts.fast_min(b.fast_max(KEEP_COUNT))
+}
 
 /// A `[min, -max]` box as a [`Box3`].
 #[inline(always)]
@@ -121,27 +158,20 @@ fn half_area8(v: f32x8) -> f32 {
 impl Bins {
     fn clear(&mut self, k: usize) {
         for a in 0..3 {
-            self.b[a][..k].fill(EMPTY8);
-            self.n[a][..k].fill(0);
+            self.b[a][..k].fill(EMPTY_BIN);
         }
     }
 
     fn merge_from(&mut self, o: &Bins, k: usize) {
         for a in 0..3 {
             for i in 0..k {
-                self.b[a][i] = self.b[a][i].fast_min(o.b[a][i]);
-                self.n[a][i] += o.n[a][i];
+                self.b[a][i] = merge_bin(self.b[a][i], o.b[a][i]);
             }
         }
     }
 
     fn merge(mut self, o: &Bins, k: usize) -> Bins {
-        for a in 0..3 {
-            for i in 0..k {
-                self.b[a][i] = self.b[a][i].fast_min(o.b[a][i]);
-                self.n[a][i] += o.n[a][i];
-            }
-        }
+        self.merge_from(o, k);
         self
     }
 
@@ -149,16 +179,17 @@ impl Bins {
     /// centroid.
     #[inline(always)]
     fn add(&mut self, r: &mut PrimRef, map: &BinMap) -> Vec3A {
-        let p = r.packed();
+        let p = r.packed().fast_max(KEEP_COUNT);
         let c2 = r.c2();
         let [ix, iy, iz] = map.index(c2);
         r.set_bins(ix as u32 | (iy as u32) << 8 | (iz as u32) << 16);
-        self.b[0][ix] = self.b[0][ix].fast_min(p);
-        self.b[1][iy] = self.b[1][iy].fast_min(p);
-        self.b[2][iz] = self.b[2][iz].fast_min(p);
-        self.n[0][ix] += 1;
-        self.n[1][iy] += 1;
-        self.n[2][iz] += 1;
+        let grow = |bin: f32x8| {
+            let bumped: f32x8 = bytemuck::cast(bytemuck::cast::<_, i32x8>(bin) + COUNT_ONE);
+            bumped.fast_min(p)
+        };
+        self.b[0][ix] = grow(self.b[0][ix]);
+        self.b[1][iy] = grow(self.b[1][iy]);
+        self.b[2][iz] = grow(self.b[2][iz]);
         c2
     }
 }
@@ -474,12 +505,12 @@ impl Ctx {
         let mut best = (f32::INFINITY, 0usize, 0usize);
         let mut right_cost = [0f32; MAX_BINS];
         for axis in (0..3).filter(|&a| map.usable(a)) {
-            let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
+            let bx = &bins.b[axis][..k];
             let mut acc = EMPTY8;
             let mut count = 0u32;
             for i in (1..k).rev() {
                 acc = acc.fast_min(bx[i]);
-                count += bn[i];
+                count += count_of(bx[i]);
                 let c = half_area8(acc) * count as f32;
                 right_cost[i - 1] = if count == 0 { f32::INFINITY } else { c };
             }
@@ -488,7 +519,7 @@ impl Ctx {
             let (mut best_cost, mut best_bin) = (f32::INFINITY, 0);
             for i in 0..k - 1 {
                 acc = acc.fast_min(bx[i]);
-                count += bn[i];
+                count += count_of(bx[i]);
                 let c = half_area8(acc) * count as f32 + right_cost[i];
                 let c = if count == 0 { f32::INFINITY } else { c };
                 // Branch-free: which candidate wins is unpredictable.
@@ -513,10 +544,10 @@ impl Ctx {
 
         // The children: boxes and counts from the bins, predicted maps, then the partition
         // bins them.
-        let (bx, bn) = (&bins.b[axis][..k], &bins.n[axis][..k]);
+        let bx = &bins.b[axis][..k];
         let union = |b: &[f32x8]| unpack(b.iter().fold(EMPTY8, |acc, b| acc.fast_min(*b)));
         let (lb, rb) = (union(&bx[..=bin]), union(&bx[bin + 1..]));
-        let nl = bn[..=bin].iter().sum::<u32>() as usize;
+        let nl = bx[..=bin].iter().map(|&b| count_of(b)).sum::<u32>() as usize;
         let nr = n - nl;
         // The centroid boundary between the two sides on the split axis (its bins are noted in
         // each primitive, so the partition does not depend on rounding here).
