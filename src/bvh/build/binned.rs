@@ -750,19 +750,25 @@ impl Ctx {
         // Left sides: the subsets of `set` without its highest primitive (which always goes
         // right, so that each way to cut is priced once), in increasing order.
         let rest = set & !(1 << (31 - set.leading_zeros()));
-        let (mut best_cost, mut best) = (f32::INFINITY, 0u32);
-        let mut s = 0u32;
-        loop {
-            s = (s | !rest).wrapping_add(1) & rest;
-            if s == 0 {
-                break;
+        let (best_cost, mut best) = if n >= 4 && set == (1 << n) - 1 {
+            // The whole node: its cuts are priced eight at a time.
+            best_cut_of_all(&t.weighted, n)
+        } else {
+            let (mut best_cost, mut best) = (f32::INFINITY, 0u32);
+            let mut s = 0u32;
+            loop {
+                s = (s | !rest).wrapping_add(1) & rest;
+                if s == 0 {
+                    break;
+                }
+                let c = t.weighted[s as usize] + t.weighted[(set ^ s) as usize];
+                if c < best_cost {
+                    best_cost = c;
+                    best = s;
+                }
             }
-            let c = t.weighted[s as usize] + t.weighted[(set ^ s) as usize];
-            if c < best_cost {
-                best_cost = c;
-                best = s;
-            }
-        }
+            (best_cost, best)
+        };
         let area = t.areas[set as usize];
         let split_cost = self.traversal_cost * area + self.intersection_cost * best_cost;
         let leaf_cost = self.intersection_cost * area * n as f32;
@@ -838,6 +844,37 @@ impl Ctx {
             }
         }
     }
+}
+
+/// The cheapest cut of a whole small node of `n` primitives (`4 <= n <= SMALL`), as the scalar
+/// search in [`Ctx::small_subtree`] finds it (the first of the cheapest left sides `s`, taken in
+/// increasing order without the highest primitive), from each subset's area times count:
+/// the price of `s` is `weighted[s] + weighted[all - s]`, eight values of `s` at a time.
+fn best_cut_of_all(weighted: &[f32; 1 << SMALL], n: u32) -> (f32, u32) {
+    let all = (1usize << n) - 1;
+    let chunks = (1usize << (n - 1)) / 8;
+    // `s = 0` (no cut) is priced at infinity.
+    let no_cut = f32x8::new([f32::INFINITY, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let mut costs = [EMPTY8; 1 << (SMALL - 4)];
+    let mut least = EMPTY8;
+    for (c, cost) in costs.iter_mut().enumerate().take(chunks) {
+        let left: [f32; 8] = weighted[8 * c..8 * c + 8].try_into().unwrap();
+        let mut right: [f32; 8] = weighted[all - 8 * c - 7..=all - 8 * c].try_into().unwrap();
+        right.reverse();
+        *cost = f32x8::new(left) + f32x8::new(right);
+        if c == 0 {
+            *cost += no_cut;
+        }
+        least = least.fast_min(*cost);
+    }
+    let best_cost = least.to_array().into_iter().fold(f32::INFINITY, f32::min);
+    for (c, cost) in costs.iter().enumerate().take(chunks) {
+        let hits = cost.simd_eq(f32x8::splat(best_cost)).to_bitmask();
+        if hits != 0 {
+            return (best_cost, (8 * c as u32) + hits.trailing_zeros());
+        }
+    }
+    (f32::INFINITY, 0)
 }
 
 /// Partitions `refs` in place by `goes_left` (Hoare: each reference is classified once), and
