@@ -95,6 +95,8 @@ struct BenchRow {
     frame: usize,
     action: String,
     build_ms: f64,
+    primary: u64,
+    shadow: u64,
     work_per_px: String,
     max_work: u64,
 }
@@ -107,15 +109,16 @@ fn bench_rows(out: &str, policy: &str) -> Vec<BenchRow> {
         .filter(|l| !l.trim_start().starts_with("frame"))
         .map(|l| {
             let c: Vec<&str> = l.split_whitespace().collect();
-            // frame action build_ms ... work/px max_work
-            let n = c.len();
-            assert!(n >= 5, "{l}");
+            // frame action build pose update normals trace total primary shadow SAH work max
+            assert_eq!(c.len(), 13, "{l}");
             BenchRow {
                 frame: c[0].parse().unwrap(),
                 action: c[1].to_string(),
                 build_ms: c[2].parse().unwrap(),
-                work_per_px: c[n - 2].to_string(),
-                max_work: c[n - 1].parse().unwrap(),
+                primary: c[8].parse().unwrap(),
+                shadow: c[9].parse().unwrap(),
+                work_per_px: c[11].to_string(),
+                max_work: c[12].parse().unwrap(),
             }
         })
         .collect()
@@ -389,4 +392,52 @@ fn the_files_camera_is_found_and_used() {
         assert!(&img == cli, "{what}: the command rendered another picture");
     }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bench_prints_the_ray_counts_and_what_it_averaged() {
+    let tube = animation("tube.glb");
+    let args = [
+        "render", &tube, "--frames", "3..8", "--fps", "12", "--size", "48x36", "--bench",
+    ];
+    for shadows in [true, false] {
+        let mut a = args.to_vec();
+        if shadows {
+            a.push("--shadows");
+        }
+        let out = ok(&dynbvh(&a));
+        let rows = bench_rows(&out, "amortized");
+        assert_eq!(rows.len(), 5, "{out}");
+        for r in &rows {
+            assert_eq!(r.primary, 48 * 36, "one primary ray per pixel: {r:?}");
+            if shadows {
+                // One from each lit point only: not from the sky or from surfaces turned away.
+                assert!(r.shadow > 0 && r.shadow < r.primary, "{r:?}");
+            } else {
+                assert_eq!(r.shadow, 0, "{r:?}");
+            }
+        }
+        let shadow_mean = rows[1..].iter().map(|r| r.shadow as f64).sum::<f64>() / 4.0;
+        let summary = out
+            .lines()
+            .find(|l| l.starts_with("amortized: "))
+            .unwrap_or_else(|| panic!("a summary line:\n{out}"));
+        assert!(
+            summary.contains(
+                "mean of the 4 frames after the first (frame 3, a fresh build, excluded)"
+            ),
+            "{summary}"
+        );
+        assert!(
+            summary.contains(&format!(
+                "rays/frame: 1728 primary (one per pixel) + {shadow_mean:.0} shadow ("
+            )),
+            "{summary}"
+        );
+        assert_eq!(
+            summary.contains("none without --shadows"),
+            !shadows,
+            "{summary}"
+        );
+    }
 }

@@ -67,7 +67,9 @@ pub struct RenderArgs {
     /// Render every frame under two policies side by side (e.g. refit,rebuild).
     #[arg(long, value_name = "P1,P2")]
     pub compare: Option<String>,
-    /// Measure only: render without writing images and print each frame's timings.
+    /// Measure only: render without writing images; print each frame's timings and ray counts
+    /// (primary, shadow), then their means over the frames after the first (whose fresh build
+    /// is left out).
     #[arg(long)]
     pub bench: bool,
     /// Worker threads (default: all cores).
@@ -326,11 +328,11 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
     for (k, (name, t)) in s.timings.iter().enumerate() {
         if per_frame {
             println!(
-                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms   rays  SAH ratio  work/px  max work"
+                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms  primary  shadow  SAH ratio  work/px  max work"
             );
             for f in t {
                 println!(
-                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:6}  {:9.3}  {:7.1}  {:8}",
+                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:7}  {:6}  {:9.3}  {:7.1}  {:8}",
                     f.frame,
                     f.action.name(),
                     f.build_ms,
@@ -339,7 +341,8 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
                     f.normals_ms,
                     f.trace_ms,
                     f.total_ms,
-                    f.counts.primary + f.counts.shadow,
+                    f.counts.primary,
+                    f.counts.shadow,
                     f.sah_ratio,
                     f.counts.work_per_pixel(),
                     f.counts.max_work
@@ -349,10 +352,26 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
         let steady = if t.len() > 1 { &t[1..] } else { &t[..] };
         let n = steady.len().max(1) as f64;
         let mean = |g: fn(&FrameTiming) -> f64| steady.iter().map(g).sum::<f64>() / n;
-        let rays = mean(|f| (f.counts.primary + f.counts.shadow) as f64);
+        let primary = mean(|f| f.counts.primary as f64);
+        let shadow = mean(|f| f.counts.shadow as f64);
         let trace = mean(|f| f.trace_ms);
+        let averaged = if t.len() > 1 {
+            format!(
+                "mean of the {} frame{} after the first (frame {}, a fresh build, excluded)",
+                steady.len(),
+                if steady.len() == 1 { "" } else { "s" },
+                s.range.0
+            )
+        } else {
+            "the only frame, a fresh build".to_string()
+        };
+        let shadow_note = if shadow > 0.0 {
+            "one from each lit point: front-facing surface or ground"
+        } else {
+            "none without --shadows"
+        };
         println!(
-            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps (pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame over frames after the first; {:.0} rays/frame, {:.1} Mrays/s)",
+            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps, pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame ({averaged}); rays/frame: {:.0} primary (one per pixel) + {:.0} shadow ({shadow_note}) = {:.0}, {:.1} Mrays/s while tracing",
             t.len(),
             s.range.0,
             s.range.1,
@@ -365,9 +384,11 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
             mean(|f| f.normals_ms),
             trace,
             mean(|f| f.total_ms),
-            rays,
+            primary,
+            shadow,
+            primary + shadow,
             if trace > 0.0 {
-                rays / (trace * 1e3)
+                (primary + shadow) / (trace * 1e3)
             } else {
                 0.0
             },
