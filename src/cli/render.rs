@@ -47,6 +47,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub gif: bool,
     /// Colour pixels by traversal work (nodes visited + triangles tested) instead of shading.
+    /// Heat maps trace each ray on its own (the work counted is a single ray's), whereas shaded
+    /// frames trace packets (--packets does not apply).
     #[arg(long)]
     pub heatmap: bool,
     /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
@@ -76,6 +78,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
+    /// Shaded frames only: heat maps trace ray by ray.
     #[arg(long, value_name = "WHICH", default_value = "both")]
     pub packets: String,
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones;
