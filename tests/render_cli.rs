@@ -1,10 +1,18 @@
-//! The `render` command end to end: numbered PNGs and a GIF, frame ranges that join up (each
-//! starts with a fresh build, the camera does not depend on the range), errors for ranges
-//! beyond the animation, and the file's own camera.
+//! The `render` command end to end: numbered PNGs and a GIF (decoded: its frames and size),
+//! frame ranges that join up (each starts with a fresh build, the camera does not depend on the
+//! range), heat maps of two policies side by side with their legends, errors for ranges beyond
+//! the animation, and the file's own camera.
 
 use dynbvh::anim::Scene;
-use dynbvh::render::{Camera, Projection, gltf_cameras};
+use dynbvh::engine::EngineConfig;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::source::FrameSource;
+use dynbvh::render::{
+    Camera, EngineShading, Projection, Renderer, Settings, Stage, animation_bounds, gltf_cameras,
+};
 use glam::Vec3;
+use image::codecs::gif::GifDecoder;
+use image::{AnimationDecoder, RgbImage};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -66,10 +74,100 @@ fn split_ranges_join_up_and_gif_is_written() {
         assert_eq!(x.dimensions(), (48, 36));
         assert!(x == y, "{name} differs between the runs");
     }
-    let gif = std::fs::read(a.join("frame_0000-0004.gif")).unwrap();
-    assert!(gif.starts_with(b"GIF89a"));
+    // The GIF holds the four frames of the range at the frames' size.
+    let gif = std::fs::File::open(a.join("frame_0000-0004.gif")).unwrap();
+    let frames = GifDecoder::new(std::io::BufReader::new(gif))
+        .unwrap()
+        .into_frames()
+        .collect_frames()
+        .unwrap();
+    assert_eq!(frames.len(), 4);
+    for f in &frames {
+        assert_eq!(f.buffer().dimensions(), (48, 36));
+    }
     let _ = std::fs::remove_dir_all(&a);
     let _ = std::fs::remove_dir_all(&b);
+}
+
+/// One row of `render --bench`'s per-frame table.
+#[derive(Debug)]
+struct BenchRow {
+    frame: usize,
+    action: String,
+    build_ms: f64,
+    primary: u64,
+    shadow: u64,
+    work_per_px: String,
+    max_work: u64,
+}
+
+/// The per-frame rows of policy `policy` in `render --bench` output.
+fn bench_rows(out: &str, policy: &str) -> Vec<BenchRow> {
+    let prefix = format!("policy {policy}: ");
+    out.lines()
+        .filter_map(|l| l.strip_prefix(&prefix))
+        .filter(|l| !l.trim_start().starts_with("frame"))
+        .map(|l| {
+            let c: Vec<&str> = l.split_whitespace().collect();
+            // frame action build pose update normals trace total primary shadow SAH work max
+            assert_eq!(c.len(), 13, "{l}");
+            BenchRow {
+                frame: c[0].parse().unwrap(),
+                action: c[1].to_string(),
+                build_ms: c[2].parse().unwrap(),
+                primary: c[8].parse().unwrap(),
+                shadow: c[9].parse().unwrap(),
+                work_per_px: c[11].to_string(),
+                max_work: c[12].parse().unwrap(),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn a_range_starts_with_a_fresh_build() {
+    // Heat-map work tells the trees apart: a range's first frame costs what a tree built for
+    // that frame costs, not what one refitted since frame 0 does.
+    let tube = animation("tube.glb");
+    let run = |frames: &str, policy: &str| {
+        let out = ok(&dynbvh(&[
+            "render",
+            &tube,
+            "--frames",
+            frames,
+            "--fps",
+            "12",
+            "--size",
+            "48x36",
+            "--heatmap",
+            "--shadows",
+            "--bench",
+            "--policy",
+            policy,
+        ]));
+        bench_rows(&out, policy)
+    };
+    let range = run("8..10", "refit");
+    let refitted = run("0..10", "refit");
+    let rebuilt = run("0..10", "rebuild");
+    assert_eq!(range.len(), 2, "{range:?}");
+    assert_eq!((range[0].frame, range[1].frame), (8, 9));
+    assert_eq!(range[0].action, "rebuild", "{range:?}");
+    assert!(range[0].build_ms > 0.0, "{range:?}");
+    assert_eq!(range[1].action, "refit", "{range:?}");
+    assert!(refitted[1..].iter().all(|r| r.action == "refit"));
+    let fresh = &rebuilt[8];
+    assert_eq!((fresh.frame, refitted[8].frame), (8, 8));
+    assert_eq!(
+        (&range[0].work_per_px, range[0].max_work),
+        (&fresh.work_per_px, fresh.max_work),
+        "the range's first frame traces a freshly built tree"
+    );
+    assert_ne!(
+        (&refitted[8].work_per_px, refitted[8].max_work),
+        (&fresh.work_per_px, fresh.max_work),
+        "refitting since frame 0 makes a different tree by frame 8"
+    );
 }
 
 #[test]
@@ -82,7 +180,7 @@ fn heat_map_comparison_writes_side_by_side_frames() {
         "--frames",
         "3",
         "--size",
-        "40x30",
+        "160x120",
         "--heatmap",
         "--compare",
         "refit,rebuild",
@@ -90,8 +188,41 @@ fn heat_map_comparison_writes_side_by_side_frames() {
         &d_s,
     ]));
     assert!(out.contains("refit:") && out.contains("rebuild:"), "{out}");
+    let (w, h) = (160, 120);
     let img = image::open(d.join("compare_0002.png")).unwrap().to_rgb8();
-    assert_eq!(img.dimensions(), (2 * 40 + 4, 30));
+    assert_eq!(img.dimensions(), (2 * w + 4, h));
+    // A dark gap between the halves.
+    for x in w..w + 4 {
+        for y in 0..h {
+            assert_eq!(img.get_pixel(x, y).0, [20, 20, 24], "gap at {x},{y}");
+        }
+    }
+    let left = image::imageops::crop_imm(&img, 0, 0, w, h).to_image();
+    let right = image::imageops::crop_imm(&img, w + 4, 0, w, h).to_image();
+    // The pictures differ below the labels and above the legends: the refitted tree costs
+    // other work than the rebuilt one.
+    let differing = (16..h - 40)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| left.get_pixel(x, y) != right.get_pixel(x, y))
+        .count();
+    assert!(
+        differing > 200,
+        "{differing} pixels differ between refit and rebuild"
+    );
+    for (side, half) in [("refit", &left), ("rebuild", &right)] {
+        // The legend along the bottom: a colour bar (a row of many colours) and its light text.
+        let bar = (h - 40..h).any(|y| {
+            let row: std::collections::HashSet<[u8; 3]> =
+                (0..w).map(|x| half.get_pixel(x, y).0).collect();
+            row.len() > 30
+        });
+        assert!(bar, "{side}: legend bar");
+        let text = (h - 40..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| half.get_pixel(x, y).0 == [230; 3])
+            .count();
+        assert!(text > 20, "{side}: legend text ({text} pixels)");
+    }
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -225,5 +356,88 @@ fn the_files_camera_is_found_and_used() {
         .unwrap()
         .to_rgb8();
     assert!(own != auto);
+    // The same frame rendered here through the library, from the file's camera and from the
+    // framed one: the command's pictures are these, and from the file's camera no primary ray
+    // hits the triangle, while the framed camera sees it.
+    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(2)).unwrap();
+    let bounds = animation_bounds(&scene, Some(0), src.times()).unwrap();
+    let engine = src.build(0, EngineConfig::default());
+    let mut shading = EngineShading::new();
+    shading.refresh_all(&engine);
+    let mut r = Renderer::new(Settings {
+        width: 32,
+        height: 24,
+        smooth: true,
+        shadows: false,
+        heatmap: None,
+    });
+    let file_cam = Camera::from_node(&src.poser().world_matrices()[2], cams[0].projection);
+    for (what, cam, cli, hit) in [
+        ("file camera", file_cam, &own, false),
+        (
+            "framed camera",
+            Camera::framing(&bounds, 32.0 / 24.0),
+            &auto,
+            true,
+        ),
+    ] {
+        let mut img = RgbImage::new(1, 1);
+        let c = r.render(
+            &shading.tracer(&engine),
+            &Stage::new(cam, &bounds, true),
+            &mut img,
+        );
+        assert_eq!(c.primary, 32 * 24);
+        assert_eq!(c.hits > 0, hit, "{what}: {} primary rays hit", c.hits);
+        assert!(&img == cli, "{what}: the command rendered another picture");
+    }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bench_prints_the_ray_counts_and_what_it_averaged() {
+    let tube = animation("tube.glb");
+    let args = [
+        "render", &tube, "--frames", "3..8", "--fps", "12", "--size", "48x36", "--bench",
+    ];
+    for shadows in [true, false] {
+        let mut a = args.to_vec();
+        if shadows {
+            a.push("--shadows");
+        }
+        let out = ok(&dynbvh(&a));
+        let rows = bench_rows(&out, "amortized");
+        assert_eq!(rows.len(), 5, "{out}");
+        for r in &rows {
+            assert_eq!(r.primary, 48 * 36, "one primary ray per pixel: {r:?}");
+            if shadows {
+                // One from each lit point only: not from the sky or from surfaces turned away.
+                assert!(r.shadow > 0 && r.shadow < r.primary, "{r:?}");
+            } else {
+                assert_eq!(r.shadow, 0, "{r:?}");
+            }
+        }
+        let shadow_mean = rows[1..].iter().map(|r| r.shadow as f64).sum::<f64>() / 4.0;
+        let summary = out
+            .lines()
+            .find(|l| l.starts_with("amortized: "))
+            .unwrap_or_else(|| panic!("a summary line:\n{out}"));
+        assert!(
+            summary.contains(
+                "mean of the 4 frames after the first (frame 3, a fresh build, excluded)"
+            ),
+            "{summary}"
+        );
+        assert!(
+            summary.contains(&format!(
+                "rays/frame: 1728 primary (one per pixel) + {shadow_mean:.0} shadow ("
+            )),
+            "{summary}"
+        );
+        assert_eq!(
+            summary.contains("none without --shadows"),
+            !shadows,
+            "{summary}"
+        );
+    }
 }

@@ -5,7 +5,8 @@
 //!
 //! After an intended change of the look, print the new values with
 //! `DYNBVH_PRINT_GOLDEN=1 cargo test --release --test render_golden -- --nocapture` and paste
-//! them below.
+//! them below. Printing does not skip the checks: every value is printed and compared, and the
+//! tests fail until the recorded values match.
 
 use dynbvh::anim::Scene;
 use dynbvh::anim::generate::{Kind, generate};
@@ -134,38 +135,69 @@ fn printing() -> bool {
     std::env::var_os("DYNBVH_PRINT_GOLDEN").is_some()
 }
 
-/// Compares a signature with the golden one: every block within `tol` levels.
-fn check_signature(what: &str, got: &[String], want: &[&str], tol: i32) {
-    if printing() {
-        println!("{what} signature:");
-        for row in got {
-            println!("    \"{row}\",");
-        }
-        return;
-    }
-    assert_eq!(got.len(), want.len(), "{what}: signature rows");
-    let mut worst = 0;
-    for (g, w) in got.iter().zip(want) {
-        for (a, b) in g.chars().zip(w.chars()) {
-            worst = worst.max((level(a) - level(b)).abs());
-        }
-    }
-    assert!(
-        worst <= tol,
-        "{what}: a block's brightness moved by {worst} levels (tolerance {tol});\n got {got:#?}\nwant {want:#?}"
-    );
+/// The golden comparisons of one test. Every check runs (and, with `DYNBVH_PRINT_GOLDEN`
+/// set, prints its value) and records its failure; the failures are asserted when the checks
+/// go out of scope, so a test prints all of its new values and still fails until they are
+/// recorded.
+#[derive(Default)]
+struct Golden {
+    failures: Vec<String>,
 }
 
-fn check_close(what: &str, got: f64, want: f64, rel: f64) {
-    if printing() {
-        println!("{what}: {got:.3}");
-        return;
+impl Golden {
+    /// Compares a signature with the golden one: every block within `tol` levels.
+    fn signature(&mut self, what: &str, got: &[String], want: &[&str], tol: i32) {
+        if printing() {
+            println!("{what} signature:");
+            for row in got {
+                println!("    \"{row}\",");
+            }
+        }
+        if got.len() != want.len() {
+            self.failures.push(format!(
+                "{what}: {} signature rows, expected {}",
+                got.len(),
+                want.len()
+            ));
+            return;
+        }
+        let mut worst = 0;
+        for (g, w) in got.iter().zip(want) {
+            for (a, b) in g.chars().zip(w.chars()) {
+                worst = worst.max((level(a) - level(b)).abs());
+            }
+        }
+        if worst > tol {
+            self.failures.push(format!(
+                "{what}: a block's brightness moved by {worst} levels (tolerance {tol});\n got {got:#?}\nwant {want:#?}"
+            ));
+        }
     }
-    assert!(
-        (got - want).abs() <= rel * want.abs().max(1.0),
-        "{what}: {got:.3}, expected {want:.3} within {:.1}%",
-        rel * 100.0
-    );
+
+    /// Compares a value with the golden one within `rel` of it.
+    fn close(&mut self, what: &str, got: f64, want: f64, rel: f64) {
+        if printing() {
+            println!("{what}: {got:.3}");
+        }
+        if (got - want).abs() > rel * want.abs().max(1.0) {
+            self.failures.push(format!(
+                "{what}: {got:.3}, expected {want:.3} within {:.1}%",
+                rel * 100.0
+            ));
+        }
+    }
+}
+
+impl Drop for Golden {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            assert!(
+                self.failures.is_empty(),
+                "golden values differ:\n{}",
+                self.failures.join("\n")
+            );
+        }
+    }
 }
 
 const TUBE_SHADED_4: [&str; 12] = [
@@ -187,6 +219,7 @@ const TUBE_VARIATION_4: f64 = 7.980;
 
 #[test]
 fn tube_shaded_frame_matches_golden() {
+    let mut g = Golden::default();
     let s = scene(Kind::Tube, 800);
     let settings = Settings {
         width: W,
@@ -209,11 +242,11 @@ fn tube_shaded_frame_matches_golden() {
     // The sky is not black.
     let top = img.get_pixel(0, 0).0;
     assert!(top.iter().all(|&c| c > 40), "background {top:?}");
-    check_signature("tube shaded frame 4", &signature(img), &TUBE_SHADED_4, 2);
-    check_close("tube variation", variation(img), TUBE_VARIATION_4, 0.01);
+    g.signature("tube shaded frame 4", &signature(img), &TUBE_SHADED_4, 2);
+    g.close("tube variation", variation(img), TUBE_VARIATION_4, 0.01);
     let m = mean_rgb(img);
     for k in 0..3 {
-        check_close(
+        g.close(
             &format!("tube mean channel {k}"),
             m[k],
             TUBE_MEAN_RGB_4[k],
@@ -241,6 +274,7 @@ const WAVE_VARIATION_3: f64 = 2.805;
 
 #[test]
 fn wave_smooth_frame_matches_golden() {
+    let mut g = Golden::default();
     // A big morphing surface with no ground: smooth and flat normals look clearly different.
     let s = scene(Kind::Wave, 800);
     let settings = Settings {
@@ -255,8 +289,8 @@ fn wave_smooth_frame_matches_golden() {
     if printing() {
         img.save("/tmp/golden_wave.png").unwrap();
     }
-    check_signature("wave smooth frame 3", &signature(img), &WAVE_SMOOTH_3, 2);
-    check_close("wave variation", variation(img), WAVE_VARIATION_3, 0.01);
+    g.signature("wave smooth frame 3", &signature(img), &WAVE_SMOOTH_3, 2);
+    g.close("wave variation", variation(img), WAVE_VARIATION_3, 0.01);
 }
 
 const ORBIT_FLAT_6: [&str; 12] = [
@@ -278,6 +312,7 @@ const ORBIT_VARIATION_6: f64 = 8.131;
 
 #[test]
 fn orbit_flat_frame_matches_golden() {
+    let mut g = Golden::default();
     // Rigid instances: normals go through each instance's transform.
     let s = scene(Kind::Orbit, 600);
     let settings = Settings {
@@ -292,11 +327,11 @@ fn orbit_flat_frame_matches_golden() {
     if printing() {
         img.save("/tmp/golden_orbit.png").unwrap();
     }
-    check_signature("orbit flat frame 6", &signature(img), &ORBIT_FLAT_6, 2);
-    check_close("orbit variation", variation(img), ORBIT_VARIATION_6, 0.01);
+    g.signature("orbit flat frame 6", &signature(img), &ORBIT_FLAT_6, 2);
+    g.close("orbit variation", variation(img), ORBIT_VARIATION_6, 0.01);
     let m = mean_rgb(img);
     for k in 0..3 {
-        check_close(
+        g.close(
             &format!("orbit mean channel {k}"),
             m[k],
             ORBIT_MEAN_RGB_6[k],
@@ -313,6 +348,7 @@ const SWAP_WORK: [(usize, f64, f64); 3] = [
 
 #[test]
 fn swap_heat_map_work_matches_golden() {
+    let mut g = Golden::default();
     let s = scene(Kind::Swap, 600);
     let settings = Settings {
         width: W,
@@ -324,13 +360,13 @@ fn swap_heat_map_work_matches_golden() {
     let frames = render(&s, settings, true, &[0, 2, 4]);
     for ((f, img, c), (gf, nodes, prims)) in frames.iter().zip(SWAP_WORK) {
         assert_eq!(*f, gf);
-        check_close(
+        g.close(
             &format!("swap frame {f} nodes"),
             c.work.nodes as f64,
             nodes,
             0.01,
         );
-        check_close(
+        g.close(
             &format!("swap frame {f} triangles"),
             c.work.prims as f64,
             prims,

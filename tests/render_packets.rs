@@ -29,8 +29,10 @@ fn packets_render_the_same_pixels_as_single_rays() {
         // An image whose sides are not multiples of the 16-pixel tile.
         let (w, h) = (83, 61);
         let stage = Stage::new(Camera::framing(&bounds, w as f32 / h as f32), &bounds, true);
+        // The traversal is set on both sides: the default is one of them.
         let config = EngineConfig {
             policy: Policy::Refit,
+            traversal: Traversal::Binary,
             ..EngineConfig::default()
         };
         let mut engine = src.build(0, config);
@@ -41,6 +43,8 @@ fn packets_render_the_same_pixels_as_single_rays() {
                 ..config
             },
         );
+        assert_eq!(engine.config().traversal, Traversal::Binary);
+        assert_eq!(wide.config().traversal, Traversal::Wide);
         for f in 1..=frame {
             for e in [&mut engine, &mut wide] {
                 src.advance(e, f);
@@ -59,6 +63,8 @@ fn packets_render_the_same_pixels_as_single_rays() {
                 shadows: true,
                 heatmap: None,
             });
+            // The reference: the binary trees, ray by ray. Every other variant (packets, and
+            // the wide trees ray by ray and as packets) must give its pixels and counts.
             let mut want = RgbImage::new(1, 1);
             let want_counts = r.render(
                 &shading.tracer(&engine).with_packets(PacketUse::NONE),

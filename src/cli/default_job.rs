@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -40,21 +41,61 @@ fn render(args: &[&str]) -> Result<RenderSummary> {
     execute(&cli.args)
 }
 
+/// What the default job renders and measures, and where it writes.
+struct Job {
+    /// The animation.
+    file: PathBuf,
+    /// Output folder (`frames/`, `heatmap/` and `bench/` go in it).
+    out: PathBuf,
+    /// Frames over one loop of the animation.
+    frames: usize,
+    /// Size of the shaded frames.
+    shaded: (u32, u32),
+    /// Size of each side of the heat-map comparison.
+    heat: (u32, u32),
+    /// Camera rays per frame of the policy benchmark (an image of this size).
+    bench_rays: (usize, usize),
+}
+
+impl Job {
+    /// What `dynbvh` with no arguments does.
+    fn standard() -> Self {
+        let base = base_dir();
+        Self {
+            file: base.join(DEFAULT_ANIMATION),
+            out: base.join("out"),
+            frames: FRAMES,
+            shaded: (480, 360),
+            heat: (320, 240),
+            bench_rays: (256, 192),
+        }
+    }
+}
+
 /// Runs the default job.
 pub fn run() -> Result<()> {
+    run_job(&Job::standard(), &mut std::io::stdout().lock())
+}
+
+/// Runs `job`, printing where everything went and the summary to `w` (progress goes to
+/// standard error).
+fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
     let t0 = Instant::now();
-    let base = base_dir();
-    let file = base.join(DEFAULT_ANIMATION);
-    let out = base.join("out");
+    let file = &job.file;
+    let out = &job.out;
     let file_s = file.to_string_lossy().into_owned();
     let frames_dir = out.join("frames");
     let heat_dir = out.join("heatmap");
     let bench_dir = out.join("bench");
-    let frames = FRAMES.to_string();
-    println!(
-        "dynbvh default job on {} ({FRAMES} frames): frames, heat maps, policy benchmark",
-        file.display()
-    );
+    let frames = job.frames.to_string();
+    let shaded_size = format!("{}x{}", job.shaded.0, job.shaded.1);
+    let heat_size = format!("{}x{}", job.heat.0, job.heat.1);
+    writeln!(
+        w,
+        "dynbvh default job on {} ({} frames): frames, heat maps, policy benchmark",
+        file.display(),
+        job.frames
+    )?;
 
     eprintln!("rendering the frames ...");
     let shaded = render(&[
@@ -62,7 +103,7 @@ pub fn run() -> Result<()> {
         "--frames",
         &frames,
         "--size",
-        "480x360",
+        &shaded_size,
         "--shadows",
         "--gif",
         "--out",
@@ -74,7 +115,7 @@ pub fn run() -> Result<()> {
         "--frames",
         &frames,
         "--size",
-        "320x240",
+        &heat_size,
         "--heatmap",
         "--compare",
         "refit,rebuild",
@@ -84,10 +125,10 @@ pub fn run() -> Result<()> {
     ])?;
 
     eprintln!("benchmarking the policies ...");
-    let scene = super::load_scene(&file, None)?;
-    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(FRAMES))?;
+    let scene = super::load_scene(file, None)?;
+    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(job.frames))?;
     let opts = Options {
-        rays: RaySpec::Size(256, 192),
+        rays: RaySpec::Size(job.bench_rays.0, job.bench_rays.1),
         trace_repeats: 2,
         ..Options::default()
     };
@@ -114,11 +155,12 @@ pub fn run() -> Result<()> {
     }
 
     // Where everything went.
-    println!();
-    println!("{table}");
-    println!("written:");
-    println!(
-        "  {:<44} {} shaded frames (480x360, shadow rays) and {}",
+    writeln!(w)?;
+    writeln!(w, "{table}")?;
+    writeln!(w, "written:")?;
+    writeln!(
+        w,
+        "  {:<44} {} shaded frames ({shaded_size}, shadow rays) and {}",
         format!("{}/", frames_dir.display()),
         shaded.pngs.len(),
         shaded
@@ -126,8 +168,9 @@ pub fn run() -> Result<()> {
             .as_ref()
             .and_then(|g| g.file_name())
             .map_or(String::new(), |g| g.to_string_lossy().into_owned())
-    );
-    println!(
+    )?;
+    writeln!(
+        w,
         "  {:<44} {} heat maps, refit (left) against rebuild (right), and {}",
         format!("{}/", heat_dir.display()),
         heat.pngs.len(),
@@ -135,16 +178,17 @@ pub fn run() -> Result<()> {
             .as_ref()
             .and_then(|g| g.file_name())
             .map_or(String::new(), |g| g.to_string_lossy().into_owned())
-    );
-    println!(
+    )?;
+    writeln!(
+        w,
         "  {:<44} summary.txt, report.json, frames.csv, charts {} (.svg and .png)",
         format!("{}/", bench_dir.display()),
         charts.join(", ")
-    );
+    )?;
 
     // The short story.
-    println!();
-    println!("summary:");
+    writeln!(w)?;
+    writeln!(w, "summary:")?;
     let (refit, rebuild) = (&heat.timings[0].1, &heat.timings[1].1);
     if let Some((k, worst)) = refit.iter().enumerate().max_by(|a, b| {
         a.1.counts
@@ -152,7 +196,8 @@ pub fn run() -> Result<()> {
             .total_cmp(&b.1.counts.work_per_pixel())
     }) && let Some(fresh) = rebuild.get(k)
     {
-        println!(
+        writeln!(
+            w,
             "  heat maps: at frame {} the refitted tree costs {:.1} nodes + triangles per covered \
              pixel against {:.1} rebuilt ({:.2}x; SAH ratio {:.2}); see {}",
             worst.frame,
@@ -163,14 +208,15 @@ pub fn run() -> Result<()> {
             heat_dir
                 .join(format!("compare_{:04}.png", worst.frame))
                 .display()
-        );
+        )?;
     }
     let find = |name: &str| report.policies.iter().find(|p| p.policy == name);
     if let (Some(r), Some(b)) = (find("refit"), find("rebuild")) {
-        println!(
+        writeln!(
+            w,
             "  benchmark: always refit {:.0} ms, always rebuild {:.0} ms over {} frames of {} rays",
             r.total_ms, b.total_ms, report.frames, report.rays_per_frame
-        );
+        )?;
     }
     if let Some(best) = report
         .policies
@@ -185,23 +231,144 @@ pub fn run() -> Result<()> {
         } else {
             String::new()
         };
-        println!(
+        writeln!(
+            w,
             "  fastest policy: {} ({:.0} ms, {} rebuilds{oracle})",
             best.policy, best.total_ms, best.rebuilds
-        );
+        )?;
     }
     if let Some(d) = report.policies.iter().find(|p| p.default) {
-        println!(
+        writeln!(
+            w,
             "  default policy {}: {:.0} ms, {} rebuilds, {:.2}x the oracle",
             d.policy, d.total_ms, d.rebuilds, d.oracle_ratio
-        );
+        )?;
     }
-    println!(
-        "  rendering: {:.0} fps at 480x360 with shadow rays (pose, update, normals and tracing; \
-         {} triangles)",
+    writeln!(
+        w,
+        "  rendering: {:.0} fps at {shaded_size} with shadow rays (pose, update, normals and \
+         tracing; {} triangles)",
         shaded.fps(0),
         shaded.triangles
-    );
-    println!("done in {:.1} s", t0.elapsed().as_secs_f64());
+    )?;
+    writeln!(w, "done in {:.1} s", t0.elapsed().as_secs_f64())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::AnimationDecoder;
+    use image::codecs::gif::GifDecoder;
+
+    /// The frames and size of an animated GIF.
+    fn gif_frames(path: &Path) -> (usize, (u32, u32)) {
+        let f = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+        let frames = GifDecoder::new(f).unwrap().into_frames().collect_frames();
+        let frames = frames.unwrap();
+        let size = frames.first().map_or((0, 0), |f| f.buffer().dimensions());
+        assert!(frames.iter().all(|f| f.buffer().dimensions() == size));
+        (frames.len(), size)
+    }
+
+    fn png_size(path: &Path) -> (u32, u32) {
+        image::open(path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .to_rgb8()
+            .dimensions()
+    }
+
+    /// The default job, smaller: every file it says it wrote is there, and the summary names
+    /// the folders.
+    #[test]
+    fn the_default_job_writes_what_it_prints() {
+        let out = std::env::temp_dir().join(format!("dynbvh_default_job_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let n = 6;
+        let job = Job {
+            file: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(DEFAULT_ANIMATION),
+            out: out.clone(),
+            frames: n,
+            shaded: (64, 48),
+            heat: (96, 72),
+            bench_rays: (48, 36),
+        };
+        let mut printed = Vec::new();
+        run_job(&job, &mut printed).unwrap();
+        let printed = String::from_utf8(printed).unwrap();
+
+        let (frames, heat, bench) = (out.join("frames"), out.join("heatmap"), out.join("bench"));
+        for f in 0..n {
+            assert_eq!(
+                png_size(&frames.join(format!("frame_{f:04}.png"))),
+                (64, 48)
+            );
+            assert_eq!(
+                png_size(&heat.join(format!("compare_{f:04}.png"))),
+                (2 * 96 + 4, 72)
+            );
+        }
+        assert!(!frames.join(format!("frame_{n:04}.png")).exists());
+        assert_eq!(gif_frames(&frames.join("frame.gif")), (n, (64, 48)));
+        assert_eq!(gif_frames(&heat.join("compare.gif")), (n, (2 * 96 + 4, 72)));
+
+        let summary = std::fs::read_to_string(bench.join("summary.txt")).unwrap();
+        assert!(
+            summary.contains("refit") && summary.contains("rebuild"),
+            "{summary}"
+        );
+        assert!(
+            printed.contains(summary.trim()),
+            "the table is printed:\n{printed}"
+        );
+        let csv = std::fs::read_to_string(bench.join("frames.csv")).unwrap();
+        assert!(
+            csv.lines().count() > n,
+            "a header and a row per frame and policy:\n{csv}"
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(bench.join("report.json")).unwrap())
+                .unwrap();
+        assert_eq!(json["frames"], n);
+        assert!(json["policies"].as_array().is_some_and(|p| p.len() >= 2));
+        // The charts the summary names, each as SVG and PNG.
+        let charts = printed
+            .lines()
+            .find_map(|l| l.split_once(" charts ").map(|(_, c)| c))
+            .and_then(|c| c.strip_suffix(" (.svg and .png)"))
+            .unwrap_or_else(|| panic!("the charts are listed:\n{printed}"));
+        let stems: Vec<&str> = charts.split(", ").collect();
+        assert!(!stems.is_empty());
+        for stem in stems {
+            let svg = std::fs::read_to_string(bench.join(stem).with_extension("svg")).unwrap();
+            assert!(svg.contains("<svg"), "{stem}.svg");
+            assert_eq!(
+                png_size(&bench.join(stem).with_extension("png")),
+                (960, 540)
+            );
+        }
+
+        // Where everything went, and the short story.
+        for dir in [&frames, &heat, &bench] {
+            assert!(
+                printed.contains(&format!("{}/", dir.display())),
+                "{} is named:\n{printed}",
+                dir.display()
+            );
+        }
+        for what in [
+            "frame.gif",
+            "compare.gif",
+            "summary:",
+            "heat maps: at frame",
+            "benchmark: always refit",
+            "fastest policy:",
+            "default policy",
+            "rendering:",
+            "done in",
+        ] {
+            assert!(printed.contains(what), "{what:?} is printed:\n{printed}");
+        }
+        let _ = std::fs::remove_dir_all(&out);
+    }
 }

@@ -47,6 +47,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub gif: bool,
     /// Colour pixels by traversal work (nodes visited + triangles tested) instead of shading.
+    /// Heat maps trace each ray on its own (the work counted is a single ray's), whereas shaded
+    /// frames trace packets (--packets does not apply).
     #[arg(long)]
     pub heatmap: bool,
     /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
@@ -67,13 +69,16 @@ pub struct RenderArgs {
     /// Render every frame under two policies side by side (e.g. refit,rebuild).
     #[arg(long, value_name = "P1,P2")]
     pub compare: Option<String>,
-    /// Measure only: render without writing images and print each frame's timings.
+    /// Measure only: render without writing images; print each frame's timings and ray counts
+    /// (primary, shadow), then their means over the frames after the first (whose fresh build
+    /// is left out).
     #[arg(long)]
     pub bench: bool,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
+    /// Shaded frames only: heat maps trace ray by ray.
     #[arg(long, value_name = "WHICH", default_value = "both")]
     pub packets: String,
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones;
@@ -326,11 +331,11 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
     for (k, (name, t)) in s.timings.iter().enumerate() {
         if per_frame {
             println!(
-                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms   rays  SAH ratio  work/px  max work"
+                "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms  primary  shadow  SAH ratio  work/px  max work"
             );
             for f in t {
                 println!(
-                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:6}  {:9.3}  {:7.1}  {:8}",
+                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:7}  {:6}  {:9.3}  {:7.1}  {:8}",
                     f.frame,
                     f.action.name(),
                     f.build_ms,
@@ -339,7 +344,8 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
                     f.normals_ms,
                     f.trace_ms,
                     f.total_ms,
-                    f.counts.primary + f.counts.shadow,
+                    f.counts.primary,
+                    f.counts.shadow,
                     f.sah_ratio,
                     f.counts.work_per_pixel(),
                     f.counts.max_work
@@ -349,10 +355,26 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
         let steady = if t.len() > 1 { &t[1..] } else { &t[..] };
         let n = steady.len().max(1) as f64;
         let mean = |g: fn(&FrameTiming) -> f64| steady.iter().map(g).sum::<f64>() / n;
-        let rays = mean(|f| (f.counts.primary + f.counts.shadow) as f64);
+        let primary = mean(|f| f.counts.primary as f64);
+        let shadow = mean(|f| f.counts.shadow as f64);
         let trace = mean(|f| f.trace_ms);
+        let averaged = if t.len() > 1 {
+            format!(
+                "mean of the {} frame{} after the first (frame {}, a fresh build, excluded)",
+                steady.len(),
+                if steady.len() == 1 { "" } else { "s" },
+                s.range.0
+            )
+        } else {
+            "the only frame, a fresh build".to_string()
+        };
+        let shadow_note = if shadow > 0.0 {
+            "one from each lit point: front-facing surface or ground"
+        } else {
+            "none without --shadows"
+        };
         println!(
-            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps (pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame over frames after the first; {:.0} rays/frame, {:.1} Mrays/s)",
+            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps, pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame ({averaged}); rays/frame: {:.0} primary (one per pixel) + {:.0} shadow ({shadow_note}) = {:.0}, {:.1} Mrays/s while tracing",
             t.len(),
             s.range.0,
             s.range.1,
@@ -365,9 +387,11 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
             mean(|f| f.normals_ms),
             trace,
             mean(|f| f.total_ms),
-            rays,
+            primary,
+            shadow,
+            primary + shadow,
             if trace > 0.0 {
-                rays / (trace * 1e3)
+                (primary + shadow) / (trace * 1e3)
             } else {
                 0.0
             },
