@@ -42,8 +42,9 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::stats::{FrameStats, MeshStats};
+use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
-    BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats,
+    BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats, WideBvh,
 };
 use crate::geom::{Aabb, Ray};
 use glam::{Affine3A, Vec3};
@@ -985,7 +986,9 @@ impl Engine {
 
     /// What the SAH predicts a ray that hits the scene's box costs without early termination:
     /// `(nodes visited, triangles tested)`, over both levels (instance boxes in world space,
-    /// instance trees by their own areas). Allocates nothing.
+    /// instance trees by their own areas), counted on the trees rays walk: the 8-wide trees
+    /// with [`Traversal::Wide`] ([`expected_work_wide`]), else the binary ones
+    /// ([`expected_work`]), as [`Engine::closest_hit_counted`] counts. Allocates nothing.
     #[must_use]
     pub fn predicted_work(&self) -> (f64, f64) {
         let root = f64::from(self.tlas.bounds().half_area());
@@ -1003,7 +1006,10 @@ impl Engine {
         // Each mesh's tree once, weighted by its instances' world box areas (summed by the
         // last update).
         for m in self.meshes.iter().filter(|m| m.world_area > 0.0) {
-            let (n, t) = expected_work(m.bvh.bvh());
+            let (n, t) = match &m.wide {
+                Some(w) => expected_work_wide(w),
+                None => expected_work(m.bvh.bvh()),
+            };
             let p = m.world_area / root;
             nodes += p * n;
             tris += p * t;
@@ -1123,7 +1129,9 @@ fn transform_box(m: &Affine3A, b: Aabb) -> Aabb {
 }
 
 /// Expected nodes visited and triangles tested by a ray through the tree's root (no early
-/// termination).
+/// termination), as the binary traversal counts them: a node (interior or leaf) when the ray
+/// hits its box, with probability its area over the root's (exact in expectation for uniformly
+/// random lines through the root's box), and a leaf's triangles with it.
 #[must_use]
 pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
     let nodes = bvh.nodes();
@@ -1139,6 +1147,48 @@ pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
         (n + ar, t + ar * f64::from(x.count))
     });
     (n / a, t / a)
+}
+
+/// [`expected_work`] for a wide tree, counted as its traversal counts
+/// ([`WideBvh::closest_hit_counted`]): the root node always (the traversal starts there without
+/// testing its box; the engine gets there through the instance's box), every other interior
+/// node and every leaf lane when the ray hits the lane's box in the parent (probability: the
+/// lane box's area over the root's), and a leaf lane's triangles (unused block lanes not
+/// counted) with it.
+#[must_use]
+pub fn expected_work_wide<const K: usize>(w: &WideBvh<K>) -> (f64, f64) {
+    let nodes = w.nodes();
+    let Some(root) = nodes.first() else {
+        return (0.0, 0.0);
+    };
+    let blocks = w.blocks();
+    let a = f64::from(root.bounds().half_area());
+    // Area sums over the children (interior and leaf lanes) and over leaf lanes times their
+    // triangles; and the plain counts, for a root of no area.
+    let (mut n, mut t, mut lanes, mut tris) = (0.0, 0.0, 0.0, 0.0);
+    for node in nodes {
+        for k in 0..K {
+            let (count, area) = match node.child(k) {
+                Child::Empty => continue,
+                Child::Node(_) => (0.0, node.lane_bounds(k).half_area()),
+                Child::Leaf { first, count } => {
+                    let run = &blocks[first as usize..(first + count) as usize];
+                    let used = run.iter().flat_map(|b| b.prims).filter(|&p| p != NO_PRIM);
+                    (used.count() as f64, node.lane_bounds(k).half_area())
+                }
+            };
+            let area = f64::from(area);
+            n += area;
+            t += area * count;
+            lanes += 1.0;
+            tris += count;
+        }
+    }
+    if a > 0.0 && a.is_finite() {
+        (1.0 + n / a, t / a)
+    } else {
+        (1.0 + lanes, tris)
+    }
 }
 
 /// SAH cost of a tree (as [`Bvh::sah_cost`]), summed in parallel for large trees.
