@@ -185,8 +185,8 @@ fn frames_allocate_nothing(traversal: Traversal) {
             0,
             0,
         ),
-        // Modelled costs and a second of tracing a frame: rebuilds whenever the trees degrade,
-        // each on probation, with reverts to the replaced trees.
+        // Modelled costs and a second of tracing a frame: rebuilds nearly every frame, each
+        // into the spare tree while the replaced one is on probation.
         (
             Policy::Amortized,
             TlasPolicy::DEFAULT,
@@ -206,6 +206,16 @@ fn frames_allocate_nothing(traversal: Traversal) {
             40,
             1,
             1,
+        ),
+        // The plain rule rebuilds into the tree's own storage and never probes.
+        (
+            Policy::AmortizedPlain,
+            TlasPolicy::DEFAULT,
+            MODELED,
+            Some(200.0),
+            40,
+            2,
+            0,
         ),
     ];
     for (policy, tlas, timing, trace_ms, n_frames, least, least_reverts) in cases {
