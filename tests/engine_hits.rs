@@ -3,7 +3,11 @@
 //! traversals (binary and 8-wide mesh trees), rays through the engine hit what brute force over
 //! the posed world triangles hits, and its packet queries give exactly its single-ray answers. On the same frames,
 //! each deforming mesh's 4- and 8-wide trees (built on the first frame, refitted on every
-//! later one) and its packet queries give exactly brute force's hits in mesh space.
+//! later one) and its packet queries give exactly brute force's hits in mesh space. Those runs
+//! record a tiny trace time, so `amortized` hardly rebuilds there; the default configuration
+//! (default policy, top-level policy and traversal) also runs on `explode.glb` and `swap.glb`
+//! with costs that make it rebuild, probe and go back to replaced trees, checked the same way
+//! on every frame, and the test asserts that those rebuilds and reverts happened.
 //!
 //! Rigid and shared-mesh instances are traced in mesh space through an inverse transform, so
 //! their distances differ from world-space brute force by rounding: distances are compared with
@@ -14,7 +18,9 @@ use dynbvh::anim::Scene;
 use dynbvh::bvh::{MeshBvh4, MeshBvh8, PacketMode, brute_force_any, brute_force_closest};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal};
+use dynbvh::engine::{
+    Engine, EngineConfig, MeshId, Policy, SceneHit, Timing, TlasPolicy, Traversal,
+};
 use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use dynbvh::report::rays::{camera_rays, random_rays};
 use std::path::{Path, PathBuf};
@@ -201,25 +207,56 @@ fn check_wide_and_packets(name: &str, f: usize, e: &Engine, meshes: &[MeshId], w
     }
 }
 
-/// Runs every policy in lockstep over `frames` frames of one animation and checks each frame.
+/// Runs every policy with both traversals in lockstep over `frames` frames of one animation
+/// and checks each frame.
 fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mut Tally) {
-    let policies: Vec<(Policy, Traversal)> = [Traversal::Binary, Traversal::Wide]
+    let configs: Vec<EngineConfig> = [Traversal::Binary, Traversal::Wide]
         .into_iter()
-        .flat_map(|t| policies().into_iter().map(move |p| (p, t)))
+        .flat_map(|traversal| {
+            policies().into_iter().map(move |policy| EngineConfig {
+                policy,
+                tlas: TlasPolicy::Threshold(1.2),
+                traversal,
+                ..EngineConfig::default()
+            })
+        })
         .collect();
+    check_configs(scene, anim, frames, &configs, Trace::Ms(0.01), tally);
+}
+
+/// The trace time each engine records after each frame.
+#[derive(Clone, Copy)]
+enum Trace {
+    /// This many ms.
+    Ms(f64),
+    /// This many times what the engine's timing prices a rebuild of all its deforming meshes.
+    Rebuilds(f64),
+}
+
+/// Runs engines of `configs` in lockstep over `frames` frames of one animation and checks each
+/// frame; returns the mesh rebuilds and the reverts to replaced trees of each engine.
+fn check_configs(
+    scene: &Scene,
+    anim: Option<usize>,
+    frames: usize,
+    configs: &[EngineConfig],
+    trace: Trace,
+    tally: &mut Tally,
+) -> Vec<(u32, u32)> {
     let mut src = GltfSource::new(scene, anim, FrameTimes::Count(frames)).unwrap();
-    let mut engines: Vec<Engine> = policies
+    let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
+    let mut done = vec![(0u32, 0u32); engines.len()];
+    let trace_ms: Vec<f64> = engines
         .iter()
-        .map(|&(policy, traversal)| {
-            src.build(
-                0,
-                EngineConfig {
-                    policy,
-                    tlas: TlasPolicy::Threshold(1.2),
-                    traversal,
-                    ..EngineConfig::default()
-                },
-            )
+        .map(|e| match trace {
+            Trace::Ms(ms) => ms,
+            Trace::Rebuilds(k) => {
+                k * src
+                    .deforming()
+                    .iter()
+                    .map(|m| e.config().timing.build_ms(0.0, e.indices(*m).len()))
+                    .sum::<f64>()
+            }
         })
         .collect();
     let deforming = src.deforming().to_vec();
@@ -236,9 +273,11 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
         .collect();
     let mut flat = TriMesh::default();
     for f in 1..=src.frames() {
-        for e in &mut engines {
+        for (e, d) in engines.iter_mut().zip(&mut done) {
             src.advance(e, f);
-            e.update();
+            let s = e.update();
+            d.0 += s.rebuilds;
+            d.1 += s.reverts;
         }
         check_wide_and_packets(&src.name(), f, &engines[0], &deforming, &mut wide);
         src.flatten_into(&mut flat);
@@ -258,7 +297,8 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
             .collect();
         let mut packet = vec![None; rays.len()];
         let mut packet_any = vec![false; rays.len()];
-        for (e, &(p, t)) in engines.iter_mut().zip(&policies) {
+        for ((e, c), &trace_ms) in engines.iter_mut().zip(configs).zip(&trace_ms) {
+            let (p, t) = (c.policy, c.traversal);
             e.closest_hit_packet_mode(&rays, &mut packet, PacketMode::Always);
             e.any_hit_packet_mode(&rays, &mut packet_any, PacketMode::Always);
             // Rays shorter than the scene test any-hit with a finite range too.
@@ -305,9 +345,10 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
                 }
                 assert_eq!(e.mesh_bvh8(*m).is_some(), t == Traversal::Wide);
             }
-            e.record_trace(0.01, rays.len() as u64);
+            e.record_trace(trace_ms, rays.len() as u64);
         }
     }
+    done
 }
 
 fn check_file(path: &Path) -> Option<Tally> {
@@ -350,6 +391,55 @@ fn shipped_animations_match_brute_force_every_frame_every_policy() {
     );
     for f in &files {
         assert!(check_file(f).is_some(), "{} has no animation", f.display());
+    }
+}
+
+/// The default configuration (default policy, top-level policy and traversal) with modelled
+/// costs and a recorded trace time that make the default policy rebuild on the animations that
+/// deform a lot, put rebuilds on probation and go back to replaced trees (the path the 0.01 ms
+/// trace above never takes): every frame still matches brute force. The 16x16 camera rays of
+/// `engine_policy.rs`'s revert test only compare with an always-refitted engine.
+#[test]
+fn default_config_matches_brute_force_through_rebuilds_and_reverts() {
+    let timing = Timing::Modeled {
+        refit_ns_per_tri: 17.0,
+        rebuild_ns_per_tri: 200.0,
+        estimate_ns_per_tri: 75.0,
+    };
+    let config = EngineConfig {
+        timing,
+        ..EngineConfig::default()
+    };
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("animations");
+    // (file, frames, trace time in rebuilds, least rebuilds, least reverts): on swap, five
+    // rebuilds' worth of tracing a frame makes it rebuild while the grids overlap and go back
+    // to the frame-0 tree (as in `engine_policy.rs`); explode degrades steadily, so its
+    // rebuilds pay and stay.
+    for (file, frames, k, least_rebuilds, least_reverts) in
+        [("swap.glb", 60, 5.0, 1, 1), ("explode.glb", 30, 5.0, 2, 0)]
+    {
+        let (scene, _) = Scene::load(dir.join(file)).unwrap();
+        let mut tally = Tally::default();
+        let done = check_configs(
+            &scene,
+            Some(0),
+            frames,
+            &[config],
+            Trace::Rebuilds(k),
+            &mut tally,
+        );
+        let (rebuilds, reverts) = done[0];
+        eprintln!(
+            "{file}: default config, {rebuilds} rebuilds, {reverts} reverts, {} ray checks, {} \
+             grazing",
+            tally.rays, tally.grazing
+        );
+        assert!(rebuilds >= least_rebuilds, "{file}: {rebuilds} rebuilds");
+        assert!(reverts >= least_reverts, "{file}: {reverts} reverts");
+        assert!(
+            tally.grazing * 100 <= tally.rays,
+            "{file}: too many grazing"
+        );
     }
 }
 

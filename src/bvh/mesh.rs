@@ -127,6 +127,26 @@ impl MeshBvh {
         &self.bvh
     }
 
+    /// Reserves (without writing) the storage a rebuild over `like`'s triangles needs, with
+    /// room for as many nodes as `like` has room for, so that [`MeshBvh::rebuild_indexed`] into
+    /// this tree then allocates nothing: for a spare tree that rebuilds go into while another
+    /// tree is kept. Returns the bytes reserved.
+    pub fn reserve_like(&mut self, like: &MeshBvh) -> usize {
+        fn to<T>(v: &mut Vec<T>, cap: usize) -> usize {
+            if v.capacity() >= cap {
+                return 0;
+            }
+            let before = v.capacity();
+            v.reserve_exact(cap - v.len());
+            (v.capacity() - before) * std::mem::size_of::<T>()
+        }
+        let n = like.tris.len();
+        to(&mut self.bvh.nodes, like.bvh.nodes.capacity())
+            + to(&mut self.bvh.prim_indices, n)
+            + to(&mut self.tris, n)
+            + to(&mut self.leaf_indices, n)
+    }
+
     /// Bytes held: nodes, primitive indices, and the leaf-ordered triangles and vertex indices.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {

@@ -44,8 +44,9 @@ pub struct BenchArgs {
     /// Camera image size WxH (default 256x256).
     #[arg(long, value_name = "WxH")]
     size: Option<String>,
-    /// Policy to run (repeatable): refit, rebuild, periodic:N, threshold:R, amortized.
-    /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized.
+    /// Policy to run (repeatable): refit, rebuild, periodic:N, threshold:R, amortized,
+    /// amortized-plain.
+    /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized, amortized-plain.
     #[arg(long = "policy", short)]
     policies: Vec<String>,
     /// Directory for frames.csv, report.json and the charts (SVG and PNG).

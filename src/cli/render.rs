@@ -37,7 +37,8 @@ pub struct RenderArgs {
     /// Image size WxH.
     #[arg(long, value_name = "WxH", default_value = "640x480")]
     pub size: String,
-    /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized.
+    /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized,
+    /// amortized-plain.
     #[arg(long, short, default_value = "amortized")]
     pub policy: String,
     /// Output directory.

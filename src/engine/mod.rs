@@ -14,6 +14,6 @@ pub mod stats;
 pub use policy::{Action, ParsePolicyError, Policy};
 pub use scene::{
     Engine, EngineConfig, InstanceId, MeshId, SceneHit, Timing, TlasPolicy, Traversal,
-    expected_work, tree_sah,
+    expected_work, expected_work_wide, tree_sah,
 };
 pub use stats::{FrameStats, MeshStats};

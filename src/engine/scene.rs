@@ -13,21 +13,38 @@
 //! After the first frame, [`Engine::update`] allocates nothing, rebuilds included: a tree is
 //! rebuilt into its own storage with the engine's one [`BuildWorkspace`] (shared by every mesh
 //! and the top-level tree, sized by the first builds), a wide tree is collapsed into its own
-//! storage ([`MeshBvh8::collapse_from`]), and ray casting never allocates. The
-//! exception is [`Policy::Amortized`], which keeps the tree a rebuild replaced for a while (see
-//! [`Policy::Amortized`]): a mesh's first rebuild makes its second tree, and later ones
-//! alternate between the two. Two
-//! things of rayon's can still allocate, so for none at all build the scene and run the frame
-//! loop inside a pool's `install`: every parallel call made from outside the pool queues a job
-//! in rayon's global injector, which allocates a block every 63 jobs; and the binned builder
-//! keeps spare bins per thread, made by each worker's first build task (with one thread, by the
-//! scene's first builds; with several, whenever a worker first steals one).
+//! storage ([`MeshBvh8::collapse_from`]), and neither ray casting nor
+//! [`Engine::predicted_work`] allocates. [`Policy::Amortized`] keeps the tree a rebuild
+//! replaced for a while (see [`Policy::Amortized`]): its rebuilds go into a spare tree reserved
+//! when the mesh is added (or when [`Engine::set_policy`] switches to it), as large as the
+//! mesh's tree (about 94 bytes a triangle with the default builder), for every mesh, since the
+//! engine cannot know which will deform; the reservation is not written until the mesh's first
+//! probed rebuild, so with the usual allocators a large one costs address space only until
+//! then. A revert to the replaced tree collapses it into the wide tree's storage. Trees keep
+//! headroom for rebuilds that come out larger (an eighth more binary nodes, a quarter more wide
+//! nodes and triangle blocks than the first build): a rebuild beyond that grows its tree once.
+//!
+//! The first [`Engine::add_mesh`] gives every thread of the current rayon pool its build
+//! scratch ([`crate::bvh::build::prepare_threads`]: the binned builder's spare bin stacks, eight
+//! a thread, which a thread would otherwise make at the first build task it runs), so build
+//! the scene in the pool the frames run in. What can still allocate is rayon's own: a parallel
+//! call made from a thread outside the pool (the main thread, with the global pool) goes
+//! through `Registry::inject`, which pushes its job onto the pool's injector
+//! (`crossbeam_deque::Injector`, a linked list of blocks of 63 jobs: every 63rd such call
+//! allocates a block), so run the frame loop inside the pool's `install`. Within a pool,
+//! parallel calls are `join`s whose jobs live on the stack and go through the workers' own
+//! deques, which allocate only to grow past (or shrink back from) 64 pending jobs, more than a
+//! frame's recursive splits keep; a thread allocates a bin stack only if more than eight build
+//! tasks nest on it (waiting in `join`, it runs stolen ones). `tests/engine_alloc.rs` proves
+//! no allocation on one thread; the same frames in 2- and 4-thread pools allocated nothing
+//! either (counted when this was written, not asserted: nesting is the scheduler's).
 
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::stats::{FrameStats, MeshStats};
+use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
-    BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats,
+    BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats, WideBvh,
 };
 use crate::geom::{Aabb, Ray};
 use glam::{Affine3A, Vec3};
@@ -239,6 +256,8 @@ struct MeshEntry {
     stats: MeshStats,
     /// Sum over its instances of world box area times SAH: its share of the trace cost.
     weight: f64,
+    /// Sum over its visible instances of their world box's half area.
+    world_area: f64,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -313,6 +332,9 @@ pub struct Engine {
     workspace: BuildWorkspace,
     /// Pose time recorded since the last update, reported by the next.
     pending_pose_ms: f64,
+    /// Set once the rayon pool's threads have their build scratch
+    /// ([`crate::bvh::build::prepare_threads`]).
+    threads_ready: bool,
     frame: u64,
     stats: FrameStats,
 }
@@ -332,6 +354,7 @@ impl Engine {
             tlas_stale: true,
             workspace: BuildWorkspace::default(),
             pending_pose_ms: 0.0,
+            threads_ready: false,
             frame: 0,
             stats: FrameStats::default(),
         }
@@ -343,9 +366,16 @@ impl Engine {
         &self.config
     }
 
-    /// Changes the mesh policy from the next update on.
+    /// Changes the mesh policy from the next update on. Switching to a policy that keeps the
+    /// trees rebuilds replace ([`Policy::Amortized`]) reserves every mesh's spare tree now, so
+    /// that the frame loop still allocates nothing.
     pub fn set_policy(&mut self, policy: Policy) {
         self.config.policy = policy;
+        if PolicyState::probes_rebuilds(policy) {
+            for m in &mut self.meshes {
+                m.prev.reserve_like(&m.bvh);
+            }
+        }
     }
 
     /// Adds a mesh and builds its tree now (the build time seeds the amortized policy's cost of
@@ -359,6 +389,10 @@ impl Engine {
             indices.iter().flatten().all(|&i| (i as usize) < n),
             "vertex index out of range"
         );
+        if !self.threads_ready {
+            crate::bvh::build::prepare_threads();
+            self.threads_ready = true;
+        }
         let t = Instant::now();
         let mut bvh = MeshBvh::default();
         bvh.rebuild_indexed(
@@ -378,12 +412,18 @@ impl Engine {
         let estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len());
         let mut state = PolicyState::default();
         state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len()));
+        // The spare a probed rebuild goes into, reserved now so that the frame loop never
+        // allocates it (address space only until the first probed rebuild writes it).
+        let mut prev = MeshBvh::default();
+        if PolicyState::probes_rebuilds(self.config.policy) {
+            prev.reserve_like(&bvh);
+        }
         self.meshes.push(MeshEntry {
             positions,
             indices,
             bvh,
             wide,
-            prev: MeshBvh::default(),
+            prev,
             probe: None,
             sah,
             dirty: false,
@@ -402,6 +442,7 @@ impl Engine {
                 ..MeshStats::default()
             },
             weight: 0.0,
+            world_area: 0.0,
         });
         MeshId(self.meshes.len() as u32 - 1)
     }
@@ -722,6 +763,7 @@ impl Engine {
         // Scene cost: top-level nodes, plus each instance's tree weighted by its box's area.
         for m in &mut self.meshes {
             m.weight = 0.0;
+            m.world_area = 0.0;
         }
         let root_area = f64::from(self.tlas.bounds().half_area());
         let mut top = 0.0f64;
@@ -736,6 +778,7 @@ impl Engine {
             }
             let m = &mut self.meshes[inst.mesh as usize];
             let w = f64::from(b.half_area()) * f64::from(m.sah);
+            m.world_area += f64::from(b.half_area());
             m.weight += w;
             total += w;
             weighted += w * f64::from(m.stats.sah_ratio);
@@ -943,7 +986,9 @@ impl Engine {
 
     /// What the SAH predicts a ray that hits the scene's box costs without early termination:
     /// `(nodes visited, triangles tested)`, over both levels (instance boxes in world space,
-    /// instance trees by their own areas).
+    /// instance trees by their own areas), counted on the trees rays walk: the 8-wide trees
+    /// with [`Traversal::Wide`] ([`expected_work_wide`]), else the binary ones
+    /// ([`expected_work`]), as [`Engine::closest_hit_counted`] counts. Allocates nothing.
     #[must_use]
     pub fn predicted_work(&self) -> (f64, f64) {
         let root = f64::from(self.tlas.bounds().half_area());
@@ -958,15 +1003,14 @@ impl Engine {
             .sum::<f64>()
             / root;
         let mut tris = 0.0;
-        let mut per_mesh: Vec<Option<(f64, f64)>> = vec![None; self.meshes.len()];
-        for (&k, b) in self.tlas_instances.iter().zip(&self.tlas_boxes) {
-            let inst = &self.instances[k as usize];
-            if !inst.visible {
-                continue;
-            }
-            let (n, t) = *per_mesh[inst.mesh as usize]
-                .get_or_insert_with(|| expected_work(self.meshes[inst.mesh as usize].bvh.bvh()));
-            let p = f64::from(b.half_area()) / root;
+        // Each mesh's tree once, weighted by its instances' world box areas (summed by the
+        // last update).
+        for m in self.meshes.iter().filter(|m| m.world_area > 0.0) {
+            let (n, t) = match &m.wide {
+                Some(w) => expected_work_wide(w),
+                None => expected_work(m.bvh.bvh()),
+            };
+            let p = m.world_area / root;
             nodes += p * n;
             tris += p * t;
         }
@@ -1085,7 +1129,9 @@ fn transform_box(m: &Affine3A, b: Aabb) -> Aabb {
 }
 
 /// Expected nodes visited and triangles tested by a ray through the tree's root (no early
-/// termination).
+/// termination), as the binary traversal counts them: a node (interior or leaf) when the ray
+/// hits its box, with probability its area over the root's (exact in expectation for uniformly
+/// random lines through the root's box), and a leaf's triangles with it.
 #[must_use]
 pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
     let nodes = bvh.nodes();
@@ -1101,6 +1147,48 @@ pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
         (n + ar, t + ar * f64::from(x.count))
     });
     (n / a, t / a)
+}
+
+/// [`expected_work`] for a wide tree, counted as its traversal counts
+/// ([`WideBvh::closest_hit_counted`]): the root node always (the traversal starts there without
+/// testing its box; the engine gets there through the instance's box), every other interior
+/// node and every leaf lane when the ray hits the lane's box in the parent (probability: the
+/// lane box's area over the root's), and a leaf lane's triangles (unused block lanes not
+/// counted) with it.
+#[must_use]
+pub fn expected_work_wide<const K: usize>(w: &WideBvh<K>) -> (f64, f64) {
+    let nodes = w.nodes();
+    let Some(root) = nodes.first() else {
+        return (0.0, 0.0);
+    };
+    let blocks = w.blocks();
+    let a = f64::from(root.bounds().half_area());
+    // Area sums over the children (interior and leaf lanes) and over leaf lanes times their
+    // triangles; and the plain counts, for a root of no area.
+    let (mut n, mut t, mut lanes, mut tris) = (0.0, 0.0, 0.0, 0.0);
+    for node in nodes {
+        for k in 0..K {
+            let (count, area) = match node.child(k) {
+                Child::Empty => continue,
+                Child::Node(_) => (0.0, node.lane_bounds(k).half_area()),
+                Child::Leaf { first, count } => {
+                    let run = &blocks[first as usize..(first + count) as usize];
+                    let used = run.iter().flat_map(|b| b.prims).filter(|&p| p != NO_PRIM);
+                    (used.count() as f64, node.lane_bounds(k).half_area())
+                }
+            };
+            let area = f64::from(area);
+            n += area;
+            t += area * count;
+            lanes += 1.0;
+            tris += count;
+        }
+    }
+    if a > 0.0 && a.is_finite() {
+        (1.0 + n / a, t / a)
+    } else {
+        (1.0 + lanes, tris)
+    }
 }
 
 /// SAH cost of a tree (as [`Bvh::sah_cost`]), summed in parallel for large trees.

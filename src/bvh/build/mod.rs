@@ -283,6 +283,15 @@ pub(crate) trait Splitter: Sync {
 /// tree's depth stays within [`MAX_DEPTH`] whatever the input.
 pub(crate) const SAH_DEPTH_LIMIT: u32 = MAX_DEPTH as u32 - 40;
 
+/// Makes every thread of the current rayon pool (the global pool outside one) ready to run
+/// binned build tasks without allocating: each gets its spare bin stacks now (the builder keeps
+/// them per thread; otherwise a thread makes its own the first time it runs a build task, with
+/// several threads at whatever later build the scheduler first hands it one). Allocates, runs
+/// on every thread of the pool: call it once, before a frame loop that must not allocate.
+pub fn prepare_threads() {
+    rayon::broadcast(|_| binned::warm_thread_spares());
+}
+
 /// Buffers a build needs besides the tree itself, kept from one build to the next so that a
 /// rebuild with binned SAH or median split allocates nothing once they have grown (the full
 /// sweep, a reference builder, still allocates its sorted lists).
