@@ -2,7 +2,7 @@
 //! normalized integers (KHR_mesh_quantization included), matrix column padding and sparse
 //! substitution, with every range checked.
 
-use super::source::Source;
+use super::source::{Source, meshopt_extension};
 use crate::error::{Error, Result};
 use gltf_json::accessor::{ComponentType, Type};
 use gltf_json::validation::Checked;
@@ -148,6 +148,17 @@ impl Reader<'_> {
             )
         })?;
         let b = view.buffer.value();
+        if self.src.absent.get(b).copied().unwrap_or(false) {
+            let ext = meshopt_extension(view.extensions.as_ref().map(|e| &e.others))
+                .unwrap_or("EXT_meshopt_compression");
+            return Err(Error::Unsupported {
+                path: self.path.into(),
+                object: format!("{object} buffer view {v}"),
+                what: format!(
+                    "data compressed with {ext} (buffer {b} has no uncompressed fallback), which the engine does not decode"
+                ),
+            });
+        }
         let buf = self.src.buffers.get(b).ok_or_else(|| {
             self.err(
                 format!("{object} buffer view {v}"),

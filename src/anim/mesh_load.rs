@@ -3,6 +3,7 @@
 
 use super::accessor::Reader;
 use super::scene::{Mesh, SkinAttributes, Warning};
+use super::source::{MESHOPT, meshopt_extension};
 use crate::error::Result;
 use glam::Vec3;
 use gltf_json::accessor::{ComponentType, Type};
@@ -17,8 +18,53 @@ pub(crate) struct LoadedMesh {
     pub skipped_modes: bool,
     /// Vertices whose skin weights were renormalized noticeably.
     pub renormalized: usize,
+    /// Surface primitives skipped because their data is compressed.
+    pub compressed: usize,
     /// Other warnings.
     pub warnings: Vec<Warning>,
+}
+
+/// Mesh compression whose primitives carry their geometry in a form the engine does not
+/// decode (the file may still give uncompressed fallback data, which is then read).
+pub(crate) const DRACO: &str = "KHR_draco_mesh_compression";
+
+/// The compression extension that keeps primitive `p` from being read, if any: Draco when an
+/// accessor it reads has neither a buffer view nor sparse data (the data lives only in the
+/// Draco stream), meshopt when an accessor's buffer view points into a buffer without data.
+fn compressed(rd: &Reader, p: &Primitive) -> Option<&'static str> {
+    let accessors = p
+        .attributes
+        .values()
+        .chain(p.indices.as_ref())
+        .chain(
+            p.targets
+                .iter()
+                .flatten()
+                .filter_map(|t| t.positions.as_ref()),
+        )
+        .filter_map(|a| rd.src.root.accessors.get(a.value()));
+    let draco = p
+        .extensions
+        .as_ref()
+        .is_some_and(|e| e.others.contains_key(DRACO));
+    for acc in accessors {
+        match acc.buffer_view {
+            None if draco && acc.sparse.is_none() => return Some(DRACO),
+            None => {}
+            Some(v) => {
+                let Some(view) = rd.src.root.buffer_views.get(v.value()) else {
+                    continue;
+                };
+                if rd.src.absent.get(view.buffer.value()) == Some(&true) {
+                    return Some(
+                        meshopt_extension(view.extensions.as_ref().map(|e| &e.others))
+                            .unwrap_or(MESHOPT[0]),
+                    );
+                }
+            }
+        }
+    }
+    None
 }
 
 /// One primitive's data before merging.
@@ -144,6 +190,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
     let mut warnings = Vec::new();
     let mut skipped_modes = false;
     let mut prims = Vec::new();
+    let mut compressed_prims: Vec<(usize, &str)> = Vec::new();
     for (p, jp) in jm.primitives.iter().enumerate() {
         let obj = format!("mesh {m} primitive {p}");
         let mode = match jp.mode {
@@ -154,6 +201,10 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
             }
             Checked::Invalid => return Err(rd.err(obj, "a primitive mode between 0 and 6")),
         };
+        if let Some(ext) = compressed(rd, jp) {
+            compressed_prims.push((p, ext));
+            continue;
+        }
         match load_primitive(rd, &obj, mode, jp)? {
             Some(prim) => prims.push(prim),
             None => warnings.push(Warning(format!(
@@ -161,6 +212,21 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
                 rd.path.display()
             ))),
         }
+    }
+    if !compressed_prims.is_empty() {
+        let mut exts: Vec<&str> = compressed_prims.iter().map(|c| c.1).collect();
+        exts.sort_unstable();
+        exts.dedup();
+        let list: Vec<String> = compressed_prims.iter().map(|c| c.0.to_string()).collect();
+        warnings.push(Warning(format!(
+            "{}: mesh {m}{} primitive{} {} of {}: compressed with {}, which the engine does not decode; skipped",
+            rd.path.display(),
+            jm.name.as_deref().map(|n| format!(" \"{n}\"")).unwrap_or_default(),
+            if list.len() == 1 { "" } else { "s" },
+            list.join(", "),
+            jm.primitives.len(),
+            exts.join(" and ")
+        )));
     }
     let n_targets = prims.iter().map(|p| p.targets.len()).max().unwrap_or(0);
     let n_sets = prims.iter().map(|p| p.joints.len()).max().unwrap_or(0);
@@ -237,6 +303,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
         mesh,
         skipped_modes,
         renormalized,
+        compressed: compressed_prims.len(),
         warnings,
     })
 }
