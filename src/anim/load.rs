@@ -1,7 +1,7 @@
 //! glTF document to [`Scene`]: node forest, chosen scene, instances, skins and animations.
 //! Mesh geometry is read by [`super::mesh_load`].
 
-use super::accessor::Reader;
+use super::accessor::{Reader, decoded_limit};
 use super::mesh_load::load_mesh;
 use super::scene::{
     Animation, Channel, Instance, Interpolation, Node, Property, Sampler, Scene, Skin, Trs, Warning,
@@ -20,6 +20,11 @@ use std::path::Path;
 pub struct LoadOptions {
     /// glTF scene to use instead of the file's default scene.
     pub scene: Option<usize>,
+    /// Bound on the bytes of decoded accessor data (`None`: [`decoded_limit`] of the input's
+    /// size, 4 GiB plus 16 bytes per byte of file and buffers). A file asking for more is an
+    /// error naming it and the mesh or accessor that went over, raised before the memory is
+    /// allocated.
+    pub max_decoded_bytes: Option<u64>,
 }
 
 /// What the engine ignores of an extension listed in `extensionsUsed`, or `None` when it
@@ -79,7 +84,11 @@ impl Scene {
         opts: &LoadOptions,
     ) -> Result<(Scene, Vec<Warning>)> {
         let src = Source::parse(path, bytes)?;
-        let rd = Reader { path, src: &src };
+        let input = bytes.len() as u64 + src.buffers.iter().map(|b| b.len() as u64).sum::<u64>();
+        let limit = opts
+            .max_decoded_bytes
+            .unwrap_or_else(|| decoded_limit(input));
+        let rd = Reader::new(path, &src, limit);
         let mut warnings = Vec::new();
         let mut used: Vec<&String> = src
             .root

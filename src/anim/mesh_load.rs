@@ -184,6 +184,66 @@ fn load_primitive(rd: &Reader, obj: &str, mode: Mode, p: &Primitive) -> Result<O
     }))
 }
 
+/// Checks, from the accessor counts alone and before anything is decoded, that mesh `m` has
+/// fewer than 2^32 vertices over its surface primitives and that its merged data (positions,
+/// triangles, morph deltas and skin attributes, each primitive padded to the mesh's most
+/// targets and weight sets) fits the reader's remaining decode bound.
+fn check_size(rd: &Reader, m: usize) -> Result<()> {
+    let jm = &rd.src.root.meshes[m];
+    let count = |a: &gltf_json::Index<gltf_json::Accessor>| {
+        rd.src
+            .root
+            .accessors
+            .get(a.value())
+            .map_or(0, |a| a.count.0)
+    };
+    let surface = jm.primitives.iter().filter(|p| {
+        matches!(
+            p.mode,
+            Checked::Valid(Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan)
+        )
+    });
+    let (mut verts, mut index_count) = (0u64, 0u64);
+    let (mut targets, mut sets) = (0u64, 0u64);
+    for p in surface {
+        let Some(pos) = p.attributes.get(&Checked::Valid(Semantic::Positions)) else {
+            continue;
+        };
+        let n = count(pos);
+        verts = verts.saturating_add(n);
+        index_count = index_count.saturating_add(p.indices.as_ref().map_or(n, count));
+        targets = targets.max(p.targets.as_ref().map_or(0, |t| t.len() as u64));
+        let s = (0u32..)
+            .take_while(|&s| {
+                p.attributes
+                    .contains_key(&Checked::Valid(Semantic::Joints(s)))
+                    && p.attributes
+                        .contains_key(&Checked::Valid(Semantic::Weights(s)))
+            })
+            .count();
+        sets = sets.max(s as u64);
+    }
+    if verts >= u64::from(u32::MAX) {
+        return Err(rd.err(
+            format!("mesh {m}"),
+            format!("fewer than 2^32 vertices over its primitives, found {verts}"),
+        ));
+    }
+    // Per vertex: position and one delta per target (12 bytes each), 4 joints (u16) and
+    // 4 weights (f32) per set; per index at most one triangle of 12 bytes (strips).
+    let per_vertex = 12 * (1 + targets) + 24 * sets;
+    let bytes = verts
+        .saturating_mul(per_vertex)
+        .saturating_add(index_count.saturating_mul(12));
+    if bytes > rd.remaining() {
+        return Err(rd.too_big(
+            format!("mesh {m} ({verts} vertices, {targets} morph targets, {sets} weight sets)"),
+            bytes,
+        ));
+    }
+    Ok(())
+}
+
 /// Loads glTF mesh `m` (the index must be in range).
 pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
     let jm = &rd.src.root.meshes[m];
@@ -191,6 +251,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
     let mut skipped_modes = false;
     let mut prims = Vec::new();
     let mut compressed_prims: Vec<(usize, &str)> = Vec::new();
+    check_size(rd, m)?;
     for (p, jp) in jm.primitives.iter().enumerate() {
         let obj = format!("mesh {m} primitive {p}");
         let mode = match jp.mode {
