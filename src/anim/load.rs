@@ -492,6 +492,7 @@ fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) 
     let mut mesh_map: HashMap<usize, usize> = HashMap::new();
     let mut skipped_modes = Vec::new();
     let mut bad_weights = Vec::new();
+    let mut no_weights = Vec::new();
     let (mut tris, mut verts) = (0usize, 0usize);
     let mut compressed = 0;
     while let Some(n) = stack.pop() {
@@ -511,6 +512,9 @@ fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) 
                 }
                 if loaded.renormalized > 0 {
                     bad_weights.push(format!("mesh {gm} ({} vertices)", loaded.renormalized));
+                }
+                if loaded.unweighted > 0 {
+                    no_weights.push(format!("mesh {gm} ({} vertices)", loaded.unweighted));
                 }
                 compressed += loaded.compressed;
                 warnings.extend(loaded.warnings);
@@ -585,6 +589,14 @@ fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) 
             "{}: skin weights not summing to 1 were renormalized in {}",
             rd.path.display(),
             bad_weights.join(", ")
+        )));
+    }
+    if !no_weights.is_empty() {
+        warnings.push(Warning(format!(
+            "{}: vertices whose skin weights are all zero are not skinned (they keep their \
+             morphed rest position, moved by the mesh node's own transform) in {}",
+            rd.path.display(),
+            no_weights.join(", ")
         )));
     }
     Ok(compressed)

@@ -18,6 +18,9 @@ pub(crate) struct LoadedMesh {
     pub skipped_modes: bool,
     /// Vertices whose skin weights were renormalized noticeably.
     pub renormalized: usize,
+    /// Vertices whose skin weights are all zero (not renormalized: skinning leaves them to
+    /// the mesh node's transform).
+    pub unweighted: usize,
     /// Surface primitives skipped because their data is compressed.
     pub compressed: usize,
     /// Other warnings.
@@ -250,6 +253,8 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
     let mut warnings = Vec::new();
     let mut skipped_modes = false;
     let mut prims = Vec::new();
+    // glTF index of each entry of `prims`.
+    let mut prim_index = Vec::new();
     let mut compressed_prims: Vec<(usize, &str)> = Vec::new();
     check_size(rd, m)?;
     for (p, jp) in jm.primitives.iter().enumerate() {
@@ -267,7 +272,10 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
             continue;
         }
         match load_primitive(rd, &obj, mode, jp)? {
-            Some(prim) => prims.push(prim),
+            Some(prim) => {
+                prims.push(prim);
+                prim_index.push(p);
+            }
             None => warnings.push(Warning(format!(
                 "{}: {obj}: no POSITION attribute; skipped",
                 rd.path.display()
@@ -307,8 +315,8 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
         joints: Vec::with_capacity(total * influences),
         weights: Vec::with_capacity(total * influences),
     };
-    let mut renormalized = 0;
-    for p in prims {
+    let (mut renormalized, mut unweighted) = (0, 0);
+    for (pi, p) in prims.into_iter().enumerate() {
         let base = mesh.positions.len() as u32;
         let t0 = mesh.indices.len();
         mesh.indices
@@ -334,7 +342,18 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
                     let w = w.unwrap_or(0.0).max(0.0);
                     // A joint with zero weight never matters: park it on joint 0.
                     let j = if w > 0.0 { j.unwrap_or(0) } else { 0 };
-                    attrs.joints.push(u16::try_from(j).unwrap_or(u16::MAX));
+                    // Skins have at most 65536 joints (JOINTS_n are u8 or u16 by the spec;
+                    // the loader also reads u32): a larger index can name no joint.
+                    let Ok(j) = u16::try_from(j) else {
+                        return Err(rd.err(
+                            format!("mesh {m} primitive {} JOINTS_{s}", prim_index[pi]),
+                            format!(
+                                "joint indices below 65536 (a skin has at most 65536 joints), \
+                                 found {j} with weight {w} at vertex {v}"
+                            ),
+                        ));
+                    };
+                    attrs.joints.push(j);
                     attrs.weights.push(w);
                 }
             }
@@ -346,7 +365,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
                 }
                 ws.iter_mut().for_each(|w| *w /= sum);
             } else if sum == 0.0 {
-                renormalized += 1;
+                unweighted += 1;
             }
         }
     }
@@ -364,6 +383,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
         mesh,
         skipped_modes,
         renormalized,
+        unweighted,
         compressed: compressed_prims.len(),
         warnings,
     })
