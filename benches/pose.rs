@@ -12,9 +12,9 @@
 //!   is far beyond the 32 MiB L3 for both thread counts, so each pose streams its 48 MB from
 //!   DRAM whether one core does it or two: the fair 1-thread / 2-thread comparison.
 //! - `pose/tube_1m/*`: one copy posed over and over. Its 48 MB do not fit the 32 MiB L3 for
-//!   one thread, but part of each thread's half stays cached from one pose to the next with
-//!   two, so the 2-thread figure is flattered (the super-linear scaling this bench used to
-//!   report). Kept to show the effect; do not read the scaling from it.
+//!   one thread, but with two, part of each thread's half could stay cached from one pose to
+//!   the next and flatter the 2-thread figure. Kept beside `tube_1m_x4` to show whether it
+//!   does (on the development VM it did not: posing is bound by arithmetic at this rate).
 //! - `pose/tube_24k/*`: a 23,817-vertex tube (about 1.1 MB), which stays in cache: what the
 //!   arithmetic alone allows.
 //! - `load/metal_rough_spheres`: `Scene::load` of the 1M-triangle
