@@ -158,6 +158,7 @@ fn big_deforming_meshes_pose_in_parallel_like_the_analytic_pose() {
     for (t, want) in &g.checks {
         poser.pose(*t);
         poser.flatten_into(&mut flat);
+        assert_eq!(flat.positions.len(), want.len(), "t={t}");
         for (a, b) in flat.positions.iter().zip(want) {
             assert!((*a - *b).abs().max_element() < 1e-4, "t={t}: {a} vs {b}");
         }

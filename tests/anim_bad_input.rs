@@ -168,10 +168,18 @@ fn json_digit_changes_never_panic() {
     }
 }
 
+/// A missing file is an I/O error naming it; a missing external buffer is an error about the
+/// `.gltf` file that names the buffer, the missing file and the system's reason.
 #[test]
-fn missing_file_and_missing_buffer_are_io_errors() {
+fn missing_file_is_an_io_error_and_missing_buffer_names_gltf_buffer_and_file() {
     let e = Scene::load("/nonexistent/dir/x.glb").unwrap_err();
-    assert!(matches!(e, dynbvh::Error::Io { .. }), "{e}");
+    match &e {
+        dynbvh::Error::Io { path, err } => {
+            assert_eq!(path, Path::new("/nonexistent/dir/x.glb"));
+            assert_eq!(err.kind(), std::io::ErrorKind::NotFound);
+        }
+        other => panic!("not an I/O error: {other:?}"),
+    }
     assert!(e.to_string().contains("x.glb"));
     let Some(p) = anim_util::sample("SimpleSkin/SimpleSkin.gltf") else {
         return;
@@ -180,7 +188,20 @@ fn missing_file_and_missing_buffer_are_io_errors() {
         .unwrap()
         .replace("skinGeometry.bin", "nope.bin");
     let e = Scene::from_slice(&p, text.as_bytes(), &LoadOptions::default()).unwrap_err();
-    assert!(e.to_string().contains("nope.bin"), "{e}");
+    match &e {
+        dynbvh::Error::Malformed { path, object, what } => {
+            assert_eq!(path, &p);
+            assert_eq!(object, "buffer 0");
+            assert!(what.contains("nope.bin"), "{what}");
+            let reason = std::io::Error::from(std::io::ErrorKind::NotFound).to_string();
+            assert!(
+                what.contains("No such file") || what.contains(&reason),
+                "{what}"
+            );
+        }
+        other => panic!("not a Malformed error: {other:?}"),
+    }
+    assert!(e.to_string().contains("SimpleSkin.gltf"), "{e}");
 }
 
 #[test]

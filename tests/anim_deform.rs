@@ -226,9 +226,24 @@ fn posing_matches_morph_then_blend_skinning_by_definition() {
     let bytes = scene_bytes();
     let (scene, warnings) =
         Scene::from_slice(Path::new("deform.glb"), &bytes, &LoadOptions::default()).unwrap();
+    // One warning for renormalized weights, one for all-zero weights (not renormalized,
+    // counted apart: the vertices the loaded skin still has with all weights zero).
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert!(warnings[0].0.contains("renormalized"), "{warnings:?}");
+    let zero = |m: usize| {
+        let a = scene.meshes[m].skin.as_ref().unwrap();
+        a.weights
+            .chunks_exact(a.influences)
+            .filter(|w| w.iter().all(|&w| w == 0.0))
+            .count()
+    };
+    assert!(zero(0) > 0 && zero(1) > 0);
+    let w = &warnings[1].0;
     assert!(
-        warnings.len() == 1 && warnings[0].0.contains("renormalized"),
-        "{warnings:?}"
+        w.contains("all zero are not skinned")
+            && w.contains(&format!("mesh 0 ({} vertices)", zero(0)))
+            && w.contains(&format!("mesh 1 ({} vertices)", zero(1))),
+        "{w}"
     );
     assert_eq!(scene.instances.len(), 2);
     assert_eq!(scene.meshes[0].positions.len(), BIG);

@@ -132,3 +132,58 @@ fn shipped_files_match_the_generator() {
     }
     assert!(total < 1_000_000, "shipped animations take {total} bytes");
 }
+
+/// The wave's CUBICSPLINE weight keys carry the derivatives of (cos φ, sin φ) as tangents:
+/// between keys the weights follow the Hermite curve computed here by hand from the key
+/// values and tangents (scaled by the key interval), which stays within the cubic's error of
+/// the circle, and the positions follow the weights.
+#[test]
+fn wave_weights_between_keys_follow_the_hermite_curve() {
+    use std::f32::consts::{PI, TAU};
+    let g = generate(Kind::Wave, 800, 1);
+    let (scene, _) =
+        Scene::from_slice(Path::new("wave.glb"), &g.glb, &LoadOptions::default()).unwrap();
+    let d = g.duration;
+    let dt = d / 8.0; // 9 keys
+    let phi = |t: f32| TAU * t / d;
+    let dphi = TAU / d;
+    let mut poser = scene.poser(Some(0)).unwrap();
+    let mut flat = TriMesh::default();
+    for t in [0.1f32, 0.37, 1.13, 1.9] {
+        let k = (t / dt).floor();
+        let (t0, t1) = (k * dt, (k + 1.0) * dt);
+        let s = (t - t0) / dt;
+        let (s2, s3) = (s * s, s * s * s);
+        let (h00, h10, h01, h11) = (
+            2.0 * s3 - 3.0 * s2 + 1.0,
+            s3 - 2.0 * s2 + s,
+            -2.0 * s3 + 3.0 * s2,
+            s3 - s2,
+        );
+        let (sn0, c0) = phi(t0).sin_cos();
+        let (sn1, c1) = phi(t1).sin_cos();
+        // Value (cos, sin), tangent (-sin, cos) · dφ/dt.
+        let w0 = h00 * c0 + h10 * dt * (-sn0 * dphi) + h01 * c1 + h11 * dt * (-sn1 * dphi);
+        let w1 = h00 * sn0 + h10 * dt * (c0 * dphi) + h01 * sn1 + h11 * dt * (c1 * dphi);
+        poser.pose(t);
+        let got = poser.morph_weights(0);
+        assert!(
+            (got[0] - w0).abs() < 1e-5 && (got[1] - w1).abs() < 1e-5,
+            "t={t}: weights {got:?}, by hand ({w0}, {w1})"
+        );
+        // The key interval is 1/8 of a turn: the cubic stays within 1e-3 of the circle.
+        let (sn, c) = phi(t).sin_cos();
+        assert!((w0 - c).abs() < 1e-3 && (w1 - sn).abs() < 1e-3, "t={t}");
+        // Positions: the node turns the grid by -90 degrees about x.
+        let node = glam::Mat4::from_quat(glam::Quat::from_rotation_x(-PI / 2.0));
+        let mesh = &scene.meshes[0];
+        poser.flatten_into(&mut flat);
+        assert_eq!(flat.positions.len(), mesh.positions.len());
+        for (v, p) in flat.positions.iter().enumerate() {
+            let want = node.transform_point3(
+                mesh.positions[v] + w0 * mesh.targets[0][v] + w1 * mesh.targets[1][v],
+            );
+            assert!((*p - want).abs().max_element() < 1e-5, "t={t} v={v}");
+        }
+    }
+}

@@ -4,7 +4,7 @@
 mod anim_util;
 
 use anim_util::assert_near;
-use dynbvh::anim::{Scene, TimeMode};
+use dynbvh::anim::{Interpolation, Sampler, Scene, TimeMode};
 use glam::{Mat4, Quat, Vec3};
 
 /// Hermite basis at `s`: (h00, h10, h01, h11).
@@ -103,6 +103,44 @@ fn cubic_scale() {
     assert_near(sc, Vec3::splat(want), 1e-5, "cubic scale");
     let (sc, _, _) = f.trs("CubicSpline Scale", 4, 5.0);
     assert_near(sc, Vec3::ONE, 1e-6, "after last key");
+    // Before the first key (1/24 s): key 0's value 1, not its in-tangent (0, which would
+    // flatten the cube).
+    for t in [0.0, 0.02] {
+        let (sc, _, _) = f.trs("CubicSpline Scale", 4, t);
+        assert_near(sc, Vec3::ONE, 1e-6, &format!("before first key t={t}"));
+    }
+}
+
+/// A CUBICSPLINE sampler whose keys start at 1 s, with in-tangents, values and out-tangents
+/// all different: before the first key it gives key 0's value, after the last the last value,
+/// and between keys the Hermite curve with tangents scaled by the key interval.
+#[test]
+fn cubic_sampler_clamps_to_values_not_tangents() {
+    let s = Sampler {
+        interpolation: Interpolation::CubicSpline,
+        times: vec![1.0, 3.0],
+        // (in, value, out) per key, width 2.
+        values: vec![
+            7.0, -7.0, 2.0, -2.0, 5.0, -5.0, 11.0, -11.0, 4.0, -4.0, 13.0, -13.0,
+        ],
+        width: 2,
+    };
+    let mut out = [0.0; 2];
+    for t in [-5.0, 0.0, 0.999, 1.0] {
+        s.sample(t, false, &mut out);
+        assert_eq!(out, [2.0, -2.0], "t={t}");
+    }
+    for t in [3.0, 3.5, 100.0] {
+        s.sample(t, false, &mut out);
+        assert_eq!(out, [4.0, -4.0], "t={t}");
+    }
+    // t = 1.5: s = 0.25 over an interval of 2 s; out-tangent of key 0 is 5, in-tangent of
+    // key 1 is 11.
+    let (h00, h10, h01, h11) = hermite(0.25);
+    let want = h00 * 2.0 + h10 * 2.0 * 5.0 + h01 * 4.0 + h11 * 2.0 * 11.0;
+    s.sample(1.5, false, &mut out);
+    assert!((out[0] - want).abs() < 1e-5, "{} vs {want}", out[0]);
+    assert!((out[1] + want).abs() < 1e-5, "{} vs {}", out[1], -want);
 }
 
 #[test]
@@ -184,11 +222,51 @@ fn looping_wraps_beyond_the_duration() {
     let a = f.scene.find_animation("Linear Translation").unwrap();
     let d = f.scene.animations[a].duration;
     assert_eq!(d, TRANS_TIMES[4]);
+    // Looping: d + 1 s is t = 1 s, between key 2 (y 6 at 0.8333 s) and key 3 (y 10 at 1.25 s).
     let looped = f.at("Linear Translation", 10, d + 1.0, TimeMode::Loop);
-    let direct = f.at("Linear Translation", 10, 1.0, TimeMode::Clamp);
-    assert!(looped.abs_diff_eq(direct, 1e-5));
-    let clamped = f.at("Linear Translation", 10, d + 1.0, TimeMode::Clamp);
-    assert!(clamped.abs_diff_eq(f.at("Linear Translation", 10, d, TimeMode::Clamp), 1e-6));
+    let s = (1.0 - TRANS_TIMES[2]) / (TRANS_TIMES[3] - TRANS_TIMES[2]);
+    assert_near(
+        looped.w_axis.truncate(),
+        Vec3::new(-3.297_580_7, 6.0 + s * 4.0, 0.0),
+        1e-4,
+        "looped",
+    );
+    // Clamping after the last key: the last key's value (-3.2975807, 6, 0), by hand.
+    for t in [d, d + 1.0, 50.0] {
+        let clamped = f.at("Linear Translation", 10, t, TimeMode::Clamp);
+        assert_near(
+            clamped.w_axis.truncate(),
+            Vec3::new(-3.297_580_7, 6.0, 0.0),
+            1e-6,
+            &format!("clamped t={t}"),
+        );
+    }
+}
+
+#[test]
+fn linear_after_the_last_key_holds_the_last_value() {
+    let Some(f) = Fixture::load() else { return };
+    // Linear Rotation's last key (1.7083 s): -180 degrees about z, (0, 0, -1, ~0).
+    let (_, r, _) = f.trs("Linear Rotation", 7, 9.0);
+    assert_quat(
+        r,
+        Quat::from_xyzw(0.0, 0.0, -1.0, 0.0),
+        "rotation after last key",
+    );
+    // Linear Scale's last key (1.6667 s) is 1; just before it the scale is still below 1.
+    let (sc, _, _) = f.trs("Linear Scale", 3, 9.0);
+    assert_near(sc, Vec3::ONE, 1e-6, "scale after last key");
+    let t = 1.5;
+    let s = (t - SCALE_TIMES[3]) / (SCALE_TIMES[4] - SCALE_TIMES[3]);
+    let (sc, _, _) = f.trs("Linear Scale", 3, t);
+    assert_near(
+        sc,
+        Vec3::splat(0.5 + s * 0.5),
+        1e-5,
+        "scale between the last keys",
+    );
+    // Linear Translation before its first key is not reachable (key 0 is at 0 s); after its
+    // last key see `looping_wraps_beyond_the_duration`.
 }
 
 #[test]

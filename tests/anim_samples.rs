@@ -54,3 +54,26 @@ fn classes_of_samples() {
     let (s, _) = Scene::load(dir.join("Fox/Fox.glb")).unwrap();
     assert!(s.classify(None).unwrap().iter().all(|&c| c == Static));
 }
+
+/// MeshPrimitiveModes has points, line, line-loop and line-strip primitives besides its
+/// triangles: exactly one warning says they were skipped, naming the meshes.
+#[test]
+fn points_and_lines_give_exactly_one_warning() {
+    let Some(path) = anim_util::sample("MeshPrimitiveModes/MeshPrimitiveModes.gltf") else {
+        return;
+    };
+    let (scene, warnings) = Scene::load(&path).unwrap();
+    assert_eq!(scene.triangle_count(), 16);
+    let modes: Vec<_> = warnings
+        .iter()
+        .filter(|w| w.0.contains("points and lines"))
+        .collect();
+    assert_eq!(modes.len(), 1, "{warnings:?}");
+    assert!(
+        modes[0].0.contains("MeshPrimitiveModes.gltf"),
+        "{}",
+        modes[0]
+    );
+    assert!(modes[0].0.contains("mesh 0"), "{}", modes[0]);
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+}

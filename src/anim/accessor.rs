@@ -2,7 +2,7 @@
 //! normalized integers (KHR_mesh_quantization included), matrix column padding and sparse
 //! substitution, with every range checked.
 
-use super::source::Source;
+use super::source::{Source, meshopt_extension};
 use crate::error::{Error, Result};
 use gltf_json::accessor::{ComponentType, Type};
 use gltf_json::validation::Checked;
@@ -11,12 +11,35 @@ use std::path::Path;
 /// Largest number of components an accessor without a buffer view may hold (zeros plus sparse).
 const MAX_ZERO_COMPONENTS: u64 = 1 << 24;
 
-/// Reads accessors of one document, naming `path` in errors.
+/// Bytes of decoded data a file may ask for beyond [`DECODED_PER_INPUT_BYTE`] bytes per byte
+/// of its own (file and buffers): 4 GiB. See [`decoded_limit`].
+pub const DECODED_BASE: u64 = 4 << 30;
+
+/// Decoded bytes allowed per byte of input (file and buffers), on top of [`DECODED_BASE`].
+pub const DECODED_PER_INPUT_BYTE: u64 = 16;
+
+/// The default bound on the bytes of decoded accessor data (vertex attributes, indices, morph
+/// deltas, skin attributes, keyframes) of one file of `input_bytes` bytes (file and buffers):
+/// `4 GiB + 16 × input_bytes`. Data read through buffer views grows at most 4 times (8-bit
+/// to `f32`) and triangle strips 12 times (8-bit indices to `[u32; 3]`), so every real file is
+/// far below it; what reaches it is an accessor without buffer view (zeros plus sparse values)
+/// or a view read again and again by many primitives, targets or samplers.
+#[must_use]
+pub fn decoded_limit(input_bytes: u64) -> u64 {
+    DECODED_BASE.saturating_add(DECODED_PER_INPUT_BYTE.saturating_mul(input_bytes))
+}
+
+/// Reads accessors of one document, naming `path` in errors, and keeps the total decoded
+/// size under `limit` bytes.
 pub(crate) struct Reader<'a> {
     /// The file, for error messages.
     pub path: &'a Path,
     /// The document and its buffers.
     pub src: &'a Source,
+    /// Bytes decoded so far.
+    pub decoded: std::cell::Cell<u64>,
+    /// Bound on `decoded`.
+    pub limit: u64,
 }
 
 /// Bytes of one component.
@@ -130,7 +153,44 @@ pub(crate) struct Decoded<T> {
     pub comp: ComponentType,
 }
 
-impl Reader<'_> {
+impl<'a> Reader<'a> {
+    /// A reader of `src` (the content of `path`) that decodes at most `limit` bytes.
+    pub fn new(path: &'a Path, src: &'a Source, limit: u64) -> Self {
+        Reader {
+            path,
+            src,
+            decoded: std::cell::Cell::new(0),
+            limit,
+        }
+    }
+
+    /// Bytes that may still be decoded.
+    pub fn remaining(&self) -> u64 {
+        self.limit.saturating_sub(self.decoded.get())
+    }
+
+    /// An error about `object` asking for `bytes` more decoded bytes than remain.
+    pub fn too_big(&self, object: impl Into<String>, bytes: u64) -> Error {
+        self.err(
+            object,
+            format!(
+                "at most {} bytes of decoded data for the whole file (the loader's bound; {} \
+                 already decoded), found a request for {bytes} more",
+                self.limit,
+                self.decoded.get()
+            ),
+        )
+    }
+
+    /// Counts `bytes` of decoded data against the bound, or fails naming `object`.
+    fn charge(&self, object: &str, bytes: u64) -> Result<()> {
+        if bytes > self.remaining() {
+            return Err(self.too_big(object, bytes));
+        }
+        self.decoded.set(self.decoded.get() + bytes);
+        Ok(())
+    }
+
     /// An error about `object`.
     pub fn err(&self, object: impl Into<String>, what: impl Into<String>) -> Error {
         Error::malformed(self.path, object, what)
@@ -148,6 +208,17 @@ impl Reader<'_> {
             )
         })?;
         let b = view.buffer.value();
+        if self.src.absent.get(b).copied().unwrap_or(false) {
+            let ext = meshopt_extension(view.extensions.as_ref().map(|e| &e.others))
+                .unwrap_or("EXT_meshopt_compression");
+            return Err(Error::Unsupported {
+                path: self.path.into(),
+                object: format!("{object} buffer view {v}"),
+                what: format!(
+                    "data compressed with {ext} (buffer {b} has no uncompressed fallback), which the engine does not decode"
+                ),
+            });
+        }
         let buf = self.src.buffers.get(b).ok_or_else(|| {
             self.err(
                 format!("{object} buffer view {v}"),
@@ -199,6 +270,12 @@ impl Reader<'_> {
         let count = acc.count.0;
         let (offsets, elem) = layout(ty, comp);
         let width = offsets.len();
+        self.charge(
+            &name,
+            count
+                .saturating_mul(width as u64)
+                .saturating_mul(std::mem::size_of::<T>() as u64),
+        )?;
         let bad_comp = || {
             self.err(
                 &name,

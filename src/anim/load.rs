@@ -1,7 +1,7 @@
 //! glTF document to [`Scene`]: node forest, chosen scene, instances, skins and animations.
 //! Mesh geometry is read by [`super::mesh_load`].
 
-use super::accessor::Reader;
+use super::accessor::{Reader, decoded_limit};
 use super::mesh_load::load_mesh;
 use super::scene::{
     Animation, Channel, Instance, Interpolation, Node, Property, Sampler, Scene, Skin, Trs, Warning,
@@ -20,10 +20,49 @@ use std::path::Path;
 pub struct LoadOptions {
     /// glTF scene to use instead of the file's default scene.
     pub scene: Option<usize>,
+    /// Bound on the bytes of decoded accessor data (`None`: [`decoded_limit`] of the input's
+    /// size, 4 GiB plus 16 bytes per byte of file and buffers). A file asking for more is an
+    /// error naming it and the mesh or accessor that went over, raised before the memory is
+    /// allocated.
+    pub max_decoded_bytes: Option<u64>,
 }
 
-/// Required extensions whose data cannot be read without decoding it.
-const UNSUPPORTED_REQUIRED: &[&str] = &["KHR_draco_mesh_compression", "EXT_meshopt_compression"];
+/// What the engine ignores of an extension listed in `extensionsUsed`, or `None` when it
+/// handles the extension or the extension cannot change positions or animation.
+///
+/// Handled: `KHR_mesh_quantization` (decoded), and the mesh compressions
+/// (`KHR_draco_mesh_compression`, `EXT_meshopt_compression`, `KHR_meshopt_compression`): their
+/// uncompressed fallback data is read when the file has it, and primitives without it are
+/// skipped with a warning naming them (see `mesh_load`). Appearance and metadata extensions
+/// (materials, textures, lights, XMP) lose nothing: the engine reads geometry only and never
+/// reads any material, texture or light. Everything else is named in a warning.
+fn extension_ignored(ext: &str) -> Option<String> {
+    const HANDLED: &[&str] = &[
+        "KHR_mesh_quantization",
+        "KHR_draco_mesh_compression",
+        "EXT_meshopt_compression",
+        "KHR_meshopt_compression",
+    ];
+    const APPEARANCE: &[&str] = &[
+        "KHR_materials_",
+        "KHR_texture_",
+        "EXT_texture_",
+        "KHR_lights_",
+        "EXT_lights_",
+        "KHR_xmp",
+    ];
+    if HANDLED.contains(&ext) || APPEARANCE.iter().any(|p| ext.starts_with(p)) {
+        return None;
+    }
+    Some(match ext {
+        "EXT_mesh_gpu_instancing" => {
+            "instances beyond the node's own are skipped (each node places its mesh once)".into()
+        }
+        "KHR_animation_pointer" => "animation channels that target a pointer are skipped".into(),
+        "KHR_node_visibility" => "node visibility is ignored: hidden nodes are loaded".into(),
+        _ => "not known to the engine and ignored: anything it changes is not applied".into(),
+    })
+}
 
 impl Scene {
     /// Loads the default scene of a `.gltf` or `.glb` file, with warnings about what was skipped.
@@ -45,15 +84,26 @@ impl Scene {
         opts: &LoadOptions,
     ) -> Result<(Scene, Vec<Warning>)> {
         let src = Source::parse(path, bytes)?;
-        let rd = Reader { path, src: &src };
+        let input = bytes.len() as u64 + src.buffers.iter().map(|b| b.len() as u64).sum::<u64>();
+        let limit = opts
+            .max_decoded_bytes
+            .unwrap_or_else(|| decoded_limit(input));
+        let rd = Reader::new(path, &src, limit);
         let mut warnings = Vec::new();
-        for ext in &src.root.extensions_required {
-            if UNSUPPORTED_REQUIRED.contains(&ext.as_str()) {
-                return Err(Error::Unsupported {
-                    path: path.into(),
-                    object: "extensionsRequired".into(),
-                    what: ext.clone(),
-                });
+        let mut used: Vec<&String> = src
+            .root
+            .extensions_used
+            .iter()
+            .chain(&src.root.extensions_required)
+            .collect();
+        used.sort_unstable();
+        used.dedup();
+        for ext in used {
+            if let Some(what) = extension_ignored(ext) {
+                warnings.push(Warning(format!(
+                    "{}: extension {ext}: {what}",
+                    path.display()
+                )));
             }
         }
         let (nodes, order) = load_nodes(&rd)?;
@@ -72,7 +122,18 @@ impl Scene {
             animations,
             instances: Vec::new(),
         };
-        build_instances(&rd, &mut scene, &mut warnings)?;
+        let compressed = build_instances(&rd, &mut scene, &mut warnings)?;
+        if compressed > 0 && scene.triangle_count() == 0 {
+            return Err(Error::Unsupported {
+                path: path.into(),
+                object: "meshes".into(),
+                what: format!(
+                    "nothing left to load: all {compressed} surface primitives of the scene are \
+                     compressed (KHR_draco_mesh_compression or EXT_meshopt_compression without \
+                     uncompressed fallback data), which the engine does not decode"
+                ),
+            });
+        }
         check_weight_channels(&rd, &scene, &mut warnings)?;
         Ok((scene, warnings))
     }
@@ -424,13 +485,16 @@ fn load_animations(
     Ok(out)
 }
 
-/// Walks the chosen scene depth first, loads the meshes it places and records the instances.
-fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) -> Result<()> {
+/// Walks the chosen scene depth first, loads the meshes it places and records the instances;
+/// returns how many surface primitives were skipped as compressed.
+fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) -> Result<usize> {
     let mut stack: Vec<usize> = scene.roots.iter().rev().copied().collect();
     let mut mesh_map: HashMap<usize, usize> = HashMap::new();
     let mut skipped_modes = Vec::new();
     let mut bad_weights = Vec::new();
+    let mut no_weights = Vec::new();
     let (mut tris, mut verts) = (0usize, 0usize);
+    let mut compressed = 0;
     while let Some(n) = stack.pop() {
         let node = &scene.nodes[n];
         stack.extend(node.children.iter().rev().copied());
@@ -449,6 +513,10 @@ fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) 
                 if loaded.renormalized > 0 {
                     bad_weights.push(format!("mesh {gm} ({} vertices)", loaded.renormalized));
                 }
+                if loaded.unweighted > 0 {
+                    no_weights.push(format!("mesh {gm} ({} vertices)", loaded.unweighted));
+                }
+                compressed += loaded.compressed;
                 warnings.extend(loaded.warnings);
                 scene.meshes.push(loaded.mesh);
                 mesh_map.insert(gm, scene.meshes.len() - 1);
@@ -523,7 +591,15 @@ fn build_instances(rd: &Reader, scene: &mut Scene, warnings: &mut Vec<Warning>) 
             bad_weights.join(", ")
         )));
     }
-    Ok(())
+    if !no_weights.is_empty() {
+        warnings.push(Warning(format!(
+            "{}: vertices whose skin weights are all zero are not skinned (they keep their \
+             morphed rest position, moved by the mesh node's own transform) in {}",
+            rd.path.display(),
+            no_weights.join(", ")
+        )));
+    }
+    Ok(compressed)
 }
 
 /// Checks that morph weight channels driving placed meshes give one weight per target.

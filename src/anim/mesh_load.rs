@@ -3,6 +3,7 @@
 
 use super::accessor::Reader;
 use super::scene::{Mesh, SkinAttributes, Warning};
+use super::source::{MESHOPT, meshopt_extension};
 use crate::error::Result;
 use glam::Vec3;
 use gltf_json::accessor::{ComponentType, Type};
@@ -17,8 +18,56 @@ pub(crate) struct LoadedMesh {
     pub skipped_modes: bool,
     /// Vertices whose skin weights were renormalized noticeably.
     pub renormalized: usize,
+    /// Vertices whose skin weights are all zero (not renormalized: skinning leaves them to
+    /// the mesh node's transform).
+    pub unweighted: usize,
+    /// Surface primitives skipped because their data is compressed.
+    pub compressed: usize,
     /// Other warnings.
     pub warnings: Vec<Warning>,
+}
+
+/// Mesh compression whose primitives carry their geometry in a form the engine does not
+/// decode (the file may still give uncompressed fallback data, which is then read).
+pub(crate) const DRACO: &str = "KHR_draco_mesh_compression";
+
+/// The compression extension that keeps primitive `p` from being read, if any: Draco when an
+/// accessor it reads has neither a buffer view nor sparse data (the data lives only in the
+/// Draco stream), meshopt when an accessor's buffer view points into a buffer without data.
+fn compressed(rd: &Reader, p: &Primitive) -> Option<&'static str> {
+    let accessors = p
+        .attributes
+        .values()
+        .chain(p.indices.as_ref())
+        .chain(
+            p.targets
+                .iter()
+                .flatten()
+                .filter_map(|t| t.positions.as_ref()),
+        )
+        .filter_map(|a| rd.src.root.accessors.get(a.value()));
+    let draco = p
+        .extensions
+        .as_ref()
+        .is_some_and(|e| e.others.contains_key(DRACO));
+    for acc in accessors {
+        match acc.buffer_view {
+            None if draco && acc.sparse.is_none() => return Some(DRACO),
+            None => {}
+            Some(v) => {
+                let Some(view) = rd.src.root.buffer_views.get(v.value()) else {
+                    continue;
+                };
+                if rd.src.absent.get(view.buffer.value()) == Some(&true) {
+                    return Some(
+                        meshopt_extension(view.extensions.as_ref().map(|e| &e.others))
+                            .unwrap_or(MESHOPT[0]),
+                    );
+                }
+            }
+        }
+    }
+    None
 }
 
 /// One primitive's data before merging.
@@ -138,12 +187,76 @@ fn load_primitive(rd: &Reader, obj: &str, mode: Mode, p: &Primitive) -> Result<O
     }))
 }
 
+/// Checks, from the accessor counts alone and before anything is decoded, that mesh `m` has
+/// fewer than 2^32 vertices over its surface primitives and that its merged data (positions,
+/// triangles, morph deltas and skin attributes, each primitive padded to the mesh's most
+/// targets and weight sets) fits the reader's remaining decode bound.
+fn check_size(rd: &Reader, m: usize) -> Result<()> {
+    let jm = &rd.src.root.meshes[m];
+    let count = |a: &gltf_json::Index<gltf_json::Accessor>| {
+        rd.src
+            .root
+            .accessors
+            .get(a.value())
+            .map_or(0, |a| a.count.0)
+    };
+    let surface = jm.primitives.iter().filter(|p| {
+        matches!(
+            p.mode,
+            Checked::Valid(Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan)
+        )
+    });
+    let (mut verts, mut index_count) = (0u64, 0u64);
+    let (mut targets, mut sets) = (0u64, 0u64);
+    for p in surface {
+        let Some(pos) = p.attributes.get(&Checked::Valid(Semantic::Positions)) else {
+            continue;
+        };
+        let n = count(pos);
+        verts = verts.saturating_add(n);
+        index_count = index_count.saturating_add(p.indices.as_ref().map_or(n, count));
+        targets = targets.max(p.targets.as_ref().map_or(0, |t| t.len() as u64));
+        let s = (0u32..)
+            .take_while(|&s| {
+                p.attributes
+                    .contains_key(&Checked::Valid(Semantic::Joints(s)))
+                    && p.attributes
+                        .contains_key(&Checked::Valid(Semantic::Weights(s)))
+            })
+            .count();
+        sets = sets.max(s as u64);
+    }
+    if verts >= u64::from(u32::MAX) {
+        return Err(rd.err(
+            format!("mesh {m}"),
+            format!("fewer than 2^32 vertices over its primitives, found {verts}"),
+        ));
+    }
+    // Per vertex: position and one delta per target (12 bytes each), 4 joints (u16) and
+    // 4 weights (f32) per set; per index at most one triangle of 12 bytes (strips).
+    let per_vertex = 12 * (1 + targets) + 24 * sets;
+    let bytes = verts
+        .saturating_mul(per_vertex)
+        .saturating_add(index_count.saturating_mul(12));
+    if bytes > rd.remaining() {
+        return Err(rd.too_big(
+            format!("mesh {m} ({verts} vertices, {targets} morph targets, {sets} weight sets)"),
+            bytes,
+        ));
+    }
+    Ok(())
+}
+
 /// Loads glTF mesh `m` (the index must be in range).
 pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
     let jm = &rd.src.root.meshes[m];
     let mut warnings = Vec::new();
     let mut skipped_modes = false;
     let mut prims = Vec::new();
+    // glTF index of each entry of `prims`.
+    let mut prim_index = Vec::new();
+    let mut compressed_prims: Vec<(usize, &str)> = Vec::new();
+    check_size(rd, m)?;
     for (p, jp) in jm.primitives.iter().enumerate() {
         let obj = format!("mesh {m} primitive {p}");
         let mode = match jp.mode {
@@ -154,13 +267,35 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
             }
             Checked::Invalid => return Err(rd.err(obj, "a primitive mode between 0 and 6")),
         };
+        if let Some(ext) = compressed(rd, jp) {
+            compressed_prims.push((p, ext));
+            continue;
+        }
         match load_primitive(rd, &obj, mode, jp)? {
-            Some(prim) => prims.push(prim),
+            Some(prim) => {
+                prims.push(prim);
+                prim_index.push(p);
+            }
             None => warnings.push(Warning(format!(
                 "{}: {obj}: no POSITION attribute; skipped",
                 rd.path.display()
             ))),
         }
+    }
+    if !compressed_prims.is_empty() {
+        let mut exts: Vec<&str> = compressed_prims.iter().map(|c| c.1).collect();
+        exts.sort_unstable();
+        exts.dedup();
+        let list: Vec<String> = compressed_prims.iter().map(|c| c.0.to_string()).collect();
+        warnings.push(Warning(format!(
+            "{}: mesh {m}{} primitive{} {} of {}: compressed with {}, which the engine does not decode; skipped",
+            rd.path.display(),
+            jm.name.as_deref().map(|n| format!(" \"{n}\"")).unwrap_or_default(),
+            if list.len() == 1 { "" } else { "s" },
+            list.join(", "),
+            jm.primitives.len(),
+            exts.join(" and ")
+        )));
     }
     let n_targets = prims.iter().map(|p| p.targets.len()).max().unwrap_or(0);
     let n_sets = prims.iter().map(|p| p.joints.len()).max().unwrap_or(0);
@@ -180,8 +315,8 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
         joints: Vec::with_capacity(total * influences),
         weights: Vec::with_capacity(total * influences),
     };
-    let mut renormalized = 0;
-    for p in prims {
+    let (mut renormalized, mut unweighted) = (0, 0);
+    for (pi, p) in prims.into_iter().enumerate() {
         let base = mesh.positions.len() as u32;
         let t0 = mesh.indices.len();
         mesh.indices
@@ -207,7 +342,18 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
                     let w = w.unwrap_or(0.0).max(0.0);
                     // A joint with zero weight never matters: park it on joint 0.
                     let j = if w > 0.0 { j.unwrap_or(0) } else { 0 };
-                    attrs.joints.push(u16::try_from(j).unwrap_or(u16::MAX));
+                    // Skins have at most 65536 joints (JOINTS_n are u8 or u16 by the spec;
+                    // the loader also reads u32): a larger index can name no joint.
+                    let Ok(j) = u16::try_from(j) else {
+                        return Err(rd.err(
+                            format!("mesh {m} primitive {} JOINTS_{s}", prim_index[pi]),
+                            format!(
+                                "joint indices below 65536 (a skin has at most 65536 joints), \
+                                 found {j} with weight {w} at vertex {v}"
+                            ),
+                        ));
+                    };
+                    attrs.joints.push(j);
                     attrs.weights.push(w);
                 }
             }
@@ -219,7 +365,7 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
                 }
                 ws.iter_mut().for_each(|w| *w /= sum);
             } else if sum == 0.0 {
-                renormalized += 1;
+                unweighted += 1;
             }
         }
     }
@@ -237,6 +383,8 @@ pub(crate) fn load_mesh(rd: &Reader, m: usize) -> Result<LoadedMesh> {
         mesh,
         skipped_modes,
         renormalized,
+        unweighted,
+        compressed: compressed_prims.len(),
         warnings,
     })
 }

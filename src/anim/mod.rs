@@ -24,6 +24,7 @@ mod sampler;
 mod scene;
 mod source;
 
+pub use accessor::{DECODED_BASE, DECODED_PER_INPUT_BYTE, decoded_limit};
 pub use load::LoadOptions;
 pub use pose::{InstanceClass, PARALLEL_VERTICES, Poser, classify};
 pub use sampler::slerp;

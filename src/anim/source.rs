@@ -9,8 +9,24 @@ use std::path::{Path, PathBuf};
 pub(crate) struct Source {
     /// The JSON document, not validated.
     pub root: Root,
-    /// One byte vector per `buffers[i]`, cut to its declared `byteLength`.
+    /// One byte vector per `buffers[i]`, cut to its declared `byteLength` (empty for a
+    /// buffer without data, see `absent`).
     pub buffers: Vec<Vec<u8>>,
+    /// Per buffer: it has no data, only a `byteLength` (the fallback buffer of
+    /// `EXT_meshopt_compression` / `KHR_meshopt_compression`, whose views hold compressed
+    /// data elsewhere, which the engine does not decode).
+    pub absent: Vec<bool>,
+}
+
+/// Compression extensions whose buffer views carry the real (compressed) data.
+pub(crate) const MESHOPT: &[&str] = &["EXT_meshopt_compression", "KHR_meshopt_compression"];
+
+/// The compression extension of a buffer or buffer view's extension map, if any.
+pub(crate) fn meshopt_extension(
+    others: Option<&serde_json::Map<String, serde_json::Value>>,
+) -> Option<&'static str> {
+    let others = others?;
+    MESHOPT.iter().copied().find(|e| others.contains_key(*e))
 }
 
 /// Splits a GLB container into its JSON chunk and optional BIN chunk.
@@ -124,11 +140,19 @@ impl Source {
             .map_err(|e| Error::malformed(path, "JSON", format!("a glTF 2.0 document: {e}")))?;
         let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let mut buffers = Vec::with_capacity(root.buffers.len());
+        let mut absent = vec![false; root.buffers.len()];
         for (i, buf) in root.buffers.iter().enumerate() {
             let object = format!("buffer {i}");
             let declared = buf.byte_length.0;
             let mut data = match (&buf.uri, i, blob) {
                 (None, 0, Some(blob)) => blob.to_vec(),
+                (None, _, _)
+                    if meshopt_extension(buf.extensions.as_ref().map(|e| &e.others)).is_some() =>
+                {
+                    absent[i] = true;
+                    buffers.push(Vec::new());
+                    continue;
+                }
                 (None, _, _) => {
                     return Err(Error::malformed(
                         path,
@@ -166,7 +190,11 @@ impl Source {
             data.truncate(declared as usize);
             buffers.push(data);
         }
-        Ok(Source { root, buffers })
+        Ok(Source {
+            root,
+            buffers,
+            absent,
+        })
     }
 }
 

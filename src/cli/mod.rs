@@ -13,8 +13,13 @@ use std::path::Path;
 
 /// Loads a glTF file (its default scene, or `scene`) and prints the loader's warnings.
 pub fn load_scene(path: &Path, scene: Option<usize>) -> Result<dynbvh::anim::Scene> {
-    let (scene, warnings) =
-        dynbvh::anim::Scene::load_with(path, &dynbvh::anim::LoadOptions { scene })?;
+    let (scene, warnings) = dynbvh::anim::Scene::load_with(
+        path,
+        &dynbvh::anim::LoadOptions {
+            scene,
+            ..Default::default()
+        },
+    )?;
     for w in &warnings {
         eprintln!("warning: {w}");
     }

@@ -14,9 +14,14 @@ pub struct PoseArgs {
     /// Time in seconds (wraps beyond the animation's duration).
     #[arg(long, default_value_t = 0.0)]
     pub time: f32,
-    /// Animation name or index (default: none, the rest pose).
+    /// Animation name or index (default: the file's first animation; the rest pose when the
+    /// file has none).
     #[arg(long)]
     pub animation: Option<String>,
+    /// Write the rest pose (nodes at their own transforms, no animation) even when the file
+    /// has animations.
+    #[arg(long, conflicts_with = "animation")]
+    pub rest: bool,
     /// glTF scene index (default: the file's default scene).
     #[arg(long)]
     pub scene: Option<usize>,
@@ -29,10 +34,30 @@ pub struct PoseArgs {
 pub fn run(a: PoseArgs) -> Result<()> {
     let scene = super::load_scene(&a.file, a.scene)?;
     let anim = match &a.animation {
-        None => None,
+        None if a.rest => None,
+        None if scene.animations.is_empty() => {
+            eprintln!("{}: no animations; writing the rest pose", a.file.display());
+            None
+        }
+        None => {
+            let first = &scene.animations[0];
+            eprintln!(
+                "{}: posing animation 0{} of {} at {} s (--animation chooses another)",
+                a.file.display(),
+                first
+                    .name
+                    .as_deref()
+                    .map(|n| format!(" \"{n}\""))
+                    .unwrap_or_default(),
+                scene.animations.len(),
+                a.time
+            );
+            Some(0)
+        }
         Some(key) => Some(scene.find_animation(key).with_context(|| {
             format!(
-                "no animation named or numbered {key:?} ({} animations)",
+                "{}: no animation named or numbered {key:?} ({} animations)",
+                a.file.display(),
                 scene.animations.len()
             )
         })?),

@@ -154,3 +154,22 @@ pub fn assert_near(a: glam::Vec3, b: glam::Vec3, tol: f32, what: &str) {
         "{what}: got {a}, want {b} (tol {tol})"
     );
 }
+
+/// `bytes` as a base64 data URI (standard alphabet, padded).
+pub fn data_uri(bytes: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::from("data:application/octet-stream;base64,");
+    for c in bytes.chunks(3) {
+        let n = (u32::from(c[0]) << 16)
+            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
+            | u32::from(*c.get(2).unwrap_or(&0));
+        for k in 0..4 {
+            out.push(if k <= c.len() {
+                A[(n >> (18 - 6 * k) & 63) as usize] as char
+            } else {
+                '='
+            });
+        }
+    }
+    out
+}
