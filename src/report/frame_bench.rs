@@ -2,7 +2,7 @@
 //! figures the charts draw.
 
 use crate::bvh::{BuildParams, TraversalStats};
-use crate::engine::oracle::{self, MeshCosts};
+use crate::engine::oracle::{MeshCosts, SceneCosts};
 use crate::engine::source::FrameSource;
 use crate::engine::{
     Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal,
@@ -205,11 +205,23 @@ pub struct OracleSummary {
     pub rebuilds: usize,
     /// For each deforming mesh, the frames it is rebuilt at.
     pub rebuild_frames: Vec<Vec<usize>>,
-    /// Modelled total of always refitting and always rebuilding, ms (to check the model
-    /// against the measured runs).
+    /// Scale of the modelled extra trace time of a degraded tree (`extra = alpha * fresh *
+    /// (SAH ratio - 1)`), fitted so that the modelled always-refit total is the measured one
+    /// (1 when nothing could be fitted; see `engine::oracle`).
+    pub alpha: f64,
+    /// False when `alpha` could not be fitted (no deforming mesh, or no modelled degradation).
+    pub alpha_fitted: bool,
+    /// Modelled total of always refitting (calibrated), ms: equals `measured_refit_ms` when
+    /// `alpha` was fitted and not clamped at 0.
     pub model_refit_ms: f64,
-    /// See `model_refit_ms`.
+    /// Modelled total of always rebuilding, ms.
     pub model_rebuild_ms: f64,
+    /// Modelled total of always refitting with `alpha = 1` (the uncalibrated SAH model), ms.
+    pub model_refit_uncalibrated_ms: f64,
+    /// Measured total (update plus trace) of the always-refit run, ms.
+    pub measured_refit_ms: f64,
+    /// Measured total of the always-rebuild run, ms.
+    pub measured_rebuild_ms: f64,
     /// How costs were obtained.
     pub model: String,
 }
@@ -507,10 +519,11 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 .fold(f64::INFINITY, f64::min);
             fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
         }
-        oracle_total = fixed;
         let mut fresh: Vec<Vec<f32>> = Vec::new();
-        oracle.model_refit_ms = fixed;
-        oracle.model_rebuild_ms = fixed;
+        let mut scene = SceneCosts {
+            fixed_ms: fixed,
+            meshes: Vec::with_capacity(deforming),
+        };
         for (k, sah) in sah.into_iter().enumerate() {
             let c = MeshCosts {
                 refit_ms: (0..=frames).map(|f| refit_run.refit[f][k]).collect(),
@@ -526,21 +539,33 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                     .collect(),
                 sah,
             };
-            let s = oracle::best_schedule(&c);
-            oracle_total += s.cost_ms;
+            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
+            scene.meshes.push(c);
+        }
+        let measured = |r: &Run| r.rows.iter().map(|x| x.update_ms + x.trace_ms).sum::<f64>();
+        oracle.measured_refit_ms = measured(refit_run);
+        oracle.measured_rebuild_ms = measured(rebuild_run);
+        let cal = scene.calibrate(oracle.measured_refit_ms);
+        let (total, schedules) = scene.best(cal.alpha);
+        oracle_total = total;
+        oracle.total_ms = total;
+        oracle.alpha = cal.alpha;
+        oracle.alpha_fitted = cal.fitted;
+        oracle.model_refit_ms = cal.model_refit_ms;
+        oracle.model_rebuild_ms = cal.model_rebuild_ms;
+        oracle.model_refit_uncalibrated_ms = cal.uncalibrated_refit_ms;
+        for s in &schedules {
             oracle.rebuilds += s.rebuilds();
-            oracle.model_refit_ms += c.cost_of(&vec![false; frames + 1]);
-            oracle.model_rebuild_ms += c.cost_of(&vec![true; frames + 1]);
             oracle
                 .rebuild_frames
                 .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
-            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
         }
-        oracle.total_ms = oracle_total;
         oracle.model = "refit and rebuild times measured per frame (always-refit and \
             always-rebuild runs); trace time modelled as the always-rebuild run's measured \
-            trace time times each mesh's SAH ratio (tree built at b refitted to f, over the \
-            tree built at f), weighted by the mesh's share of the SAH-expected trace cost"
+            trace time plus, per mesh, alpha x its share of it (by SAH-expected trace cost) x \
+            (SAH ratio - 1), the ratio of the tree built at b refitted to f over the tree built \
+            at f; alpha fitted so the modelled always-refit total equals the measured one; \
+            schedules refit or rebuild only (no going back to an older tree)"
             .into();
         // The true fresh ratio of every run's trees (same positions, same deterministic build).
         for run in all_runs.iter_mut() {
@@ -716,13 +741,24 @@ pub fn summary_table(r: &Report) -> String {
         ));
     }
     if r.oracle.total_ms > 0.0 {
+        let o = &r.oracle;
         s.push_str(&format!(
-            "{:<14} {:>10.2} {:>54} (model: refit {:.2}, rebuild {:.2})\n",
+            "{:<14} {:>10.2} {:>54}\n",
             "oracle",
-            r.oracle.total_ms,
-            format!("{} rebuilds", r.oracle.rebuilds),
-            r.oracle.model_refit_ms,
-            r.oracle.model_rebuild_ms
+            o.total_ms,
+            format!("{} rebuilds", o.rebuilds),
+        ));
+        s.push_str(&format!(
+            "oracle model: alpha {:.3}{} (extra trace = alpha x fresh trace x (SAH ratio - 1)); \
+             always-refit modelled {:.2} / measured {:.2} ms (alpha = 1: {:.2}); \
+             always-rebuild modelled {:.2} / measured {:.2} ms\n",
+            o.alpha,
+            if o.alpha_fitted { "" } else { " (not fitted)" },
+            o.model_refit_ms,
+            o.measured_refit_ms,
+            o.model_refit_uncalibrated_ms,
+            o.model_rebuild_ms,
+            o.measured_rebuild_ms
         ));
     }
     s.push_str(
