@@ -6,7 +6,7 @@ use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere};
 use dynbvh::engine::{Policy, Traversal};
-use dynbvh::report::frame_bench::{self, Options, RaySpec};
+use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `bench`.
@@ -246,9 +246,10 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         eprint!("{}", frame_bench::summary_table(&report));
         reports.push(report);
     }
-    let table = frame_bench::sweep_table(&reports);
+    let sweep = Sweep::new(reports, Vec::new(), Vec::new());
+    let table = frame_bench::sweep_table(&sweep);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&reports)?);
+        println!("{}", serde_json::to_string_pretty(&sweep)?);
     } else {
         print!("{table}");
     }
@@ -257,7 +258,7 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         std::fs::write(dir.join("sweep.txt"), &table)?;
         std::fs::write(
             dir.join("sweep.json"),
-            serde_json::to_string_pretty(&reports)?,
+            serde_json::to_string_pretty(&sweep)?,
         )?;
         eprintln!("wrote {}", dir.display());
     }

@@ -896,11 +896,210 @@ fn short(s: &str) -> String {
         .map_or_else(|| s.to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// The sweep table: per file, per policy, total time over the oracle's; then the worst ratio
-/// of each policy, the top-level tree comparison (total time over the best top-level policy's
-/// on that file), and why the default is the default.
+/// A file or animation of the sweep that gave no report.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepFailure {
+    /// The file, and the animation when the file loaded.
+    pub source: String,
+    /// Why.
+    pub error: String,
+}
+
+/// One policy over the sweep's rows (only rows with an oracle count).
+#[derive(Clone, Debug, Serialize)]
+pub struct PolicyVerdict {
+    /// Policy name.
+    pub policy: String,
+    /// True for the default policy.
+    pub default: bool,
+    /// Rows (file and animation) counted.
+    pub rows: usize,
+    /// Mean total time over the oracle's.
+    pub mean_ratio: f64,
+    /// Largest total time over the oracle's.
+    pub worst_ratio: f64,
+    /// The row of the largest ratio.
+    pub worst_source: String,
+    /// Rows more than 10% above the oracle.
+    pub over_10pct: Vec<String>,
+}
+
+/// What a sweep's table says, computed from it.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepConclusion {
+    /// Per policy, in the table's order.
+    pub policies: Vec<PolicyVerdict>,
+    /// The policy with the lowest worst ratio (none without rows).
+    pub lowest_worst: Option<String>,
+    /// The default policy's verdict: within 10% of the oracle on every row (false without
+    /// rows).
+    pub default_within_10pct: bool,
+    /// Rows that gave no report (load or run failures).
+    pub failures: usize,
+}
+
+/// Everything `bench --all` produced.
+#[derive(Clone, Debug, Serialize)]
+pub struct Sweep {
+    /// One report per file and animation.
+    pub reports: Vec<Report>,
+    /// Files that did not load, animations that did not run.
+    pub failed: Vec<SweepFailure>,
+    /// Files without animation (not run).
+    pub not_animated: Vec<String>,
+    /// What the table says.
+    pub conclusion: SweepConclusion,
+}
+
+impl Sweep {
+    /// Collects the sweep's results and computes its conclusion.
+    #[must_use]
+    pub fn new(reports: Vec<Report>, failed: Vec<SweepFailure>, not_animated: Vec<String>) -> Self {
+        let conclusion = sweep_conclusion(&reports, failed.len());
+        Self {
+            reports,
+            failed,
+            not_animated,
+            conclusion,
+        }
+    }
+}
+
+/// Per policy, the mean and worst ratio to the oracle over the reports that have one; which
+/// policy's worst is lowest; whether the default stays within 10% everywhere.
 #[must_use]
-pub fn sweep_table(reports: &[Report]) -> String {
+pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion {
+    let mut policies: Vec<PolicyVerdict> = Vec::new();
+    for r in reports.iter().filter(|r| r.oracle.total_ms > 0.0) {
+        for p in &r.policies {
+            let k = match policies.iter().position(|v| v.policy == p.policy) {
+                Some(k) => k,
+                None => {
+                    policies.push(PolicyVerdict {
+                        policy: p.policy.clone(),
+                        default: p.default,
+                        rows: 0,
+                        mean_ratio: 0.0,
+                        worst_ratio: 0.0,
+                        worst_source: String::new(),
+                        over_10pct: Vec::new(),
+                    });
+                    policies.len() - 1
+                }
+            };
+            let v = &mut policies[k];
+            v.rows += 1;
+            v.mean_ratio += p.oracle_ratio;
+            if p.oracle_ratio > v.worst_ratio {
+                v.worst_ratio = p.oracle_ratio;
+                v.worst_source.clone_from(&r.source);
+            }
+            if p.oracle_ratio > 1.10 {
+                v.over_10pct.push(r.source.clone());
+            }
+        }
+    }
+    for v in &mut policies {
+        v.mean_ratio /= v.rows.max(1) as f64;
+    }
+    let lowest_worst = policies
+        .iter()
+        .min_by(|a, b| a.worst_ratio.total_cmp(&b.worst_ratio))
+        .map(|v| v.policy.clone());
+    let default_within_10pct = policies
+        .iter()
+        .find(|v| v.default)
+        .is_some_and(|v| v.rows > 0 && v.over_10pct.is_empty());
+    SweepConclusion {
+        policies,
+        lowest_worst,
+        default_within_10pct,
+        failures,
+    }
+}
+
+/// The conclusion as text.
+#[must_use]
+pub fn conclusion_text(c: &SweepConclusion) -> String {
+    let mut s = String::from("Conclusion (computed from the rows above):\n");
+    if c.policies.is_empty() {
+        s.push_str("  no row has an oracle: nothing to conclude\n");
+    }
+    s.push_str(&format!(
+        "  {:<16} {:>5} {:>7} {:>7}  worst row\n",
+        "policy", "rows", "mean", "worst"
+    ));
+    for v in &c.policies {
+        s.push_str(&format!(
+            "  {:<16} {:>5} {:>7.3} {:>7.3}  {}\n",
+            format!("{}{}", v.policy, if v.default { "*" } else { "" }),
+            v.rows,
+            v.mean_ratio,
+            v.worst_ratio,
+            v.worst_source
+        ));
+    }
+    if let Some(best) = &c.lowest_worst
+        && let Some(v) = c.policies.iter().find(|v| &v.policy == best)
+    {
+        s.push_str(&format!(
+            "  lowest worst ratio: {} ({:.3})\n",
+            v.policy, v.worst_ratio
+        ));
+    }
+    if let Some(d) = c.policies.iter().find(|v| v.default) {
+        if c.default_within_10pct {
+            s.push_str(&format!(
+                "  default {}: within 10% of the oracle on every row ({} rows; worst {:.3}, {})\n",
+                d.policy, d.rows, d.worst_ratio, d.worst_source
+            ));
+        } else {
+            s.push_str(&format!(
+                "  default {}: NOT within 10% of the oracle on {} of {} rows ({}); worst {:.3}, {}\n",
+                d.policy,
+                d.over_10pct.len(),
+                d.rows,
+                d.over_10pct.join(", "),
+                d.worst_ratio,
+                d.worst_source
+            ));
+        }
+    } else if !c.policies.is_empty() {
+        s.push_str("  the default policy was not run\n");
+    }
+    if c.failures > 0 {
+        s.push_str(&format!(
+            "  {} file(s) or animation(s) gave no row (see above): not counted\n",
+            c.failures
+        ));
+    }
+    s.push_str(
+        "  (ratios within a few percent of 1, either side, are timing noise on a shared machine; \
+         the oracle's schedules refit or rebuild only, so a policy that goes back to an older \
+         tree can come out below 1)\n",
+    );
+    s
+}
+
+/// The sweep table: per file and animation, per policy, total time over the oracle's; then the
+/// worst ratio of each policy, the top-level tree comparison (total time over the best
+/// top-level policy's on that file), the rows that failed, and the conclusion computed from the
+/// rows ([`sweep_conclusion`]).
+#[must_use]
+pub fn sweep_table(sweep: &Sweep) -> String {
+    let mut s = sweep_rows(&sweep.reports);
+    for f in &sweep.failed {
+        s.push_str(&format!("FAILED {}: {}\n", f.source, f.error));
+    }
+    for n in &sweep.not_animated {
+        s.push_str(&format!("not run (no animation): {n}\n"));
+    }
+    s.push('\n');
+    s.push_str(&conclusion_text(&sweep.conclusion));
+    s
+}
+
+fn sweep_rows(reports: &[Report]) -> String {
     let Some(first) = reports.first() else {
         return "no animated files\n".into();
     };
@@ -961,7 +1160,6 @@ pub fn sweep_table(reports: &[Report]) -> String {
     for (v, n) in worst_tlas.iter().zip(&tlas_names) {
         s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
     }
-    s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n\n");
-    s.push_str(crate::engine::policy::WHY_DEFAULT);
+    s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n");
     s
 }
