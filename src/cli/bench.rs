@@ -63,6 +63,10 @@ pub struct BenchArgs {
     /// with one builder, the full sweep included: slow on large meshes).
     #[arg(long)]
     no_builders: bool,
+    /// Skip the top-level tree comparison (the default mesh policy run again under each
+    /// top-level tree policy).
+    #[arg(long)]
+    no_tlas_compare: bool,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
@@ -96,6 +100,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let mut opts = Options {
         trace_repeats: a.repeats.max(1),
         oracle: !a.no_oracle,
+        tlas_compare: !a.no_tlas_compare,
         traversal: a.traversal,
         ..Options::default()
     };
