@@ -206,7 +206,7 @@ pub struct OracleSummary {
     /// For each deforming mesh, the frames it is rebuilt at.
     pub rebuild_frames: Vec<Vec<usize>>,
     /// Scale of the modelled extra trace time of a degraded tree (`extra = alpha * fresh *
-    /// (SAH ratio - 1)`), fitted so that the modelled always-refit total is the measured one
+    /// max(SAH ratio - 1, 0)`), fitted so that the modelled always-refit total is the measured one
     /// (1 when nothing could be fitted; see `engine::oracle`).
     pub alpha: f64,
     /// False when `alpha` could not be fitted (no deforming mesh, or no modelled degradation).
@@ -563,7 +563,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         oracle.model = "refit and rebuild times measured per frame (always-refit and \
             always-rebuild runs); trace time modelled as the always-rebuild run's measured \
             trace time plus, per mesh, alpha x its share of it (by SAH-expected trace cost) x \
-            (SAH ratio - 1), the ratio of the tree built at b refitted to f over the tree built \
+            max(SAH ratio - 1, 0), the ratio of the tree built at b refitted to f over the tree built \
             at f; alpha fitted so the modelled always-refit total equals the measured one; \
             schedules refit or rebuild only (no going back to an older tree)"
             .into();
@@ -749,7 +749,7 @@ pub fn summary_table(r: &Report) -> String {
             format!("{} rebuilds", o.rebuilds),
         ));
         s.push_str(&format!(
-            "oracle model: alpha {:.3}{} (extra trace = alpha x fresh trace x (SAH ratio - 1)); \
+            "oracle model: alpha {:.3}{} (extra trace = alpha x fresh trace x max(SAH ratio - 1, 0)); \
              always-refit modelled {:.2} / measured {:.2} ms (alpha = 1: {:.2}); \
              always-rebuild modelled {:.2} / measured {:.2} ms\n",
             o.alpha,
