@@ -56,7 +56,8 @@ pub struct BenchArgs {
     /// Print the report as JSON instead of the table.
     #[arg(long)]
     json: bool,
-    /// Skip the oracle (it builds at every frame and refits through the later ones).
+    /// Skip the oracle (it builds at every frame and refits through the later ones) and the
+    /// always-refit and always-rebuild runs it needs (unless asked for with `--policy`).
     #[arg(long)]
     no_oracle: bool,
     /// Skip the builder points of the speed-against-accuracy chart (each rebuilds every frame

@@ -41,8 +41,8 @@ impl RaySpec {
 /// What to run.
 #[derive(Clone, Debug)]
 pub struct Options {
-    /// Policies to report (the always-refit and always-rebuild runs happen anyway: the oracle
-    /// needs their measurements).
+    /// Policies to report (with the oracle, the always-refit and always-rebuild runs happen
+    /// anyway: it needs their measurements).
     pub policies: Vec<Policy>,
     /// Rays per frame.
     pub rays: RaySpec,
@@ -175,6 +175,16 @@ pub struct PolicySummary {
     pub max_fresh_ratio: f32,
     /// `total_ms` over the oracle's total (0 when the oracle was not computed).
     pub oracle_ratio: f64,
+    /// Median over the frames of the pose time, ms.
+    pub median_pose_ms: f64,
+    /// Median of the mesh trees' update time (refit plus rebuild), ms.
+    pub median_blas_ms: f64,
+    /// Median of the top-level tree's time, ms.
+    pub median_tlas_ms: f64,
+    /// Median of the frame update (pose + mesh trees + top-level tree), ms.
+    pub median_update_ms: f64,
+    /// Median of the frame's trace time, ms.
+    pub median_trace_ms: f64,
 }
 
 /// The top-level tree under one policy (mesh policy: the default).
@@ -426,6 +436,26 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         } else {
             0.0
         },
+        median_pose_ms: median(rows.iter().map(|r| r.pose_ms)),
+        median_blas_ms: median(rows.iter().map(|r| r.refit_ms + r.rebuild_ms)),
+        median_tlas_ms: median(rows.iter().map(|r| r.tlas_ms)),
+        median_update_ms: median(rows.iter().map(|r| r.update_ms)),
+        median_trace_ms: median(rows.iter().map(|r| r.trace_ms)),
+    }
+}
+
+/// The median (the mean of the two middle values for an even count; 0 when empty).
+fn median(v: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = v.collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
     }
 }
 
@@ -445,11 +475,14 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
     };
     let deforming = src.deforming().len();
 
-    // The measured runs: the asked policies, plus always-refit and always-rebuild.
+    // The measured runs: the asked policies, plus always-refit and always-rebuild when the
+    // oracle needs them.
     let mut wanted = opts.policies.clone();
-    for p in [Policy::Refit, Policy::Rebuild] {
-        if !wanted.contains(&p) {
-            wanted.push(p);
+    if opts.oracle {
+        for p in [Policy::Refit, Policy::Rebuild] {
+            if !wanted.contains(&p) {
+                wanted.push(p);
+            }
         }
     }
     // The top-level tree comparison: the default mesh policy under each top-level policy.
@@ -482,12 +515,12 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
     ));
     let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames);
     let runs = &mut all_runs[..wanted.len()];
-    let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("always run")];
-    let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
 
     let mut oracle = OracleSummary::default();
     let mut oracle_total = 0.0;
     if opts.oracle && frames > 0 {
+        let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("run")];
+        let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
         progress("oracle: building at every frame, refitting through the later ones");
         // sah[mesh][b][f - b]
         let mut sah = vec![vec![Vec::new(); frames + 1]; deforming];
@@ -765,6 +798,36 @@ pub fn summary_table(r: &Report) -> String {
         "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
          rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
+    s.push_str(&format!(
+        "update against trace per frame (medians over {} frames; update = pose + mesh trees + \
+         top-level tree; mean update includes rebuilds spread over the frames):\n\
+         {:<14} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>10}  update < trace\n",
+        r.frames, "policy", "pose", "meshes", "tlas", "update", "trace", "upd/trace", "mean upd"
+    ));
+    for p in &r.policies {
+        let ratio = if p.median_trace_ms > 0.0 {
+            p.median_update_ms / p.median_trace_ms
+        } else {
+            f64::INFINITY
+        };
+        s.push_str(&format!(
+            "{:<14} {:>9.3} {:>9.3} {:>9.4} {:>10.3} {:>10.3} {:>10.3} {:>10.3}  {}\n",
+            format!("{}{}", p.policy, if p.default { "*" } else { "" }),
+            p.median_pose_ms,
+            p.median_blas_ms,
+            p.median_tlas_ms,
+            p.median_update_ms,
+            p.median_trace_ms,
+            ratio,
+            p.update_ms_per_frame,
+            match (ratio < 1.0, p.update_ms_per_frame < p.trace_ms_per_frame) {
+                (true, true) => "yes (median and mean)",
+                (true, false) => "median only",
+                (false, true) => "mean only",
+                (false, false) => "no",
+            }
+        ));
+    }
     if !r.tlas.is_empty() {
         s.push_str(&format!(
             "top-level tree ({} policy for meshes):\n{:<14} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
