@@ -253,6 +253,8 @@ fn sweep_lists_failures_and_exits_non_zero() {
     assert!(stdout.contains("swap.glb [swap]"), "{stdout}");
     assert!(stdout.contains("Conclusion"), "{stdout}");
     assert!(stdout.contains("lowest worst ratio"), "{stdout}");
+    assert!(stdout.contains("rows with a deforming mesh"), "{stdout}");
+    assert!(stdout.contains("default amortized"), "{stdout}");
     assert!(!stdout.contains("Why amortized is the default"), "{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -985,6 +985,11 @@ pub struct PolicyVerdict {
     pub worst_source: String,
     /// Rows more than 10% above the oracle.
     pub over_10pct: Vec<String>,
+    /// Largest ratio over the rows with a deforming mesh (the others run the same trees under
+    /// every policy: their ratios are timing noise); 0 without such rows.
+    pub worst_deforming_ratio: f64,
+    /// The row of `worst_deforming_ratio`.
+    pub worst_deforming_source: String,
 }
 
 /// What a sweep's table says, computed from it.
@@ -1046,6 +1051,8 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
                         worst_ratio: 0.0,
                         worst_source: String::new(),
                         over_10pct: Vec::new(),
+                        worst_deforming_ratio: 0.0,
+                        worst_deforming_source: String::new(),
                     });
                     policies.len() - 1
                 }
@@ -1059,6 +1066,10 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
             }
             if p.oracle_ratio > 1.10 {
                 v.over_10pct.push(r.source.clone());
+            }
+            if r.deforming_meshes > 0 && p.oracle_ratio > v.worst_deforming_ratio {
+                v.worst_deforming_ratio = p.oracle_ratio;
+                v.worst_deforming_source.clone_from(&r.source);
             }
         }
     }
@@ -1089,17 +1100,19 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
         s.push_str("  no row has an oracle: nothing to conclude\n");
     }
     s.push_str(&format!(
-        "  {:<16} {:>5} {:>7} {:>7}  worst row\n",
+        "  {:<16} {:>5} {:>7} {:>7}  worst row; worst of the rows with a deforming mesh\n",
         "policy", "rows", "mean", "worst"
     ));
     for v in &c.policies {
         s.push_str(&format!(
-            "  {:<16} {:>5} {:>7.3} {:>7.3}  {}\n",
+            "  {:<16} {:>5} {:>7.3} {:>7.3}  {}; {:.3} {}\n",
             format!("{}{}", v.policy, if v.default { "*" } else { "" }),
             v.rows,
             v.mean_ratio,
             v.worst_ratio,
-            v.worst_source
+            v.worst_source,
+            v.worst_deforming_ratio,
+            v.worst_deforming_source
         ));
     }
     if let Some(best) = &c.lowest_worst
@@ -1137,7 +1150,9 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
         ));
     }
     s.push_str(
-        "  (ratios within a few percent of 1, either side, are timing noise on a shared machine; \
+        "  (rows without a deforming mesh run the same trees under every policy: their spread \
+         around 1 shows the run's timing noise. Ratios within a few percent of 1, either side, \
+         are timing noise on a shared machine; \
          the oracle's schedules refit or rebuild only, so a policy that goes back to an older \
          tree can come out below 1)\n",
     );
