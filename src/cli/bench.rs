@@ -6,7 +6,7 @@ use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere};
 use dynbvh::engine::{Policy, Traversal};
-use dynbvh::report::frame_bench::{self, Options, RaySpec};
+use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep, SweepFailure};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `bench`.
@@ -18,9 +18,11 @@ pub struct BenchArgs {
         conflicts_with_all = ["synthetic", "all"]
     )]
     file: Option<PathBuf>,
-    /// The sweep: every animated .glb/.gltf under the `--dir` folders (default `animations`
-    /// and `../shared/gltf-samples`), every policy, printing total time over the oracle's per
-    /// file and policy (default 30 frames and 128x128 rays; no builder points).
+    /// The sweep: every animation of every .glb/.gltf under the `--dir` folders (default
+    /// `animations` and `../shared/gltf-samples`), every policy, printing total time over the
+    /// oracle's per file, animation and policy, and a conclusion computed from those rows
+    /// (default 30 frames and 128x128 rays; no builder points). Files that fail to load are
+    /// listed with the reason, and make the exit status non-zero.
     #[arg(long, conflicts_with = "synthetic")]
     all: bool,
     /// Folder searched by `--all` (repeatable).
@@ -55,13 +57,18 @@ pub struct BenchArgs {
     /// Print the report as JSON instead of the table.
     #[arg(long)]
     json: bool,
-    /// Skip the oracle (it builds at every frame and refits through the later ones).
+    /// Skip the oracle (it builds at every frame and refits through the later ones) and the
+    /// always-refit and always-rebuild runs it needs (unless asked for with `--policy`).
     #[arg(long)]
     no_oracle: bool,
     /// Skip the builder points of the speed-against-accuracy chart (each rebuilds every frame
     /// with one builder, the full sweep included: slow on large meshes).
     #[arg(long)]
     no_builders: bool,
+    /// Skip the top-level tree comparison (the default mesh policy run again under each
+    /// top-level tree policy).
+    #[arg(long)]
+    no_tlas_compare: bool,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
@@ -95,6 +102,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let mut opts = Options {
         trace_repeats: a.repeats.max(1),
         oracle: !a.no_oracle,
+        tlas_compare: !a.no_tlas_compare,
         traversal: a.traversal,
         ..Options::default()
     };
@@ -229,27 +237,74 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         gltf_files(d, &mut files)?;
     }
     let mut reports = Vec::new();
+    let mut failed = Vec::new();
+    let mut not_animated = Vec::new();
     for path in &files {
-        let (scene, _) = match Scene::load(path) {
-            Ok(s) => s,
+        let scene = match Scene::load(path) {
+            Ok((s, _)) => s,
             Err(e) => {
-                eprintln!("{}: skipped ({e})", path.display());
+                eprintln!("{}: FAILED to load: {e}", path.display());
+                failed.push(SweepFailure {
+                    source: path.display().to_string(),
+                    error: format!("failed to load: {e}"),
+                });
                 continue;
             }
         };
         if scene.animations.is_empty() {
-            eprintln!("{}: no animation, skipped", path.display());
+            eprintln!("{}: no animation, not run", path.display());
+            not_animated.push(path.display().to_string());
             continue;
         }
-        let mut src = GltfSource::new(&scene, Some(0), times)?;
-        eprintln!("{}: {} frames", src.name(), src.frames());
-        let report = frame_bench::run(&mut src, opts, |_| {});
-        eprint!("{}", frame_bench::summary_table(&report));
-        reports.push(report);
+        for anim in 0..scene.animations.len() {
+            let label = format!(
+                "{} [animation {anim}{}]",
+                path.display(),
+                scene.animations[anim]
+                    .name
+                    .as_deref()
+                    .map_or(String::new(), |n| format!(" {n:?}"))
+            );
+            let mut src = match GltfSource::new(&scene, Some(anim), times) {
+                Ok(s) => s,
+                Err(e) => {
+                    eprintln!("{label}: FAILED: {e}");
+                    failed.push(SweepFailure {
+                        source: label,
+                        error: e.to_string(),
+                    });
+                    continue;
+                }
+            };
+            eprintln!("{}: {} frames", src.name(), src.frames());
+            // A panic in one row (a bug) is reported as that row's failure; the sweep goes on.
+            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                frame_bench::run(&mut src, opts, |_| {})
+            }));
+            match run {
+                Ok(report) => {
+                    eprint!("{}", frame_bench::summary_table(&report));
+                    reports.push(report);
+                }
+                Err(p) => {
+                    let why = p
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| p.downcast_ref::<&str>().map(|s| (*s).to_string()))
+                        .unwrap_or_else(|| "panicked".into());
+                    eprintln!("{label}: FAILED: {why}");
+                    failed.push(SweepFailure {
+                        source: label,
+                        error: format!("panicked: {why}"),
+                    });
+                }
+            }
+        }
     }
-    let table = frame_bench::sweep_table(&reports);
+    let sweep = Sweep::new(reports, failed, not_animated);
+    let table = frame_bench::sweep_table(&sweep);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&reports)?);
+        println!("{}", serde_json::to_string_pretty(&sweep)?);
     } else {
         print!("{table}");
     }
@@ -258,9 +313,21 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         std::fs::write(dir.join("sweep.txt"), &table)?;
         std::fs::write(
             dir.join("sweep.json"),
-            serde_json::to_string_pretty(&reports)?,
+            serde_json::to_string_pretty(&sweep)?,
         )?;
         eprintln!("wrote {}", dir.display());
+    }
+    if !sweep.failed.is_empty() {
+        bail!(
+            "{} file(s) or animation(s) failed: {}",
+            sweep.failed.len(),
+            sweep
+                .failed
+                .iter()
+                .map(|f| f.source.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! figures the charts draw.
 
 use crate::bvh::{BuildParams, TraversalStats};
-use crate::engine::oracle::{self, MeshCosts};
+use crate::engine::oracle::{MeshCosts, SceneCosts};
 use crate::engine::source::FrameSource;
 use crate::engine::{
     Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal,
@@ -41,8 +41,8 @@ impl RaySpec {
 /// What to run.
 #[derive(Clone, Debug)]
 pub struct Options {
-    /// Policies to report (the always-refit and always-rebuild runs happen anyway: the oracle
-    /// needs their measurements).
+    /// Policies to report (with the oracle, the always-refit and always-rebuild runs happen
+    /// anyway: it needs their measurements).
     pub policies: Vec<Policy>,
     /// Rays per frame.
     pub rays: RaySpec,
@@ -175,6 +175,16 @@ pub struct PolicySummary {
     pub max_fresh_ratio: f32,
     /// `total_ms` over the oracle's total (0 when the oracle was not computed).
     pub oracle_ratio: f64,
+    /// Median over the frames of the pose time, ms.
+    pub median_pose_ms: f64,
+    /// Median of the mesh trees' update time (refit plus rebuild), ms.
+    pub median_blas_ms: f64,
+    /// Median of the top-level tree's time, ms.
+    pub median_tlas_ms: f64,
+    /// Median of the frame update (pose + mesh trees + top-level tree), ms.
+    pub median_update_ms: f64,
+    /// Median of the frame's trace time, ms.
+    pub median_trace_ms: f64,
 }
 
 /// The top-level tree under one policy (mesh policy: the default).
@@ -205,11 +215,23 @@ pub struct OracleSummary {
     pub rebuilds: usize,
     /// For each deforming mesh, the frames it is rebuilt at.
     pub rebuild_frames: Vec<Vec<usize>>,
-    /// Modelled total of always refitting and always rebuilding, ms (to check the model
-    /// against the measured runs).
+    /// Scale of the modelled extra trace time of a degraded tree (`extra = alpha * fresh *
+    /// max(SAH ratio - 1, 0)`), fitted so that the modelled always-refit total is the measured one
+    /// (1 when nothing could be fitted; see `engine::oracle`).
+    pub alpha: f64,
+    /// False when `alpha` could not be fitted (no deforming mesh, or no modelled degradation).
+    pub alpha_fitted: bool,
+    /// Modelled total of always refitting (calibrated), ms: equals `measured_refit_ms` when
+    /// `alpha` was fitted and not clamped at 0.
     pub model_refit_ms: f64,
-    /// See `model_refit_ms`.
+    /// Modelled total of always rebuilding, ms.
     pub model_rebuild_ms: f64,
+    /// Modelled total of always refitting with `alpha = 1` (the uncalibrated SAH model), ms.
+    pub model_refit_uncalibrated_ms: f64,
+    /// Measured total (update plus trace) of the always-refit run, ms.
+    pub measured_refit_ms: f64,
+    /// Measured total of the always-rebuild run, ms.
+    pub measured_rebuild_ms: f64,
     /// How costs were obtained.
     pub model: String,
 }
@@ -414,6 +436,26 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         } else {
             0.0
         },
+        median_pose_ms: median(rows.iter().map(|r| r.pose_ms)),
+        median_blas_ms: median(rows.iter().map(|r| r.refit_ms + r.rebuild_ms)),
+        median_tlas_ms: median(rows.iter().map(|r| r.tlas_ms)),
+        median_update_ms: median(rows.iter().map(|r| r.update_ms)),
+        median_trace_ms: median(rows.iter().map(|r| r.trace_ms)),
+    }
+}
+
+/// The median (the mean of the two middle values for an even count; 0 when empty).
+fn median(v: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = v.collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
     }
 }
 
@@ -433,11 +475,14 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
     };
     let deforming = src.deforming().len();
 
-    // The measured runs: the asked policies, plus always-refit and always-rebuild.
+    // The measured runs: the asked policies, plus always-refit and always-rebuild when the
+    // oracle needs them.
     let mut wanted = opts.policies.clone();
-    for p in [Policy::Refit, Policy::Rebuild] {
-        if !wanted.contains(&p) {
-            wanted.push(p);
+    if opts.oracle {
+        for p in [Policy::Refit, Policy::Rebuild] {
+            if !wanted.contains(&p) {
+                wanted.push(p);
+            }
         }
     }
     // The top-level tree comparison: the default mesh policy under each top-level policy.
@@ -470,12 +515,12 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
     ));
     let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames);
     let runs = &mut all_runs[..wanted.len()];
-    let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("always run")];
-    let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
 
     let mut oracle = OracleSummary::default();
     let mut oracle_total = 0.0;
     if opts.oracle && frames > 0 {
+        let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("run")];
+        let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
         progress("oracle: building at every frame, refitting through the later ones");
         // sah[mesh][b][f - b]
         let mut sah = vec![vec![Vec::new(); frames + 1]; deforming];
@@ -507,10 +552,11 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 .fold(f64::INFINITY, f64::min);
             fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
         }
-        oracle_total = fixed;
         let mut fresh: Vec<Vec<f32>> = Vec::new();
-        oracle.model_refit_ms = fixed;
-        oracle.model_rebuild_ms = fixed;
+        let mut scene = SceneCosts {
+            fixed_ms: fixed,
+            meshes: Vec::with_capacity(deforming),
+        };
         for (k, sah) in sah.into_iter().enumerate() {
             let c = MeshCosts {
                 refit_ms: (0..=frames).map(|f| refit_run.refit[f][k]).collect(),
@@ -526,21 +572,33 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                     .collect(),
                 sah,
             };
-            let s = oracle::best_schedule(&c);
-            oracle_total += s.cost_ms;
+            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
+            scene.meshes.push(c);
+        }
+        let measured = |r: &Run| r.rows.iter().map(|x| x.update_ms + x.trace_ms).sum::<f64>();
+        oracle.measured_refit_ms = measured(refit_run);
+        oracle.measured_rebuild_ms = measured(rebuild_run);
+        let cal = scene.calibrate(oracle.measured_refit_ms);
+        let (total, schedules) = scene.best(cal.alpha);
+        oracle_total = total;
+        oracle.total_ms = total;
+        oracle.alpha = cal.alpha;
+        oracle.alpha_fitted = cal.fitted;
+        oracle.model_refit_ms = cal.model_refit_ms;
+        oracle.model_rebuild_ms = cal.model_rebuild_ms;
+        oracle.model_refit_uncalibrated_ms = cal.uncalibrated_refit_ms;
+        for s in &schedules {
             oracle.rebuilds += s.rebuilds();
-            oracle.model_refit_ms += c.cost_of(&vec![false; frames + 1]);
-            oracle.model_rebuild_ms += c.cost_of(&vec![true; frames + 1]);
             oracle
                 .rebuild_frames
                 .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
-            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
         }
-        oracle.total_ms = oracle_total;
         oracle.model = "refit and rebuild times measured per frame (always-refit and \
             always-rebuild runs); trace time modelled as the always-rebuild run's measured \
-            trace time times each mesh's SAH ratio (tree built at b refitted to f, over the \
-            tree built at f), weighted by the mesh's share of the SAH-expected trace cost"
+            trace time plus, per mesh, alpha x its share of it (by SAH-expected trace cost) x \
+            max(SAH ratio - 1, 0), the ratio of the tree built at b refitted to f over the tree built \
+            at f; alpha fitted so the modelled always-refit total equals the measured one; \
+            schedules refit or rebuild only (no going back to an older tree)"
             .into();
         // The true fresh ratio of every run's trees (same positions, same deterministic build).
         for run in all_runs.iter_mut() {
@@ -716,19 +774,60 @@ pub fn summary_table(r: &Report) -> String {
         ));
     }
     if r.oracle.total_ms > 0.0 {
+        let o = &r.oracle;
         s.push_str(&format!(
-            "{:<14} {:>10.2} {:>54} (model: refit {:.2}, rebuild {:.2})\n",
+            "{:<14} {:>10.2} {:>54}\n",
             "oracle",
-            r.oracle.total_ms,
-            format!("{} rebuilds", r.oracle.rebuilds),
-            r.oracle.model_refit_ms,
-            r.oracle.model_rebuild_ms
+            o.total_ms,
+            format!("{} rebuilds", o.rebuilds),
+        ));
+        s.push_str(&format!(
+            "oracle model: alpha {:.3}{} (extra trace = alpha x fresh trace x max(SAH ratio - 1, 0)); \
+             always-refit modelled {:.2} / measured {:.2} ms (alpha = 1: {:.2}); \
+             always-rebuild modelled {:.2} / measured {:.2} ms\n",
+            o.alpha,
+            if o.alpha_fitted { "" } else { " (not fitted)" },
+            o.model_refit_ms,
+            o.measured_refit_ms,
+            o.model_refit_uncalibrated_ms,
+            o.model_rebuild_ms,
+            o.measured_rebuild_ms
         ));
     }
     s.push_str(
         "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
          rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
+    s.push_str(&format!(
+        "update against trace per frame (medians over {} frames; update = pose + mesh trees + \
+         top-level tree; mean update includes rebuilds spread over the frames):\n\
+         {:<14} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10} {:>10}  update < trace\n",
+        r.frames, "policy", "pose", "meshes", "tlas", "update", "trace", "upd/trace", "mean upd"
+    ));
+    for p in &r.policies {
+        let ratio = if p.median_trace_ms > 0.0 {
+            p.median_update_ms / p.median_trace_ms
+        } else {
+            f64::INFINITY
+        };
+        s.push_str(&format!(
+            "{:<14} {:>9.3} {:>9.3} {:>9.4} {:>10.3} {:>10.3} {:>10.3} {:>10.3}  {}\n",
+            format!("{}{}", p.policy, if p.default { "*" } else { "" }),
+            p.median_pose_ms,
+            p.median_blas_ms,
+            p.median_tlas_ms,
+            p.median_update_ms,
+            p.median_trace_ms,
+            ratio,
+            p.update_ms_per_frame,
+            match (ratio < 1.0, p.update_ms_per_frame < p.trace_ms_per_frame) {
+                (true, true) => "yes (median and mean)",
+                (true, false) => "median only",
+                (false, true) => "mean only",
+                (false, false) => "no",
+            }
+        ));
+    }
     if !r.tlas.is_empty() {
         s.push_str(&format!(
             "top-level tree ({} policy for meshes):\n{:<14} {:>10} {:>9} {:>9} {:>8} {:>9}\n",
@@ -860,11 +959,225 @@ fn short(s: &str) -> String {
         .map_or_else(|| s.to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// The sweep table: per file, per policy, total time over the oracle's; then the worst ratio
-/// of each policy, the top-level tree comparison (total time over the best top-level policy's
-/// on that file), and why the default is the default.
+/// A file or animation of the sweep that gave no report.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepFailure {
+    /// The file, and the animation when the file loaded.
+    pub source: String,
+    /// Why.
+    pub error: String,
+}
+
+/// One policy over the sweep's rows (only rows with an oracle count).
+#[derive(Clone, Debug, Serialize)]
+pub struct PolicyVerdict {
+    /// Policy name.
+    pub policy: String,
+    /// True for the default policy.
+    pub default: bool,
+    /// Rows (file and animation) counted.
+    pub rows: usize,
+    /// Mean total time over the oracle's.
+    pub mean_ratio: f64,
+    /// Largest total time over the oracle's.
+    pub worst_ratio: f64,
+    /// The row of the largest ratio.
+    pub worst_source: String,
+    /// Rows more than 10% above the oracle.
+    pub over_10pct: Vec<String>,
+    /// Largest ratio over the rows with a deforming mesh (the others run the same trees under
+    /// every policy: their ratios are timing noise); 0 without such rows.
+    pub worst_deforming_ratio: f64,
+    /// The row of `worst_deforming_ratio`.
+    pub worst_deforming_source: String,
+}
+
+/// What a sweep's table says, computed from it.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepConclusion {
+    /// Per policy, in the table's order.
+    pub policies: Vec<PolicyVerdict>,
+    /// The policy with the lowest worst ratio (none without rows).
+    pub lowest_worst: Option<String>,
+    /// The default policy's verdict: within 10% of the oracle on every row (false without
+    /// rows).
+    pub default_within_10pct: bool,
+    /// Rows that gave no report (load or run failures).
+    pub failures: usize,
+}
+
+/// Everything `bench --all` produced.
+#[derive(Clone, Debug, Serialize)]
+pub struct Sweep {
+    /// One report per file and animation.
+    pub reports: Vec<Report>,
+    /// Files that did not load, animations that did not run.
+    pub failed: Vec<SweepFailure>,
+    /// Files without animation (not run).
+    pub not_animated: Vec<String>,
+    /// What the table says.
+    pub conclusion: SweepConclusion,
+}
+
+impl Sweep {
+    /// Collects the sweep's results and computes its conclusion.
+    #[must_use]
+    pub fn new(reports: Vec<Report>, failed: Vec<SweepFailure>, not_animated: Vec<String>) -> Self {
+        let conclusion = sweep_conclusion(&reports, failed.len());
+        Self {
+            reports,
+            failed,
+            not_animated,
+            conclusion,
+        }
+    }
+}
+
+/// Per policy, the mean and worst ratio to the oracle over the reports that have one; which
+/// policy's worst is lowest; whether the default stays within 10% everywhere.
 #[must_use]
-pub fn sweep_table(reports: &[Report]) -> String {
+pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion {
+    let mut policies: Vec<PolicyVerdict> = Vec::new();
+    for r in reports.iter().filter(|r| r.oracle.total_ms > 0.0) {
+        for p in &r.policies {
+            let k = match policies.iter().position(|v| v.policy == p.policy) {
+                Some(k) => k,
+                None => {
+                    policies.push(PolicyVerdict {
+                        policy: p.policy.clone(),
+                        default: p.default,
+                        rows: 0,
+                        mean_ratio: 0.0,
+                        worst_ratio: 0.0,
+                        worst_source: String::new(),
+                        over_10pct: Vec::new(),
+                        worst_deforming_ratio: 0.0,
+                        worst_deforming_source: String::new(),
+                    });
+                    policies.len() - 1
+                }
+            };
+            let v = &mut policies[k];
+            v.rows += 1;
+            v.mean_ratio += p.oracle_ratio;
+            if p.oracle_ratio > v.worst_ratio {
+                v.worst_ratio = p.oracle_ratio;
+                v.worst_source.clone_from(&r.source);
+            }
+            if p.oracle_ratio > 1.10 {
+                v.over_10pct.push(r.source.clone());
+            }
+            if r.deforming_meshes > 0 && p.oracle_ratio > v.worst_deforming_ratio {
+                v.worst_deforming_ratio = p.oracle_ratio;
+                v.worst_deforming_source.clone_from(&r.source);
+            }
+        }
+    }
+    for v in &mut policies {
+        v.mean_ratio /= v.rows.max(1) as f64;
+    }
+    let lowest_worst = policies
+        .iter()
+        .min_by(|a, b| a.worst_ratio.total_cmp(&b.worst_ratio))
+        .map(|v| v.policy.clone());
+    let default_within_10pct = policies
+        .iter()
+        .find(|v| v.default)
+        .is_some_and(|v| v.rows > 0 && v.over_10pct.is_empty());
+    SweepConclusion {
+        policies,
+        lowest_worst,
+        default_within_10pct,
+        failures,
+    }
+}
+
+/// The conclusion as text.
+#[must_use]
+pub fn conclusion_text(c: &SweepConclusion) -> String {
+    let mut s = String::from("Conclusion (computed from the rows above):\n");
+    if c.policies.is_empty() {
+        s.push_str("  no row has an oracle: nothing to conclude\n");
+    }
+    s.push_str(&format!(
+        "  {:<16} {:>5} {:>7} {:>7}  worst row; worst of the rows with a deforming mesh\n",
+        "policy", "rows", "mean", "worst"
+    ));
+    for v in &c.policies {
+        s.push_str(&format!(
+            "  {:<16} {:>5} {:>7.3} {:>7.3}  {}; {:.3} {}\n",
+            format!("{}{}", v.policy, if v.default { "*" } else { "" }),
+            v.rows,
+            v.mean_ratio,
+            v.worst_ratio,
+            v.worst_source,
+            v.worst_deforming_ratio,
+            v.worst_deforming_source
+        ));
+    }
+    if let Some(best) = &c.lowest_worst
+        && let Some(v) = c.policies.iter().find(|v| &v.policy == best)
+    {
+        s.push_str(&format!(
+            "  lowest worst ratio: {} ({:.3})\n",
+            v.policy, v.worst_ratio
+        ));
+    }
+    if let Some(d) = c.policies.iter().find(|v| v.default) {
+        if c.default_within_10pct {
+            s.push_str(&format!(
+                "  default {}: within 10% of the oracle on every row ({} rows; worst {:.3}, {})\n",
+                d.policy, d.rows, d.worst_ratio, d.worst_source
+            ));
+        } else {
+            s.push_str(&format!(
+                "  default {}: NOT within 10% of the oracle on {} of {} rows ({}); worst {:.3}, {}\n",
+                d.policy,
+                d.over_10pct.len(),
+                d.rows,
+                d.over_10pct.join(", "),
+                d.worst_ratio,
+                d.worst_source
+            ));
+        }
+    } else if !c.policies.is_empty() {
+        s.push_str("  the default policy was not run\n");
+    }
+    if c.failures > 0 {
+        s.push_str(&format!(
+            "  {} file(s) or animation(s) gave no row (see above): not counted\n",
+            c.failures
+        ));
+    }
+    s.push_str(
+        "  (rows without a deforming mesh run the same trees under every policy: their spread \
+         around 1 shows the run's timing noise. Ratios within a few percent of 1, either side, \
+         are timing noise on a shared machine; \
+         the oracle's schedules refit or rebuild only, so a policy that goes back to an older \
+         tree can come out below 1)\n",
+    );
+    s
+}
+
+/// The sweep table: per file and animation, per policy, total time over the oracle's; then the
+/// worst ratio of each policy, the top-level tree comparison (total time over the best
+/// top-level policy's on that file), the rows that failed, and the conclusion computed from the
+/// rows ([`sweep_conclusion`]).
+#[must_use]
+pub fn sweep_table(sweep: &Sweep) -> String {
+    let mut s = sweep_rows(&sweep.reports);
+    for f in &sweep.failed {
+        s.push_str(&format!("FAILED {}: {}\n", f.source, f.error));
+    }
+    for n in &sweep.not_animated {
+        s.push_str(&format!("not run (no animation): {n}\n"));
+    }
+    s.push('\n');
+    s.push_str(&conclusion_text(&sweep.conclusion));
+    s
+}
+
+fn sweep_rows(reports: &[Report]) -> String {
     let Some(first) = reports.first() else {
         return "no animated files\n".into();
     };
@@ -925,7 +1238,6 @@ pub fn sweep_table(reports: &[Report]) -> String {
     for (v, n) in worst_tlas.iter().zip(&tlas_names) {
         s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
     }
-    s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n\n");
-    s.push_str(crate::engine::policy::WHY_DEFAULT);
+    s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n");
     s
 }
