@@ -32,20 +32,7 @@ fn sparse_positions_replace_base_values() {
 
 /// A one-buffer glTF with a base64 data URI holding `bin`.
 fn doc(bin: &[u8], mut root: serde_json::Value) -> Vec<u8> {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bin.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            s.push(if k <= c.len() {
-                A[(n >> (18 - 6 * k) & 63) as usize] as char
-            } else {
-                '='
-            });
-        }
-    }
+    let s = anim_util::base64(bin);
     root["asset"] = json!({"version": "2.0"});
     root["buffers"] = json!([{"byteLength": bin.len(), "uri": format!("data:application/gltf-buffer;base64,{s}")}]);
     serde_json::to_vec(&root).unwrap()

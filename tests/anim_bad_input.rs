@@ -10,25 +10,6 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
 use std::path::{Path, PathBuf};
 
-/// Standard base64 of `bytes`.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
-}
-
 /// The file's bytes, with external buffers of `.gltf` files inlined as data URIs so that
 /// mutations reach binary data too.
 fn self_contained(path: &Path) -> Vec<u8> {
@@ -41,7 +22,7 @@ fn self_contained(path: &Path) -> Vec<u8> {
         let uri = b["uri"].as_str().unwrap().to_string();
         if !uri.starts_with("data:") {
             let data = std::fs::read(path.parent().unwrap().join(&uri)).unwrap();
-            b["uri"] = format!("data:application/octet-stream;base64,{}", base64(&data)).into();
+            b["uri"] = anim_util::data_uri(&data).into();
         }
     }
     serde_json::to_vec(&json).unwrap()

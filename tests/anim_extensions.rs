@@ -4,35 +4,17 @@
 //! them while the rest loads; an error naming the file when nothing is left. Small hand-made
 //! `.gltf` files with data URIs.
 
+mod anim_util;
 use dynbvh::Error;
 use dynbvh::anim::{LoadOptions, Scene, Warning};
 use serde_json::{Value, json};
 use std::path::Path;
 
-/// Standard base64 with padding.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                out.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
 /// One triangle's positions (36 bytes) as a data URI.
 fn triangle_uri() -> String {
     let p: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     let bytes: Vec<u8> = p.iter().flat_map(|x| x.to_le_bytes()).collect();
-    format!("data:application/octet-stream;base64,{}", base64(&bytes))
+    anim_util::data_uri(&bytes)
 }
 
 /// A document with buffer 0 (one triangle), buffer view 0 and accessor 0 over it, and a

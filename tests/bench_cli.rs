@@ -3,36 +3,15 @@
 //! ratio climbing while the rebuild-capable policies rebuild. No timing is asserted: only what
 //! the frames and the policies' rules decide.
 
+mod cli_util;
+use cli_util::{animation, dynbvh};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("dynbvh_bench_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn animation(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("animations")
-        .join(name)
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn dynbvh(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dynbvh"))
-        .args(args)
-        .output()
-        .expect("run dynbvh")
-}
+use std::path::PathBuf;
 
 /// Runs `bench` on an animation with `extra` arguments, `--out` a fresh folder and `--json`;
 /// returns the printed report and the folder.
 fn bench(file: &str, tag: &str, extra: &[&str]) -> (Value, PathBuf) {
-    let out = tmp_dir(tag);
+    let out = cli_util::tmp_dir("bench", tag);
     let path = animation(file);
     let out_s = out.to_string_lossy().into_owned();
     let mut args = vec!["bench", path.as_str(), "--out", out_s.as_str(), "--json"];
@@ -237,7 +216,7 @@ fn refit_degrades_and_policies_rebuild_on_explode_and_swap() {
 /// reason, prints a conclusion computed from its rows, and exits non-zero.
 #[test]
 fn sweep_lists_failures_and_exits_non_zero() {
-    let dir = tmp_dir("sweep");
+    let dir = cli_util::tmp_dir("bench", "sweep");
     std::fs::write(dir.join("broken.glb"), b"glTF not really").unwrap();
     std::fs::copy(animation("swap.glb"), dir.join("swap.glb")).unwrap();
     let dir_s = dir.to_string_lossy().into_owned();

@@ -2,37 +2,14 @@
 //! animations with durations, channels and interpolation modes), `pose --time` to `.obj` and
 //! `.ply` (read back and compared with the library's own pose), and a bad file.
 
+mod cli_util;
+use cli_util::{dynbvh, ok};
 use dynbvh::anim::Scene;
 use dynbvh::anim::generate::Kind;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 mod anim_util;
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("dynbvh_cli_anim_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn dynbvh<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dynbvh"))
-        .args(args)
-        .output()
-        .expect("run dynbvh")
-}
-
-/// Stdout of a successful run (panics with stderr otherwise).
-fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "dynbvh failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 fn s(p: &Path) -> String {
     p.to_string_lossy().into_owned()
@@ -126,7 +103,7 @@ fn read_ply(path: &Path) -> (Vec<Vec3>, Vec<[u32; 3]>) {
 
 #[test]
 fn gen_writes_every_kind_and_the_files_load() {
-    let dir = tmp_dir("gen");
+    let dir = cli_util::tmp_dir("cli_anim", "gen");
     for kind in Kind::ALL {
         let path = gen_file(&dir, kind, 300);
         let (scene, warnings) = Scene::load(&path).expect("the generated file loads");
@@ -141,7 +118,7 @@ fn gen_writes_every_kind_and_the_files_load() {
 
 #[test]
 fn info_lists_classes_animations_channels_and_modes() {
-    let dir = tmp_dir("info");
+    let dir = cli_util::tmp_dir("cli_anim", "info");
     // The tube deforms (skin), the orbit's cubes are rigid (node animation, STEP and LINEAR).
     let tube = gen_file(&dir, Kind::Tube, 400);
     let text = ok(&dynbvh(&["info", &s(&tube)]));
@@ -268,7 +245,7 @@ fn check_pose(dir: &Path, file: &Path, times: [f32; 2]) {
 
 #[test]
 fn pose_uses_the_first_animation_and_matches_the_library() {
-    let dir = tmp_dir("pose");
+    let dir = cli_util::tmp_dir("cli_anim", "pose");
     let tube = gen_file(&dir, Kind::Tube, 400);
     check_pose(&dir, &tube, [0.3, 1.1]);
     let wave = gen_file(&dir, Kind::Wave, 400);
@@ -289,7 +266,7 @@ fn pose_without_animations_writes_the_rest_pose() {
     let Some(path) = anim_util::sample("TransmissionTest/TransmissionTest.glb") else {
         return;
     };
-    let dir = tmp_dir("rest");
+    let dir = cli_util::tmp_dir("cli_anim", "rest");
     let out = dir.join("rest.ply");
     let msg = pose(&path, 2.0, &out, &[]);
     assert!(msg.contains("no animations"), "{msg}");
@@ -301,7 +278,7 @@ fn pose_without_animations_writes_the_rest_pose() {
 
 #[test]
 fn bad_files_fail_with_an_error_naming_the_file() {
-    let dir = tmp_dir("bad");
+    let dir = cli_util::tmp_dir("cli_anim", "bad");
     let bad = dir.join("broken.glb");
     std::fs::write(&bad, b"glTF\x02\x00\x00\x00garbage").unwrap();
     let missing = dir.join("missing.gltf");

@@ -3,6 +3,9 @@
 //! range), heat maps of two policies side by side with their legends, errors for ranges beyond
 //! the animation, and the file's own camera.
 
+mod anim_util;
+mod cli_util;
+use cli_util::{animation, dynbvh, ok};
 use dynbvh::anim::Scene;
 use dynbvh::engine::EngineConfig;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
@@ -14,43 +17,14 @@ use glam::Vec3;
 use image::codecs::gif::GifDecoder;
 use image::{AnimationDecoder, RgbImage};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("dynbvh_render_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn dynbvh(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dynbvh"))
-        .args(args)
-        .output()
-        .expect("run dynbvh")
-}
-
-fn animation(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("animations")
-        .join(name)
-        .to_string_lossy()
-        .into_owned()
-}
-
-fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "dynbvh failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 #[test]
 fn split_ranges_join_up_and_gif_is_written() {
     let tube = animation("tube.glb");
-    let (a, b) = (tmp_dir("range_a"), tmp_dir("range_b"));
+    let (a, b) = (
+        cli_util::tmp_dir("render", "range_a"),
+        cli_util::tmp_dir("render", "range_b"),
+    );
     let common = ["--size", "48x36", "--shadows", "--fps", "12"];
     let mut args = vec!["render", &tube, "--frames", "0..4", "--gif", "--out"];
     let a_s = a.to_string_lossy().into_owned();
@@ -172,7 +146,7 @@ fn a_range_starts_with_a_fresh_build() {
 
 #[test]
 fn heat_map_comparison_writes_side_by_side_frames() {
-    let d = tmp_dir("compare");
+    let d = cli_util::tmp_dir("render", "compare");
     let d_s = d.to_string_lossy().into_owned();
     let out = ok(&dynbvh(&[
         "render",
@@ -242,25 +216,6 @@ fn bad_ranges_and_policies_are_errors() {
     assert!(!o.status.success());
 }
 
-/// Standard base64 with padding.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for k in 0..4 {
-            if k <= c.len() {
-                s.push(char::from(A[(n >> (18 - 6 * k) & 63) as usize]));
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
-}
-
 /// A glTF file with one animated triangle and a camera at (0, 0.5, 3) turned a quarter turn
 /// to the left (so it looks along -x).
 fn write_camera_scene(dir: &Path) -> PathBuf {
@@ -289,7 +244,7 @@ fn write_camera_scene(dir: &Path) -> PathBuf {
  {{"bufferView":2,"componentType":5126,"count":2,"type":"VEC3"}}],
 "animations":[{{"channels":[{{"sampler":0,"target":{{"node":0,"path":"translation"}}}}],
  "samplers":[{{"input":1,"output":2}}]}}]}}"#,
-        base64(&buf)
+        anim_util::base64(&buf)
     );
     let p = dir.join("camera.gltf");
     std::fs::write(&p, json).unwrap();
@@ -298,7 +253,7 @@ fn write_camera_scene(dir: &Path) -> PathBuf {
 
 #[test]
 fn the_files_camera_is_found_and_used() {
-    let d = tmp_dir("camera");
+    let d = cli_util::tmp_dir("render", "camera");
     let path = write_camera_scene(&d);
     let (scene, _) = Scene::load(&path).unwrap();
     let cams = gltf_cameras(&scene).unwrap();

@@ -157,18 +157,23 @@ pub fn assert_near(a: glam::Vec3, b: glam::Vec3, tol: f32, what: &str) {
 
 /// `bytes` as a base64 data URI (standard alphabet, padded).
 pub fn data_uri(bytes: &[u8]) -> String {
+    format!("data:application/octet-stream;base64,{}", base64(bytes))
+}
+
+/// Standard base64 with padding (for `data:` URIs in hand-made glTF files).
+pub fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::from("data:application/octet-stream;base64,");
+    let mut out = String::new();
     for c in bytes.chunks(3) {
         let n = (u32::from(c[0]) << 16)
             | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
             | u32::from(*c.get(2).unwrap_or(&0));
         for k in 0..4 {
-            out.push(if k <= c.len() {
-                A[(n >> (18 - 6 * k) & 63) as usize] as char
+            if k <= c.len() {
+                out.push(char::from(A[(n >> (18 - 6 * k) & 63) as usize]));
             } else {
-                '='
-            });
+                out.push('=');
+            }
         }
     }
     out
