@@ -29,6 +29,7 @@
 
 pub mod anim;
 pub mod bvh;
+pub mod cputime;
 pub mod engine;
 pub mod error;
 pub mod geom;

@@ -254,7 +254,11 @@ fn check_configs(
                 k * src
                     .deforming()
                     .iter()
-                    .map(|m| e.config().timing.build_ms(0.0, e.indices(*m).len()))
+                    .map(|m| {
+                        e.config()
+                            .timing
+                            .build_ms(0.0, e.indices(*m).len(), &e.config().prices)
+                    })
                     .sum::<f64>()
             }
         })

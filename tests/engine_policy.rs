@@ -177,7 +177,8 @@ fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
     // rebuild within a few frames (the fresh ratio's excess sums to about 0.6 before the
     // grids overlap most), not enough for a rebuild to pay for itself in its first frame (the
     // true fresh ratio is then 1.09, so it would take 11).
-    let trace_ms = 5.0 * timing.build_ms(0.0, e.indices(m).len());
+    let trace_ms =
+        5.0 * timing.build_ms(0.0, e.indices(m).len(), &dynbvh::engine::Prices::default());
     let rays = camera_rays(&e.bounds(), 16, 16);
     let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
     let (mut rebuilds, mut reverts) = (0, 0);

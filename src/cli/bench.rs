@@ -5,7 +5,7 @@ use clap::Args;
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere};
-use dynbvh::engine::{Policy, Traversal};
+use dynbvh::engine::{CostMeasure, Policy, Prices, Traversal};
 use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep, SweepFailure};
 use std::path::{Path, PathBuf};
 
@@ -78,6 +78,53 @@ pub struct BenchArgs {
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
     traversal: Traversal,
+    /// What the policies decide on: rays (the ray-work sample of the frame's own rays) or sah.
+    #[arg(long, value_name = "rays|sah", default_value_t = CostMeasure::default())]
+    cost: CostMeasure,
+    /// Unit prices of the modelled measure, from a file written by `--save-prices` (default: a
+    /// calibration pass at the start of the run).
+    #[arg(long, value_name = "FILE")]
+    prices: Option<PathBuf>,
+    /// Write the prices used to this file (JSON), to reuse with `--prices`.
+    #[arg(long, value_name = "FILE")]
+    save_prices: Option<PathBuf>,
+}
+
+/// Triangles of the calibration mesh, and passes per price.
+const CALIBRATION: (usize, usize) = (100_000, 5);
+
+/// The run's prices: loaded, or calibrated now; printed either way.
+fn prices(a: &BenchArgs) -> Result<Prices> {
+    let p = match &a.prices {
+        Some(f) => {
+            let p = Prices::load(f)?;
+            eprintln!("prices from {}", f.display());
+            p
+        }
+        None => {
+            let (tris, passes) = CALIBRATION;
+            eprintln!(
+                "calibrating prices ({}) ...",
+                Prices::calibration_source(tris, passes)
+            );
+            Prices::calibrate(tris, passes)
+        }
+    };
+    eprintln!(
+        "prices: refit {:.3} ns/triangle, rebuild {:.3} ns/(n log2 n), estimate {:.3} ns/triangle, \
+         trace {:.3} ns/node + {:.3} ns/triangle",
+        p.refit_ns_per_tri,
+        p.rebuild_ns_per_tri_log,
+        p.estimate_ns_per_tri,
+        p.trace_ns_per_node,
+        p.trace_ns_per_tri
+    );
+    if let Some(f) = &a.save_prices {
+        std::fs::write(f, serde_json::to_string_pretty(&p)?)
+            .with_context(|| format!("writing {}", f.display()))?;
+        eprintln!("wrote {}", f.display());
+    }
+    Ok(p)
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
@@ -104,6 +151,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
         oracle: !a.no_oracle,
         tlas_compare: !a.no_tlas_compare,
         traversal: a.traversal,
+        cost: a.cost,
+        prices: prices(&a)?,
         ..Options::default()
     };
     if a.no_builders {
@@ -180,6 +229,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     } else {
         print!("{}", frame_bench::summary_table(&report));
     }
+
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         std::fs::write(
@@ -196,6 +246,27 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 .with_context(|| format!("writing chart {stem}"))?;
         }
         eprintln!("wrote {}", dir.display());
+    }
+    check_oracle(std::slice::from_ref(&report))
+}
+
+/// Fails loudly when a policy's modelled total fell below the modelled oracle's, the exact
+/// optimum of that measure: a bug in the engine, the oracle or the bench.
+fn check_oracle(reports: &[frame_bench::Report]) -> Result<()> {
+    let below: Vec<String> = reports
+        .iter()
+        .flat_map(|r| {
+            r.below_oracle
+                .iter()
+                .map(move |b| format!("{}: {b}", r.source))
+        })
+        .collect();
+    if !below.is_empty() {
+        bail!(
+            "BELOW THE ORACLE: a policy's modelled total fell below the oracle's, the exact \
+             optimum of that measure: {}",
+            below.join("; ")
+        );
     }
     Ok(())
 }
@@ -317,6 +388,7 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         )?;
         eprintln!("wrote {}", dir.display());
     }
+    check_oracle(&sweep.reports)?;
     if !sweep.failed.is_empty() {
         bail!(
             "{} file(s) or animation(s) failed: {}",

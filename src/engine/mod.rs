@@ -7,11 +7,15 @@ pub mod estimate;
 pub mod gltf;
 pub mod oracle;
 pub mod policy;
+pub mod prices;
+pub mod ray_work;
 mod scene;
 pub mod source;
 pub mod stats;
 
 pub use policy::{Action, ParsePolicyError, Policy};
+pub use prices::Prices;
+pub use ray_work::{CostMeasure, Query, SampleEntry, WorkEstimate};
 pub use scene::{
     Engine, EngineConfig, InstanceId, MeshId, SceneHit, Timing, TlasPolicy, Traversal,
     expected_work, expected_work_wide, tree_sah,

@@ -145,9 +145,84 @@ pub fn best_schedule(c: &MeshCosts) -> Schedule {
 /// [`best_schedule`] with the extra trace time scaled by `alpha` (the calibrated model).
 #[must_use]
 pub fn best_schedule_with(c: &MeshCosts, alpha: f64) -> Schedule {
-    let n = c.frames();
+    best_by(
+        c.frames(),
+        |b, f| c.refit_ms[f] + alpha * c.extra_trace_ms(b, f),
+        |f| c.rebuild_ms[f],
+    )
+}
+
+/// One mesh's costs in the modelled measure over frames `0 ..= F`: refit and rebuild priced
+/// by their work, and the trace cost of every tree the mesh can have at every frame, priced by
+/// the ray work the frame's sampled rays cost in it.
+#[derive(Clone, Debug, Default)]
+pub struct WorkCosts {
+    /// Modelled refit at each frame, ms.
+    pub refit_ms: Vec<f64>,
+    /// Modelled rebuild at each frame, ms.
+    pub rebuild_ms: Vec<f64>,
+    /// `trace_ms[b][f - b]`: modelled trace cost at frame `f` of the tree built at frame `b`
+    /// and refitted to `f` (`trace_ms[f][0]`: the fresh tree's), ms.
+    pub trace_ms: Vec<Vec<f64>>,
+}
+
+impl WorkCosts {
+    /// Number of frames after the initial one.
+    #[must_use]
+    pub fn frames(&self) -> usize {
+        self.refit_ms.len().saturating_sub(1)
+    }
+
+    /// Modelled cost of frames `1 ..= F` under a schedule (`rebuild[f]`, index 0 ignored):
+    /// each frame's update plus its trace cost with the tree the schedule has then.
+    #[must_use]
+    pub fn cost_of(&self, rebuild: &[bool]) -> f64 {
+        let mut b = 0;
+        let mut total = 0.0;
+        for (f, &r) in rebuild.iter().enumerate().take(self.frames() + 1).skip(1) {
+            if r {
+                b = f;
+                total += self.rebuild_ms[f] + self.trace_ms[f][0];
+            } else {
+                total += self.refit_ms[f] + self.trace_ms[b][f - b];
+            }
+        }
+        total
+    }
+
+    /// The trace cost at frame `f` of the tree built at `b` over the fresh tree's: the
+    /// degradation the rays felt.
+    #[must_use]
+    pub fn ratio(&self, b: usize, f: usize) -> f64 {
+        let fresh = self.trace_ms[f][0];
+        if fresh > 0.0 {
+            self.trace_ms[b][f - b] / fresh
+        } else {
+            1.0
+        }
+    }
+
+    /// The schedule of least modelled cost: the exact optimum over refit-or-rebuild schedules.
+    #[must_use]
+    pub fn best(&self) -> Schedule {
+        best_by(
+            self.frames(),
+            |b, f| self.refit_ms[f] + self.trace_ms[b][f - b],
+            |f| self.rebuild_ms[f] + self.trace_ms[f][0],
+        )
+    }
+}
+
+/// The least-cost schedule over frames `1 ..= n` by dynamic programming over the frame of the
+/// last build: `keep(b, f)` is frame `f`'s cost when the tree built at `b` is refitted,
+/// `rebuild(f)` its cost when the tree is rebuilt at `f`. `O(n^2)`.
+fn best_by(
+    n: usize,
+    keep: impl Fn(usize, usize) -> f64,
+    rebuild: impl Fn(usize) -> f64,
+) -> Schedule {
     // cost[b] after frame f: least cost of frames 1..=f with the tree last built at b;
-    // from[f][b]: the build frame before f when the tree was rebuilt at f.
+    // parent[f]: the build frame before f when the tree was rebuilt at f.
     let mut cost = vec![f64::INFINITY; n + 1];
     cost[0] = 0.0;
     let mut parent = vec![0usize; n + 1];
@@ -161,10 +236,10 @@ pub fn best_schedule_with(c: &MeshCosts, alpha: f64) -> Schedule {
             .unwrap_or((0, 0.0));
         for (b, cb) in cost.iter_mut().enumerate().take(f) {
             if cb.is_finite() {
-                *cb += c.refit_ms[f] + alpha * c.extra_trace_ms(b, f);
+                *cb += keep(b, f);
             }
         }
-        cost[f] = best + c.rebuild_ms[f];
+        cost[f] = best + rebuild(f);
         parent[f] = best_b;
     }
     let (mut b, total) = cost
@@ -313,6 +388,46 @@ mod tests {
             c.sah.push(row);
         }
         c
+    }
+
+    fn work_costs(n: usize, seed: u64) -> WorkCosts {
+        let m = costs(n, seed);
+        WorkCosts {
+            trace_ms: (0..=n)
+                .map(|b| {
+                    (b..=n)
+                        .map(|f| m.fresh_trace_ms[f] * f64::from(m.sah[b][f - b] / m.sah[f][0]))
+                        .collect()
+                })
+                .collect(),
+            refit_ms: m.refit_ms,
+            rebuild_ms: m.rebuild_ms,
+        }
+    }
+
+    #[test]
+    fn the_work_oracle_is_the_exhaustive_optimum() {
+        for seed in 0..60 {
+            let n = 1 + seed as usize % 12;
+            let c = work_costs(n, seed);
+            let s = c.best();
+            let want = (0..1u32 << n)
+                .map(|mask| {
+                    let mut r = vec![true];
+                    r.extend((0..n).map(|k| mask >> k & 1 == 1));
+                    c.cost_of(&r)
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                (s.cost_ms - want).abs() < 1e-9,
+                "seed {seed}: {} vs {want}",
+                s.cost_ms
+            );
+            assert!((c.cost_of(&s.rebuild) - s.cost_ms).abs() < 1e-9);
+            // Never above either endpoint.
+            assert!(s.cost_ms <= c.cost_of(&vec![false; n + 1]) + 1e-9);
+            assert!(s.cost_ms <= c.cost_of(&vec![true; n + 1]) + 1e-9);
+        }
     }
 
     #[test]

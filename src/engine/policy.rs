@@ -299,6 +299,8 @@ pub struct PolicyState {
     /// did not pay for itself (the tree it replaced, refitted alongside, turned out better
     /// before the new one had saved its cost), halved towards 1 by each that did.
     pub rebuild_scale: f64,
+    /// Rebuilds the ray-work measure has learnt `estimate_gain` from.
+    pub ray_calibrations: u32,
 }
 
 impl Default for PolicyState {
@@ -313,6 +315,7 @@ impl Default for PolicyState {
             traced_ratio: 1.0,
             estimate_gain: 1.0,
             rebuild_scale: 1.0,
+            ray_calibrations: 0,
         }
     }
 }
@@ -371,6 +374,20 @@ impl PolicyState {
         if estimated > 1.0 + 1e-3 && measured.is_finite() {
             let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(0.0, 2.0);
             self.estimate_gain = 0.5 * (self.estimate_gain + seen);
+        }
+    }
+
+    /// Learns from a rebuild under the ray-work measure: the fresh SAH ratio was estimated at
+    /// `estimated`, and the replaced tree's sampled work over the new tree's, on the same rays,
+    /// is `measured`. The gain becomes the share of the SAH's estimated degradation the rays
+    /// felt: the first measurement replaces the prior of 1, later ones are averaged in with
+    /// weight `max(1 / (n + 1), 0.3)` (so it follows a change within a few rebuilds).
+    pub fn calibrate_rays(&mut self, estimated: f32, measured: f32) {
+        if estimated > 1.0 + 1e-3 && measured.is_finite() {
+            let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(0.0, 2.0);
+            let w = (1.0 / (self.ray_calibrations as f32 + 1.0)).max(0.3);
+            self.estimate_gain += w * (seen - self.estimate_gain);
+            self.ray_calibrations += 1;
         }
     }
 

@@ -41,6 +41,8 @@
 
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
+use super::prices::Prices;
+use super::ray_work::{CostMeasure, Query, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
@@ -52,6 +54,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod packet;
+mod sample;
 
 /// A mesh of an [`Engine`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -98,6 +101,11 @@ pub struct EngineConfig {
     pub timing: Timing,
     /// Which mesh trees rays walk.
     pub traversal: Traversal,
+    /// What the policies measure degradation and trace cost by.
+    pub cost: CostMeasure,
+    /// Unit prices of the modelled costs: what [`Timing::Priced`] decides with, and what the
+    /// statistics' modelled figures are priced at whatever the timing.
+    pub prices: Prices,
 }
 
 /// Which tree of each mesh the engine's rays walk (the top-level tree is binary either way).
@@ -154,6 +162,8 @@ impl Default for EngineConfig {
             tlas: TlasPolicy::DEFAULT,
             timing: Timing::Measured,
             traversal: Traversal::DEFAULT,
+            cost: CostMeasure::default(),
+            prices: Prices::default(),
         }
     }
 }
@@ -166,6 +176,11 @@ pub enum Timing {
     /// Timed with the wall clock as the engine runs, so the decisions follow the machine and
     /// its load: the default.
     Measured,
+    /// Every cost from work counts at the configuration's [`Prices`]: refits and rebuilds by
+    /// their triangles, estimates by their subsample, and the trace time by the ray-work
+    /// sample (when the frame's rays were sampled; else the recorded time). The same frames and
+    /// rays give the same decisions on every run, whatever the machine's load.
+    Priced,
     /// Costs in proportion to the triangles worked on, so the same frames and recorded trace
     /// times give the same decisions on every run and machine (reproducible simulations,
     /// tests). Frame statistics still report the measured times.
@@ -182,9 +197,10 @@ pub enum Timing {
 impl Timing {
     /// The cost (ms) the policy uses for a refit over `tris` triangles measured at `ms`.
     #[must_use]
-    pub fn refit_ms(self, ms: f64, tris: usize) -> f64 {
+    pub fn refit_ms(self, ms: f64, tris: usize, prices: &Prices) -> f64 {
         match self {
             Self::Measured => ms,
+            Self::Priced => prices.refit_ms(tris),
             Self::Modeled {
                 refit_ns_per_tri, ..
             } => refit_ns_per_tri * tris as f64 * 1e-6,
@@ -193,9 +209,10 @@ impl Timing {
 
     /// The cost (ms) the policy uses for a rebuild over `tris` triangles measured at `ms`.
     #[must_use]
-    pub fn build_ms(self, ms: f64, tris: usize) -> f64 {
+    pub fn build_ms(self, ms: f64, tris: usize, prices: &Prices) -> f64 {
         match self {
             Self::Measured => ms,
+            Self::Priced => prices.rebuild_ms(tris),
             Self::Modeled {
                 rebuild_ns_per_tri, ..
             } => rebuild_ns_per_tri * tris as f64 * 1e-6,
@@ -205,9 +222,10 @@ impl Timing {
     /// The cost (ms) the policy uses for an estimate over a subsample of `tris` triangles
     /// measured at `ms`.
     #[must_use]
-    pub fn estimate_ms(self, ms: f64, tris: usize) -> f64 {
+    pub fn estimate_ms(self, ms: f64, tris: usize, prices: &Prices) -> f64 {
         match self {
             Self::Measured => ms,
+            Self::Priced => prices.estimate_ms(tris),
             Self::Modeled {
                 estimate_ns_per_tri,
                 ..
@@ -337,6 +355,12 @@ pub struct Engine {
     threads_ready: bool,
     frame: u64,
     stats: FrameStats,
+    /// The ray-work sample of the frame traced last ([`Engine::sample_rays`]).
+    sample: RaySample,
+    /// Its sampled rays' entries into instances.
+    entries: Vec<SampleEntry>,
+    /// Its work per mesh.
+    sample_work: Vec<TraversalStats>,
 }
 
 impl Engine {
@@ -357,7 +381,18 @@ impl Engine {
             threads_ready: false,
             frame: 0,
             stats: FrameStats::default(),
+            sample: RaySample::new(u64::MAX),
+            entries: Vec::new(),
+            sample_work: Vec::new(),
         }
+    }
+
+    /// True when rebuilds are probed (the replaced tree kept and refitted alongside): the
+    /// amortized policy under the SAH measure. Under the ray-work measure the degradation is
+    /// learnt from the rays at each rebuild instead, and the engine never goes back to an
+    /// earlier tree, so that the oracle's moves are the engine's.
+    fn probes(&self) -> bool {
+        PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Sah
     }
 
     /// The configuration.
@@ -371,7 +406,7 @@ impl Engine {
     /// that the frame loop still allocates nothing.
     pub fn set_policy(&mut self, policy: Policy) {
         self.config.policy = policy;
-        if PolicyState::probes_rebuilds(policy) {
+        if self.probes() {
             for m in &mut self.meshes {
                 m.prev.reserve_like(&m.bvh);
             }
@@ -409,13 +444,14 @@ impl Engine {
         let t = Instant::now();
         let estimate = fresh.estimate(&positions, &indices);
         let timing = self.config.timing;
-        let estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len());
+        let prices = self.config.prices;
+        let estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len(), &prices);
         let mut state = PolicyState::default();
-        state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len()));
+        state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len(), &prices));
         // The spare a probed rebuild goes into, reserved now so that the frame loop never
         // allocates it (address space only until the first probed rebuild writes it).
         let mut prev = MeshBvh::default();
-        if PolicyState::probes_rebuilds(self.config.policy) {
+        if self.probes() {
             prev.reserve_like(&bvh);
         }
         self.meshes.push(MeshEntry {
@@ -444,6 +480,7 @@ impl Engine {
             weight: 0.0,
             world_area: 0.0,
         });
+        self.sample_work.push(TraversalStats::default());
         MeshId(self.meshes.len() as u32 - 1)
     }
 
@@ -571,9 +608,17 @@ impl Engine {
     pub fn update(&mut self) -> &FrameStats {
         let policy = self.config.policy;
         let build = self.config.build;
-        let estimate = PolicyState::needs_fresh_ratio(policy);
-        let probes = PolicyState::probes_rebuilds(policy);
+        let rays_cost = self.config.cost == CostMeasure::Rays;
+        // Under the ray-work measure the threshold policy, too, decides on the estimated
+        // degradation against a fresh tree.
+        let estimate = PolicyState::needs_fresh_ratio(policy)
+            || (rays_cost && matches!(policy, Policy::Threshold(_)));
+        let probes = self.probes();
         let timing = self.config.timing;
+        let prices = self.config.prices;
+        self.apply_sample();
+        // The previous frame's sampled rays, replayed on both trees at a rebuild.
+        let replay = rays_cost && self.sample.frame == self.frame && self.sample.sampled > 0;
         let mut stats = FrameStats {
             frame: self.frame,
             pose_ms: std::mem::take(&mut self.pending_pose_ms),
@@ -583,14 +628,18 @@ impl Engine {
             tlas_sah_ratio: 1.0,
             ..FrameStats::default()
         };
-        for m in &mut self.meshes {
+        for (id, m) in self.meshes.iter_mut().enumerate() {
+            let id = MeshId(id as u32);
             m.moved = std::mem::take(&mut m.dirty);
+            m.stats.model_ms = 0.0;
+            m.stats.measured_work_ratio = 0.0;
             if !m.moved {
                 m.stats.action = Action::None;
                 m.stats.refit_ms = 0.0;
                 m.stats.rebuild_ms = 0.0;
                 continue;
             }
+            let tris = m.indices.len();
             let decided = m.state.before_refit(policy);
             let mut refit_ms = 0.0;
             // The binary tree changed under the wide one (a revert to the replaced tree).
@@ -602,8 +651,9 @@ impl Engine {
                 m.bvh.refit_indexed(&m.positions, &m.indices);
                 m.sah = tree_sah(m.bvh.bvh());
                 m.state.since_build += 1;
+                m.stats.model_ms += prices.refit_ms(tris);
                 if let Some(p) = m.probe.take()
-                    && probe_step(m, p, timing)
+                    && probe_step(m, p, timing, &prices)
                 {
                     stats.reverts += 1;
                     recollapse = true;
@@ -613,14 +663,15 @@ impl Engine {
                 // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the
                 // latest estimate when this frame has not earned a new one.
                 m.stats.fresh_ratio = if estimate && m.state.build_estimate > 0.0 {
-                    let tris = m.indices.len();
                     m.estimate_budget += ESTIMATE_SHARE
-                        * (m.state.trace_share_ms + timing.refit_ms(ms_since(t), tris));
+                        * (m.state.trace_share_ms + timing.refit_ms(ms_since(t), tris, &prices));
                     if m.estimate_budget >= m.estimate_ms {
                         let te = Instant::now();
                         m.last_estimate = m.fresh.estimate(&m.positions, &m.indices);
-                        m.estimate_ms = timing.estimate_ms(ms_since(te), m.fresh.sample_len());
+                        let n = m.fresh.sample_len();
+                        m.estimate_ms = timing.estimate_ms(ms_since(te), n, &prices);
                         m.estimate_budget = (m.estimate_budget - m.estimate_ms).max(0.0);
+                        m.stats.model_ms += prices.estimate_ms(n);
                     }
                     if m.last_estimate > 0.0 {
                         ratio * m.state.build_estimate / m.last_estimate
@@ -633,14 +684,30 @@ impl Engine {
                     0.0
                 };
                 let fresh = m.stats.fresh_ratio;
+                // The ray-work measure: the estimated degradation as far as the rays felt it.
+                let judged = if rays_cost && estimate {
+                    m.stats.work_ratio = 1.0 + m.state.estimate_gain * (fresh - 1.0).max(0.0);
+                    m.stats.work_ratio
+                } else {
+                    m.stats.work_ratio = 0.0;
+                    ratio
+                };
                 refit_ms = ms_since(t);
-                decided.unwrap_or_else(|| m.state.after_refit(policy, ratio, fresh))
+                decided.unwrap_or_else(|| m.state.after_refit(policy, judged, fresh))
             };
             let mut rebuild_ms = 0.0;
             if rebuild {
                 let refitted = (decided != Some(true)).then_some(m.sah);
                 let probe = probes && refitted.is_some();
                 let t = Instant::now();
+                // The replaced tree's work on the previous frame's rays (its wide tree refitted
+                // first, as the rays would have walked it).
+                let old_work = (replay && refitted.is_some()).then(|| {
+                    if let Some(w) = &mut m.wide {
+                        w.refit_indexed(&m.positions, &m.indices);
+                    }
+                    sample::tree_work(&m.bvh, m.wide.as_ref(), id, &self.entries)
+                });
                 if probe {
                     // Keep the refitted tree: rebuild into the spare.
                     std::mem::swap(&mut m.bvh, &mut m.prev);
@@ -658,16 +725,35 @@ impl Engine {
                 };
                 m.last_estimate = est;
                 m.estimate_budget = 0.0;
+                m.stats.model_ms += prices.rebuild_ms(tris);
+                if estimate {
+                    m.stats.model_ms += prices.estimate_ms(m.fresh.sample_len());
+                }
+                if let Some(old) = old_work {
+                    let new = sample::tree_work(&m.bvh, m.wide.as_ref(), id, &self.entries);
+                    m.stats.model_ms += prices.trace_ms(old) + prices.trace_ms(new);
+                    let (old, new) = (prices.trace_ms(old), prices.trace_ms(new));
+                    if new > 0.0 {
+                        m.stats.measured_work_ratio = (old / new) as f32;
+                    }
+                }
                 rebuild_ms = ms_since(t);
                 if let Some(refit_sah) = refitted
                     && estimate
                 {
-                    m.state
-                        .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
+                    if rays_cost {
+                        if m.stats.measured_work_ratio > 0.0 {
+                            m.state
+                                .calibrate_rays(m.stats.fresh_ratio, m.stats.measured_work_ratio);
+                        }
+                    } else {
+                        m.state
+                            .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
+                    }
                 }
                 let replaced = m.state;
                 // What the policy weighs; the statistics keep the measured time.
-                let rebuild_cost = timing.build_ms(rebuild_ms, m.indices.len());
+                let rebuild_cost = timing.build_ms(rebuild_ms, tris, &prices);
                 m.state.rebuilt(m.sah, est, rebuild_cost);
                 m.probe = None;
                 if let (true, Some(refit_sah)) = (probe, refitted) {
@@ -687,6 +773,7 @@ impl Engine {
                 }
                 m.stats.sah_ratio = 1.0;
                 m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
+                m.stats.work_ratio = if rays_cost && estimate { 1.0 } else { 0.0 };
                 stats.rebuilds += 1;
             } else {
                 // The wide tree follows the refitted (or reverted-to) binary tree; its time is
@@ -700,7 +787,7 @@ impl Engine {
                     }
                     let ms = ms_since(t);
                     refit_ms += ms;
-                    m.estimate_budget += ESTIMATE_SHARE * timing.refit_ms(ms, m.indices.len());
+                    m.estimate_budget += ESTIMATE_SHARE * timing.refit_ms(ms, tris, &prices);
                 }
                 stats.refits += 1;
             }
@@ -714,6 +801,7 @@ impl Engine {
             m.stats.sah = m.sah;
             stats.refit_ms += refit_ms;
             stats.rebuild_ms += rebuild_ms;
+            stats.model_update_ms += m.stats.model_ms;
             stats.max_sah_ratio = stats.max_sah_ratio.max(m.stats.sah_ratio);
             stats.max_fresh_ratio = stats.max_fresh_ratio.max(m.stats.fresh_ratio);
         }
@@ -793,6 +881,49 @@ impl Engine {
         self.stats = stats;
         self.frame += 1;
         &self.stats
+    }
+
+    /// Gives each mesh's policy state its share of the last frame's trace cost from the
+    /// ray-work sample: under [`CostMeasure::Rays`] by the mesh's own sampled work, under the
+    /// SAH by its expected cost as [`Engine::record_trace`] splits it; the total is the
+    /// sample's modelled estimate with [`Timing::Priced`], the recorded time otherwise.
+    fn apply_sample(&mut self) {
+        if self.sample.frame != self.frame || self.sample.sampled == 0 {
+            return;
+        }
+        let p = self.config.prices;
+        let scale = self.sample.scale();
+        let modelled = scale * p.trace_ms(self.sample.work);
+        let total = if self.config.timing == Timing::Priced {
+            modelled
+        } else {
+            self.stats.trace_ms
+        };
+        match self.config.cost {
+            CostMeasure::Rays => {
+                for (m, w) in self.meshes.iter_mut().zip(&self.sample_work) {
+                    let share = if modelled > 0.0 {
+                        scale * p.trace_ms(*w) / modelled
+                    } else {
+                        0.0
+                    };
+                    m.state.trace_share_ms = total * share;
+                    m.state.traced_ratio = if m.stats.work_ratio > 0.0 {
+                        m.stats.work_ratio
+                    } else {
+                        1.0
+                    };
+                }
+            }
+            CostMeasure::Sah => {
+                let weights: f64 = self.meshes.iter().map(|m| m.weight).sum();
+                if self.config.timing == Timing::Priced && weights > 0.0 {
+                    for m in &mut self.meshes {
+                        m.state.trace_share_ms = total * m.weight / weights;
+                    }
+                }
+            }
+        }
     }
 
     fn rebuild_tlas(&mut self) {
@@ -981,7 +1112,26 @@ impl Engine {
         self.trace_closest(rays, out);
         let ms = ms_since(t);
         self.record_trace(ms, rays.len() as u64);
+        self.sample_timed(rays, Query::Closest);
         ms
+    }
+
+    /// [`Engine::trace_any`], timed and recorded with [`Engine::record_trace`] and sampled for
+    /// the ray-work measure; returns the time in ms.
+    pub fn trace_frame_any(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        let t = Instant::now();
+        self.trace_any(rays, out);
+        let ms = ms_since(t);
+        self.record_trace(ms, rays.len() as u64);
+        self.sample_timed(rays, Query::Any);
+        ms
+    }
+
+    /// [`Engine::sample_rays`], its wall-clock time added to the frame's `sample_ms`.
+    pub fn sample_timed(&mut self, rays: &[Ray], query: Query) {
+        let t = Instant::now();
+        self.sample_rays(rays, query);
+        self.stats.sample_ms += ms_since(t);
     }
 
     /// What the SAH predicts a ray that hits the scene's box costs without early termination:
@@ -1036,11 +1186,12 @@ const RAY_CHUNK: usize = 256;
 
 /// One frame of a probed rebuild, after `m`'s tree was refitted: refits the replaced tree too
 /// and decides. Returns true when it went back to the replaced tree.
-fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing) -> bool {
+fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing, prices: &Prices) -> bool {
     let t = Instant::now();
     m.prev.refit_indexed(&m.positions, &m.indices);
     let old_sah = tree_sah(m.prev.bvh());
-    p.cost_ms += timing.refit_ms(ms_since(t), m.indices.len());
+    p.cost_ms += timing.refit_ms(ms_since(t), m.indices.len(), prices);
+    m.stats.model_ms += prices.refit_ms(m.indices.len());
     p.frames += 1;
     // What tracing this frame with the new tree gains (or would lose: then the old tree is
     // back before the trace, and the loss counts against the rebuild as a measure of how fast

@@ -20,6 +20,16 @@ pub struct MeshStats {
     /// `sah` over the estimated cost of a fresh build now (see [`super::estimate`]); 0 when the
     /// policy does not estimate it.
     pub fresh_ratio: f32,
+    /// Estimated ray-work degradation (sampled work over a fresh tree's) with
+    /// [`super::CostMeasure::Rays`]: the SAH's estimated degradation scaled by how much of it
+    /// the sampled rays felt at the last rebuilds; 0 with the SAH measure.
+    pub work_ratio: f32,
+    /// The ray-work ratio measured at this frame's rebuild: the replaced (refitted) tree's
+    /// sampled work on the previous frame's rays over the new tree's; 0 when not measured.
+    pub measured_work_ratio: f32,
+    /// Modelled cost of this mesh's update (refit, rebuild, estimate, replayed samples) at the
+    /// engine's prices, ms.
+    pub model_ms: f64,
 }
 
 /// One frame as the engine saw it: update times, the trees' quality, and the traced rays.
@@ -69,4 +79,15 @@ pub struct FrameStats {
     pub max_fresh_ratio: f32,
     /// SAH ratio of the top-level tree.
     pub tlas_sah_ratio: f32,
+    /// Modelled cost of the meshes' updates at the engine's prices, ms.
+    pub model_update_ms: f64,
+    /// Modelled trace cost of the frame's rays: the ray-work sample's estimate of the frame's
+    /// total work at the engine's prices, ms.
+    pub model_trace_ms: f64,
+    /// Modelled cost of tracing the sample again with counters, ms.
+    pub model_sample_ms: f64,
+    /// Wall-clock time spent sampling (tracing the sampled rays again with counters), ms.
+    pub sample_ms: f64,
+    /// The ray-work sample's estimate of the mean work per ray.
+    pub work: super::ray_work::WorkEstimate,
 }

@@ -1,16 +1,23 @@
 //! `bench`: every policy on the same frames and rays, the oracle's best schedule, and the
 //! figures the charts draw.
 
-use crate::bvh::{BuildParams, TraversalStats};
+use crate::bvh::BuildParams;
+use crate::cputime::{CpuClock, Elapsed};
 use crate::engine::oracle::{MeshCosts, SceneCosts};
+use crate::engine::ray_work::SAMPLE_STRIDE;
 use crate::engine::source::FrameSource;
 use crate::engine::{
-    Action, Engine, EngineConfig, MeshId, Policy, SceneHit, TlasPolicy, Traversal,
+    Action, CostMeasure, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit, Timing,
+    TlasPolicy, Traversal,
 };
 use crate::geom::{Aabb, Ray};
+use crate::report::all_pairs::{self, SampledFrame};
 use crate::report::rays::camera_rays;
 use serde::Serialize;
-use std::time::Instant;
+
+/// A run whose threads waited for a core more than this share of their CPU time is flagged
+/// busy: its wall-clock figures are disturbed.
+pub const BUSY_SHARE: f64 = 0.10;
 
 /// How many rays each frame casts (all from one camera looking at the scene's first frame).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,6 +72,11 @@ pub struct Options {
     pub tlas_compare: bool,
     /// Which mesh trees the rays walk.
     pub traversal: Traversal,
+    /// What the policies decide on.
+    pub cost: CostMeasure,
+    /// Unit prices of the modelled measure (every engine decides with them: the schedules do
+    /// not depend on the machine's load).
+    pub prices: Prices,
 }
 
 impl Default for Options {
@@ -88,6 +100,8 @@ impl Default for Options {
             oracle: true,
             tlas_compare: true,
             traversal: Traversal::DEFAULT,
+            cost: CostMeasure::default(),
+            prices: Prices::default(),
         }
     }
 }
@@ -140,6 +154,29 @@ pub struct FrameRow {
     pub predicted_nodes_per_ray: f64,
     /// What the SAH predicts for triangles per ray.
     pub predicted_tris_per_ray: f64,
+    /// Modelled mesh updates, ms.
+    pub model_update_ms: f64,
+    /// Modelled trace cost (the ray-work sample's estimate), ms.
+    pub model_trace_ms: f64,
+    /// Modelled cost of tracing the sample again, ms.
+    pub model_sample_ms: f64,
+    /// Half width of the 95% confidence interval of the sample's mean work per ray, as a share
+    /// of the mean.
+    pub work_ci95_rel: f64,
+    /// Largest estimated ray-work degradation of a mesh (0 under the SAH measure).
+    pub est_work_ratio: f32,
+    /// Largest ray-work ratio measured at a rebuild (replaced tree over new, same rays; 0
+    /// without).
+    pub measured_work_ratio: f32,
+    /// Largest true ray-work degradation of a mesh: its tree's modelled trace cost over a fresh
+    /// tree's on the frame's sampled rays (the all-pairs pass; 0 without the oracle).
+    pub work_ratio: f32,
+    /// CPU time of the process over the frame's update and (fastest) trace, ms.
+    pub cpu_ms: f64,
+    /// Time the threads waited for a core meanwhile, ms.
+    pub wait_ms: f64,
+    /// Wall-clock time of sampling the rays again with counters, ms.
+    pub sample_ms: f64,
 }
 
 /// Totals of one policy.
@@ -185,6 +222,30 @@ pub struct PolicySummary {
     pub median_update_ms: f64,
     /// Median of the frame's trace time, ms.
     pub median_trace_ms: f64,
+    /// Modelled total (mesh updates, tracing, and the ray sample for the policies that read
+    /// it), ms: the same on every run with the same prices.
+    pub modelled_ms: f64,
+    /// `modelled_ms` over the modelled oracle's total (0 without the oracle).
+    pub oracle_ratio_modelled: f64,
+    /// Wall clock of the updates and traces (`total_ms`), ms.
+    pub wall_ms: f64,
+    /// CPU time of the process's threads over the same, ms.
+    pub cpu_ms: f64,
+    /// Time the threads were runnable but waited for a core, ms.
+    pub wait_ms: f64,
+    /// True when `wait_ms` exceeds [`BUSY_SHARE`] of `cpu_ms`: the machine was busy and the
+    /// wall-clock figures are disturbed.
+    pub busy: bool,
+    /// Frames (1-based) some mesh was rebuilt at.
+    pub rebuild_frames: Vec<usize>,
+    /// Wall-clock time of sampling over the wall-clock trace time.
+    pub sample_share: f64,
+    /// Median, 95th percentile and largest frame time (update plus trace, wall clock), ms.
+    pub p50_ms: f64,
+    /// 95th percentile frame time, ms.
+    pub p95_ms: f64,
+    /// Largest frame time, ms.
+    pub max_ms: f64,
 }
 
 /// The top-level tree under one policy (mesh policy: the default).
@@ -251,6 +312,46 @@ pub struct SpeedPoint {
     pub sah: f64,
 }
 
+/// The best schedule in the modelled measure.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ModelledOracle {
+    /// Modelled total of the best schedule (fixed trace cost plus each deforming mesh's best),
+    /// ms.
+    pub total_ms: f64,
+    /// Rebuilds over all meshes.
+    pub rebuilds: usize,
+    /// For each deforming mesh, the frames it is rebuilt at.
+    pub rebuild_frames: Vec<Vec<usize>>,
+    /// Modelled totals of always refitting and always rebuilding (no sampling overhead), ms.
+    pub refit_ms: f64,
+    /// See `refit_ms`.
+    pub rebuild_ms: f64,
+    /// What the oracle's moves are and what it is not charged for.
+    pub moves: String,
+}
+
+/// How well each measure of degradation follows the trace time: per frame, the always-refit
+/// tree against the always-rebuilt (fresh) one.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DegradationCheck {
+    /// Frames compared.
+    pub frames: usize,
+    /// Mean over the frames of the measured (wall clock) trace-time ratio, refit over rebuild.
+    pub time_ratio: f64,
+    /// Mean of the ray-work ratio (the refitted tree's modelled trace cost over the fresh
+    /// tree's, same sampled rays).
+    pub work_ratio: f64,
+    /// Mean of the SAH ratio (the refitted tree's SAH over the fresh tree's).
+    pub sah_ratio: f64,
+    /// `work_ratio / time_ratio - 1`.
+    pub work_error: f64,
+    /// `sah_ratio / time_ratio - 1`.
+    pub sah_error: f64,
+    /// Mean of the engine's estimated ray-work degradation under the default policy (which
+    /// rebuilds, so not the same trees: for reference).
+    pub est_work_ratio_default: f64,
+}
+
 /// Everything `bench` measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -266,10 +367,23 @@ pub struct Report {
     pub rays_per_frame: usize,
     /// Worker threads.
     pub threads: usize,
+    /// What the policies decided on.
+    pub cost: CostMeasure,
+    /// Unit prices of the modelled measure.
+    pub prices: Prices,
     /// Per policy, in the order asked.
     pub policies: Vec<PolicySummary>,
-    /// The oracle.
+    /// The oracle in the wall-clock measure (measured updates, SAH trace model).
     pub oracle: OracleSummary,
+    /// The oracle in the modelled measure.
+    pub oracle_modelled: ModelledOracle,
+    /// Policies whose modelled total fell below the modelled oracle's (a bug if not empty).
+    pub below_oracle: Vec<String>,
+    /// True when some run's threads waited for a core more than [`BUSY_SHARE`] of their CPU
+    /// time: the wall-clock columns are disturbed.
+    pub busy: bool,
+    /// Ray work and SAH against the measured trace time.
+    pub degradation: DegradationCheck,
     /// The top-level tree under each of its policies (empty when not compared).
     pub tlas: Vec<TlasSummary>,
     /// Speed against accuracy: builders and policies.
@@ -286,26 +400,27 @@ struct Run {
     rebuild: Vec<Vec<f64>>,
     share: Vec<Vec<f64>>,
     sah: Vec<Vec<f32>>,
+    /// `[frame][mesh]`: the frame the mesh's tree was last built at.
+    built: Vec<Vec<usize>>,
     /// Per frame: top-level tree rebuilt, its SAH ratio.
     tlas: Vec<(bool, f32)>,
 }
 
-fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1e3
-}
-
 /// Runs every configuration over every frame in lockstep: each frame is posed into every engine
 /// and updated, then the engines trace the frame's rays in turn, `trace_repeats` rounds in a
-/// rotating order, each keeping its fastest pass. Interleaving puts every configuration under
-/// the same load (this machine is shared), so differences between their times are the trees'.
+/// rotating order, each keeping its fastest pass, and sample them for the ray-work measure.
+/// Interleaving puts every configuration under the same load (this machine is shared), so
+/// differences between their times are the trees'. With `sampled`, the first engine's sample
+/// of each frame is kept there (every engine's entries are the same).
 fn run_lockstep(
     src: &mut dyn FrameSource,
     configs: &[EngineConfig],
     rays: &[Ray],
     opts: &Options,
     frames: usize,
+    mut sampled: Option<&mut Vec<SampledFrame>>,
 ) -> Vec<Run> {
-    let deforming = src.deforming().len();
+    let deforming = src.deforming().to_vec();
     let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
     let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
     let step = (rays.len() / opts.counted_rays.max(1)).max(1);
@@ -314,42 +429,77 @@ fn run_lockstep(
         .map(|&config| Run {
             config,
             rows: Vec::with_capacity(frames),
-            refit: vec![vec![0.0; deforming]; frames + 1],
-            rebuild: vec![vec![0.0; deforming]; frames + 1],
-            share: vec![vec![0.0; deforming]; frames + 1],
-            sah: vec![vec![0.0; deforming]; frames + 1],
+            refit: vec![vec![0.0; deforming.len()]; frames + 1],
+            rebuild: vec![vec![0.0; deforming.len()]; frames + 1],
+            share: vec![vec![0.0; deforming.len()]; frames + 1],
+            sah: vec![vec![0.0; deforming.len()]; frames + 1],
+            built: vec![vec![0; deforming.len()]; frames + 1],
             tlas: Vec::with_capacity(frames),
         })
         .collect();
+    if let Some(s) = sampled.as_deref_mut() {
+        s.clear();
+        s.push(SampledFrame::default());
+    }
     // Warm-up: one untimed pass each.
     for e in &engines {
         e.trace_closest(rays, &mut hits);
     }
     let n = engines.len();
     let mut best = vec![f64::INFINITY; n];
+    let mut best_clock = vec![Elapsed::default(); n];
+    let mut update_clock = vec![Elapsed::default(); n];
     for f in 1..=frames {
-        for e in &mut engines {
+        for (e, u) in engines.iter_mut().zip(&mut update_clock) {
+            let c = CpuClock::now();
             src.advance(e, f);
             e.update();
+            *u = c.elapsed_ms();
         }
         best.fill(f64::INFINITY);
         for rep in 0..opts.trace_repeats.max(1) {
             for k in 0..n {
                 let i = (k + rep + f) % n;
-                let t = Instant::now();
+                let c = CpuClock::now();
                 engines[i].trace_closest(rays, &mut hits);
-                best[i] = best[i].min(ms(t));
+                let t = c.elapsed_ms();
+                if t.wall_ms < best[i] {
+                    best[i] = t.wall_ms;
+                    best_clock[i] = t;
+                }
             }
         }
-        for ((e, run), &best) in engines.iter_mut().zip(&mut runs).zip(&best) {
-            e.record_trace(best, rays.len() as u64);
-            record_frame(e, src.deforming(), run, rays, step, f);
+        for (i, (e, run)) in engines.iter_mut().zip(&mut runs).enumerate() {
+            e.record_trace(best[i], rays.len() as u64);
+            e.sample_timed(rays, Query::Closest);
+            let mut clock = update_clock[i];
+            clock += best_clock[i];
+            record_frame(e, &deforming, run, rays, step, f, clock);
+            if i == 0
+                && let Some(s) = sampled.as_deref_mut()
+            {
+                s.push(sampled_frame(e, &deforming, &opts.prices));
+            }
         }
     }
     runs
 }
 
-/// Appends frame `f` of engine `e` (updated and traced) to `run`.
+/// What every run shares of engine `e`'s sample of the current frame.
+fn sampled_frame(e: &Engine, deforming: &[MeshId], prices: &Prices) -> SampledFrame {
+    let mut fixed = e.sampled_top_work();
+    for m in (0..e.mesh_count() as u32).map(MeshId) {
+        if !deforming.contains(&m) {
+            fixed += e.sampled_mesh_work(m);
+        }
+    }
+    SampledFrame {
+        entries: e.sampled_entries().to_vec(),
+        fixed_ms: SAMPLE_STRIDE as f64 * prices.trace_ms(fixed),
+    }
+}
+
+/// Appends frame `f` of engine `e` (updated, traced and sampled) to `run`.
 fn record_frame(
     e: &Engine,
     deforming: &[MeshId],
@@ -357,14 +507,13 @@ fn record_frame(
     rays: &[Ray],
     step: usize,
     f: usize,
+    clock: Elapsed,
 ) {
     let s = *e.frame_stats();
-    let mut counted = TraversalStats::default();
     let mut n = 0u64;
     let mut in_box = 0u64;
     let root = e.bounds();
     for r in rays.iter().step_by(step) {
-        let _ = e.closest_hit_counted(r, &mut counted);
         n += 1;
         if r.hit_box(root.min, root.max, r.tmax).is_some() {
             in_box += 1;
@@ -372,13 +521,24 @@ fn record_frame(
     }
     let (pn, pt) = e.predicted_work();
     let p_hit = in_box as f64 / n.max(1) as f64;
+    let (mut est_work, mut measured_work) = (0.0f32, 0.0f32);
     for (k, m) in deforming.iter().enumerate() {
         let ms = e.mesh_stats(*m);
         run.refit[f][k] = ms.refit_ms;
         run.rebuild[f][k] = ms.rebuild_ms;
         run.share[f][k] = e.mesh_trace_share(*m);
         run.sah[f][k] = ms.sah;
+        run.built[f][k] = if ms.action == Action::Rebuild {
+            f
+        } else {
+            run.built[f - 1][k]
+        };
+        est_work = est_work.max(ms.work_ratio);
+        measured_work = measured_work.max(ms.measured_work_ratio);
     }
+    let work = e.work_estimate();
+    let sampled = work.sampled.max(1) as f64;
+    let counted = e.sampled_work();
     run.tlas.push((s.tlas_rebuilt, s.tlas_sah_ratio));
     run.rows.push(FrameRow {
         policy: run.config.policy.to_string(),
@@ -399,11 +559,31 @@ fn record_frame(
         reverts: s.reverts,
         rays: s.rays,
         mrays: s.mrays,
-        nodes_per_ray: counted.nodes as f64 / n.max(1) as f64,
-        tris_per_ray: counted.prims as f64 / n.max(1) as f64,
+        nodes_per_ray: counted.nodes as f64 / sampled,
+        tris_per_ray: counted.prims as f64 / sampled,
         predicted_nodes_per_ray: pn * p_hit,
         predicted_tris_per_ray: pt * p_hit,
+        model_update_ms: s.model_update_ms,
+        model_trace_ms: s.model_trace_ms,
+        model_sample_ms: s.model_sample_ms,
+        work_ci95_rel: if work.mean > 0.0 {
+            work.ci95 / work.mean
+        } else {
+            0.0
+        },
+        est_work_ratio: est_work,
+        measured_work_ratio: measured_work,
+        work_ratio: 0.0,
+        cpu_ms: clock.cpu_ms,
+        wait_ms: clock.wait_ms,
+        sample_ms: s.sample_ms,
     });
+}
+
+/// True for the policies that read the ray sample (the trace cost, or the degradation): they
+/// are charged for it.
+fn reads_sample(p: Policy) -> bool {
+    !matches!(p, Policy::Refit | Policy::Rebuild | Policy::Periodic(_))
 }
 
 fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySummary {
@@ -412,6 +592,30 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
     let trace: f64 = rows.iter().map(|r| r.trace_ms).sum();
     let rays: u64 = rows.iter().map(|r| r.rays).sum();
     let total = update + trace;
+    let modelled: f64 = rows
+        .iter()
+        .map(|r| {
+            r.model_update_ms
+                + r.model_trace_ms
+                + if reads_sample(policy) {
+                    r.model_sample_ms
+                } else {
+                    0.0
+                }
+        })
+        .sum();
+    let cpu: f64 = rows.iter().map(|r| r.cpu_ms).sum();
+    let wait: f64 = rows.iter().map(|r| r.wait_ms).sum();
+    let sample: f64 = rows.iter().map(|r| r.sample_ms).sum();
+    let mut frame_ms: Vec<f64> = rows.iter().map(|r| r.update_ms + r.trace_ms).collect();
+    frame_ms.sort_by(f64::total_cmp);
+    let pct = |q: f64| -> f64 {
+        if frame_ms.is_empty() {
+            0.0
+        } else {
+            frame_ms[((frame_ms.len() - 1) as f64 * q).round() as usize]
+        }
+    };
     PolicySummary {
         policy: policy.to_string(),
         default: policy == Policy::DEFAULT,
@@ -441,6 +645,21 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         median_tlas_ms: median(rows.iter().map(|r| r.tlas_ms)),
         median_update_ms: median(rows.iter().map(|r| r.update_ms)),
         median_trace_ms: median(rows.iter().map(|r| r.trace_ms)),
+        modelled_ms: modelled,
+        oracle_ratio_modelled: 0.0,
+        wall_ms: total,
+        cpu_ms: cpu,
+        wait_ms: wait,
+        busy: wait > BUSY_SHARE * cpu,
+        rebuild_frames: rows
+            .iter()
+            .filter(|r| r.rebuilds > 0)
+            .map(|r| r.frame)
+            .collect(),
+        sample_share: if trace > 0.0 { sample / trace } else { 0.0 },
+        p50_ms: pct(0.5),
+        p95_ms: pct(0.95),
+        max_ms: frame_ms.last().copied().unwrap_or(0.0),
     }
 }
 
@@ -467,7 +686,9 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         policy,
         tlas: opts.tlas,
         traversal: opts.traversal,
-        ..EngineConfig::default()
+        cost: opts.cost,
+        prices: opts.prices,
+        timing: Timing::Priced,
     };
     let rays = {
         let e = src.build(0, config(Policy::Refit));
@@ -513,102 +734,51 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             .collect::<Vec<_>>()
             .join(", ")
     ));
-    let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames);
-    let runs = &mut all_runs[..wanted.len()];
+    let mut sampled = Vec::new();
+    let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames, Some(&mut sampled));
 
     let mut oracle = OracleSummary::default();
+    let mut modelled = ModelledOracle::default();
+    let mut degradation = DegradationCheck::default();
     let mut oracle_total = 0.0;
     if opts.oracle && frames > 0 {
+        progress("oracle: building at every frame, refitting through the later ones");
+        let pairs = all_pairs::measure(src, config(Policy::Refit), &sampled, &opts.prices, frames);
+        let runs = &all_runs[..wanted.len()];
         let find = |p: Policy| &runs[wanted.iter().position(|&q| q == p).expect("run")];
         let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
-        progress("oracle: building at every frame, refitting through the later ones");
-        // sah[mesh][b][f - b]
-        let mut sah = vec![vec![Vec::new(); frames + 1]; deforming];
-        for b in 0..=frames {
-            let mut e = src.build(b, config(Policy::Refit));
-            let ids = src.deforming().to_vec();
-            for (row, m) in sah.iter_mut().zip(&ids) {
-                row[b].push(e.mesh_stats(*m).sah);
-            }
-            for f in b + 1..=frames {
-                src.advance(&mut e, f);
-                e.update();
-                for (row, m) in sah.iter_mut().zip(&ids) {
-                    row[b].push(e.mesh_stats(*m).sah);
-                }
-            }
-        }
-        // Costs no schedule changes: pose and top-level tree (fastest over the runs), and
-        // tracing with fresh trees.
-        let mut fixed = 0.0;
-        for f in 1..=frames {
-            let pose = runs
-                .iter()
-                .map(|r| r.rows[f - 1].pose_ms)
-                .fold(f64::INFINITY, f64::min);
-            let tlas = runs
-                .iter()
-                .map(|r| r.rows[f - 1].tlas_ms)
-                .fold(f64::INFINITY, f64::min);
-            fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
-        }
-        let mut fresh: Vec<Vec<f32>> = Vec::new();
-        let mut scene = SceneCosts {
-            fixed_ms: fixed,
-            meshes: Vec::with_capacity(deforming),
-        };
-        for (k, sah) in sah.into_iter().enumerate() {
-            let c = MeshCosts {
-                refit_ms: (0..=frames).map(|f| refit_run.refit[f][k]).collect(),
-                rebuild_ms: (0..=frames).map(|f| rebuild_run.rebuild[f][k]).collect(),
-                fresh_trace_ms: (0..=frames)
-                    .map(|f| {
-                        if f == 0 {
-                            0.0
-                        } else {
-                            rebuild_run.rows[f - 1].trace_ms * rebuild_run.share[f][k]
-                        }
-                    })
-                    .collect(),
-                sah,
-            };
-            fresh.push((0..=frames).map(|f| c.sah[f][0]).collect::<Vec<f32>>());
-            scene.meshes.push(c);
-        }
-        let measured = |r: &Run| r.rows.iter().map(|x| x.update_ms + x.trace_ms).sum::<f64>();
-        oracle.measured_refit_ms = measured(refit_run);
-        oracle.measured_rebuild_ms = measured(rebuild_run);
-        let cal = scene.calibrate(oracle.measured_refit_ms);
-        let (total, schedules) = scene.best(cal.alpha);
-        oracle_total = total;
-        oracle.total_ms = total;
-        oracle.alpha = cal.alpha;
-        oracle.alpha_fitted = cal.fitted;
-        oracle.model_refit_ms = cal.model_refit_ms;
-        oracle.model_rebuild_ms = cal.model_rebuild_ms;
-        oracle.model_refit_uncalibrated_ms = cal.uncalibrated_refit_ms;
-        for s in &schedules {
-            oracle.rebuilds += s.rebuilds();
-            oracle
-                .rebuild_frames
-                .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
-        }
-        oracle.model = "refit and rebuild times measured per frame (always-refit and \
-            always-rebuild runs); trace time modelled as the always-rebuild run's measured \
-            trace time plus, per mesh, alpha x its share of it (by SAH-expected trace cost) x \
-            max(SAH ratio - 1, 0), the ratio of the tree built at b refitted to f over the tree built \
-            at f; alpha fitted so the modelled always-refit total equals the measured one; \
-            schedules refit or rebuild only (no going back to an older tree)"
-            .into();
-        // The true fresh ratio of every run's trees (same positions, same deterministic build).
+        oracle_total = wall_clock_oracle(&mut oracle, &pairs.sah, refit_run, rebuild_run, runs);
+        modelled = modelled_oracle(&pairs.work, &sampled);
+        degradation = degradation_check(&pairs, refit_run, rebuild_run);
+        // The true fresh ratio and ray-work ratio of every run's trees (same positions, same
+        // deterministic build).
         for run in all_runs.iter_mut() {
             for (f, row) in (1..=frames).zip(run.rows.iter_mut()) {
-                row.fresh_ratio = fresh
+                row.fresh_ratio = pairs
+                    .sah
                     .iter()
                     .zip(&run.sah[f])
-                    .map(|(fr, &s)| if fr[f] > 0.0 { s / fr[f] } else { 1.0 })
+                    .map(|(t, &s)| if t[f][0] > 0.0 { s / t[f][0] } else { 1.0 })
+                    .fold(1.0, f32::max);
+                row.work_ratio = pairs
+                    .work
+                    .iter()
+                    .zip(&run.built[f])
+                    .map(|(w, &b)| w.ratio(b, f) as f32)
                     .fold(1.0, f32::max);
             }
+        }
+        let policy_runs = &all_runs[..wanted.len()];
+        if let Some(r) = policy_runs
+            .iter()
+            .find(|r| r.config.policy == Policy::DEFAULT)
+        {
+            degradation.est_work_ratio_default = r
+                .rows
+                .iter()
+                .map(|x| f64::from(x.est_work_ratio))
+                .sum::<f64>()
+                / r.rows.len().max(1) as f64;
         }
     }
     let runs = &all_runs[..wanted.len()];
@@ -616,11 +786,21 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
     let mut policies = Vec::new();
     let mut per_frame = Vec::new();
     let mut speed = Vec::new();
+    let mut below_oracle = Vec::new();
     for (p, r) in wanted.iter().zip(runs) {
         if !opts.policies.contains(p) {
             continue;
         }
-        let s = summarize(*p, &r.rows, oracle_total);
+        let mut s = summarize(*p, &r.rows, oracle_total);
+        if modelled.total_ms > 0.0 {
+            s.oracle_ratio_modelled = s.modelled_ms / modelled.total_ms;
+            if s.modelled_ms < modelled.total_ms * (1.0 - 1e-9) {
+                below_oracle.push(format!(
+                    "{}: modelled {:.6} ms below the oracle's {:.6} ms",
+                    s.policy, s.modelled_ms, modelled.total_ms
+                ));
+            }
+        }
         speed.push(SpeedPoint {
             name: p.to_string(),
             kind: "policy".into(),
@@ -637,12 +817,9 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             progress(&format!("builder {}", b.name()));
             let cfg = EngineConfig {
                 build: *b,
-                policy: Policy::Rebuild,
-                tlas: opts.tlas,
-                traversal: opts.traversal,
-                ..EngineConfig::default()
+                ..config(Policy::Rebuild)
             };
-            let r = run_lockstep(src, &[cfg], &rays, opts, bf).remove(0);
+            let r = run_lockstep(src, &[cfg], &rays, opts, bf, None).remove(0);
             let s = summarize(Policy::Rebuild, &r.rows, 0.0);
             speed.push(SpeedPoint {
                 name: b.name(),
@@ -653,6 +830,11 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             });
         }
     }
+    let busy = all_runs.iter().any(|r| {
+        let cpu: f64 = r.rows.iter().map(|x| x.cpu_ms).sum();
+        let wait: f64 = r.rows.iter().map(|x| x.wait_ms).sum();
+        wait > BUSY_SHARE * cpu
+    });
     let tlas = tlas_configs
         .iter()
         .map(|c| {
@@ -676,12 +858,156 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         frames,
         rays_per_frame: rays.len(),
         threads: rayon::current_num_threads(),
+        cost: opts.cost,
+        prices: opts.prices,
         policies,
         oracle,
+        oracle_modelled: modelled,
+        below_oracle,
+        busy,
+        degradation,
         tlas,
         speed,
         per_frame,
     }
+}
+
+/// The modelled oracle: the fixed trace cost plus each deforming mesh's exact best schedule.
+fn modelled_oracle(
+    work: &[crate::engine::oracle::WorkCosts],
+    sampled: &[SampledFrame],
+) -> ModelledOracle {
+    let fixed: f64 = sampled.iter().skip(1).map(|s| s.fixed_ms).sum();
+    let mut o = ModelledOracle {
+        total_ms: fixed,
+        refit_ms: fixed,
+        rebuild_ms: fixed,
+        moves: "per deforming mesh and frame: refit the current tree or rebuild it (the \
+            engine's moves under the ray-work measure, which never goes back to an earlier \
+            tree); charged for refits, rebuilds and tracing at the same prices as the \
+            policies, not for the ray sample nor for estimates, which it does not need"
+            .into(),
+        ..ModelledOracle::default()
+    };
+    for w in work {
+        let s = w.best();
+        let n = w.frames() + 1;
+        o.total_ms += s.cost_ms;
+        o.refit_ms += w.cost_of(&vec![false; n]);
+        o.rebuild_ms += w.cost_of(&vec![true; n]);
+        o.rebuilds += s.rebuilds();
+        o.rebuild_frames
+            .push((1..n).filter(|&f| s.rebuild[f]).collect());
+    }
+    o
+}
+
+/// Per frame, the refitted tree against the fresh one: measured trace-time ratio (always-refit
+/// run over always-rebuild run), ray-work ratio and SAH ratio.
+fn degradation_check(pairs: &all_pairs::AllPairs, refit: &Run, rebuild: &Run) -> DegradationCheck {
+    let frames = refit.rows.len();
+    let mut c = DegradationCheck {
+        frames,
+        ..DegradationCheck::default()
+    };
+    if frames == 0 || pairs.work.is_empty() {
+        return c;
+    }
+    for f in 1..=frames {
+        let (rt, bt) = (refit.rows[f - 1].trace_ms, rebuild.rows[f - 1].trace_ms);
+        c.time_ratio += if bt > 0.0 { rt / bt } else { 1.0 };
+        // The whole frame's modelled trace: both runs' own samples.
+        let (rw, bw) = (
+            refit.rows[f - 1].model_trace_ms,
+            rebuild.rows[f - 1].model_trace_ms,
+        );
+        c.work_ratio += if bw > 0.0 { rw / bw } else { 1.0 };
+        let (mut sr, mut sb) = (0.0f64, 0.0f64);
+        for (k, sah) in pairs.sah.iter().enumerate() {
+            let share = rebuild.share[f][k];
+            sr += share * f64::from(sah[0][f]);
+            sb += share * f64::from(sah[f][0]);
+        }
+        c.sah_ratio += if sb > 0.0 { sr / sb } else { 1.0 };
+    }
+    let n = frames as f64;
+    c.time_ratio /= n;
+    c.work_ratio /= n;
+    c.sah_ratio /= n;
+    c.work_error = c.work_ratio / c.time_ratio - 1.0;
+    c.sah_error = c.sah_ratio / c.time_ratio - 1.0;
+    c
+}
+
+/// The wall-clock oracle (measured refit and rebuild times, the SAH trace model calibrated on
+/// the always-refit run); returns its total.
+fn wall_clock_oracle(
+    oracle: &mut OracleSummary,
+    sah: &[Vec<Vec<f32>>],
+    refit_run: &Run,
+    rebuild_run: &Run,
+    runs: &[Run],
+) -> f64 {
+    let frames = refit_run.rows.len();
+    // Costs no schedule changes: pose and top-level tree (fastest over the runs), and
+    // tracing with fresh trees.
+    let mut fixed = 0.0;
+    for f in 1..=frames {
+        let pose = runs
+            .iter()
+            .map(|r| r.rows[f - 1].pose_ms)
+            .fold(f64::INFINITY, f64::min);
+        let tlas = runs
+            .iter()
+            .map(|r| r.rows[f - 1].tlas_ms)
+            .fold(f64::INFINITY, f64::min);
+        fixed += pose + tlas + rebuild_run.rows[f - 1].trace_ms;
+    }
+    let mut scene = SceneCosts {
+        fixed_ms: fixed,
+        meshes: Vec::with_capacity(sah.len()),
+    };
+    for (k, sah) in sah.iter().enumerate() {
+        scene.meshes.push(MeshCosts {
+            refit_ms: (0..=frames).map(|f| refit_run.refit[f][k]).collect(),
+            rebuild_ms: (0..=frames).map(|f| rebuild_run.rebuild[f][k]).collect(),
+            fresh_trace_ms: (0..=frames)
+                .map(|f| {
+                    if f == 0 {
+                        0.0
+                    } else {
+                        rebuild_run.rows[f - 1].trace_ms * rebuild_run.share[f][k]
+                    }
+                })
+                .collect(),
+            sah: sah.clone(),
+        });
+    }
+    let measured = |r: &Run| r.rows.iter().map(|x| x.update_ms + x.trace_ms).sum::<f64>();
+    oracle.measured_refit_ms = measured(refit_run);
+    oracle.measured_rebuild_ms = measured(rebuild_run);
+    let cal = scene.calibrate(oracle.measured_refit_ms);
+    let (total, schedules) = scene.best(cal.alpha);
+    oracle.total_ms = total;
+    oracle.alpha = cal.alpha;
+    oracle.alpha_fitted = cal.fitted;
+    oracle.model_refit_ms = cal.model_refit_ms;
+    oracle.model_rebuild_ms = cal.model_rebuild_ms;
+    oracle.model_refit_uncalibrated_ms = cal.uncalibrated_refit_ms;
+    for s in &schedules {
+        oracle.rebuilds += s.rebuilds();
+        oracle
+            .rebuild_frames
+            .push((1..=frames).filter(|&f| s.rebuild[f]).collect());
+    }
+    oracle.model = "refit and rebuild times measured per frame (always-refit and \
+        always-rebuild runs); trace time modelled as the always-rebuild run's measured \
+        trace time plus, per mesh, alpha x its share of it (by SAH-expected trace cost) x \
+        max(SAH ratio - 1, 0), the ratio of the tree built at b refitted to f over the tree built \
+        at f; alpha fitted so the modelled always-refit total equals the measured one; \
+        schedules refit or rebuild only (no going back to an older tree)"
+        .into();
+    total
 }
 
 /// Name of a top-level tree policy as the reports print it.
@@ -732,6 +1058,95 @@ pub fn to_csv(rows: &[FrameRow]) -> String {
     s
 }
 
+/// The modelled measure's table: per policy its modelled total and ratio to the modelled
+/// oracle, next to its wall clock, CPU time and frame-time percentiles.
+fn modelled_table(r: &Report) -> String {
+    let p = &r.prices;
+    let mut s = format!(
+        "modelled (policies decide on {}; prices: refit {:.2} ns/tri, rebuild {:.2} ns/(n log2 n), \
+         estimate {:.2} ns/tri, trace {:.2} ns/node + {:.2} ns/tri; pose and top-level tree \
+         updates left out, the same for every policy):\n",
+        r.cost,
+        p.refit_ns_per_tri,
+        p.rebuild_ns_per_tri_log,
+        p.estimate_ns_per_tri,
+        p.trace_ns_per_node,
+        p.trace_ns_per_tri
+    );
+    s.push_str(&format!(
+        "{:<16} {:>12} {:>8} {:>8} {:>10} {:>10} {:>5} {:>9} {:>8} {:>8} {:>8}\n",
+        "policy",
+        "modelled ms",
+        "/oracle",
+        "rebuilds",
+        "wall ms",
+        "cpu ms",
+        "busy",
+        "wall/orc",
+        "p50 ms",
+        "p95 ms",
+        "max ms"
+    ));
+    for q in &r.policies {
+        s.push_str(&format!(
+            "{:<16} {:>12.3} {:>8.4} {:>8} {:>10.2} {:>10.2} {:>5} {:>9} {:>8.3} {:>8.3} {:>8.3}\n",
+            format!("{}{}", q.policy, if q.default { "*" } else { "" }),
+            q.modelled_ms,
+            q.oracle_ratio_modelled,
+            q.rebuilds,
+            q.wall_ms,
+            q.cpu_ms,
+            if q.busy { "BUSY" } else { "no" },
+            if q.busy {
+                "(busy)".to_string()
+            } else {
+                format!("{:.3}", q.oracle_ratio)
+            },
+            q.p50_ms,
+            q.p95_ms,
+            q.max_ms
+        ));
+    }
+    let o = &r.oracle_modelled;
+    if o.total_ms > 0.0 {
+        s.push_str(&format!(
+            "{:<16} {:>12.3} {:>8} {:>8}   (always-refit {:.3}, always-rebuild {:.3}, no sampling)\n",
+            "oracle", o.total_ms, "1", o.rebuilds, o.refit_ms, o.rebuild_ms
+        ));
+        let d = &r.degradation;
+        s.push_str(&format!(
+            "refitted against fresh trees, mean over {} frames: trace time {:.3}x, ray work \
+             {:.3}x ({:+.1}%), SAH {:.3}x ({:+.1}%)\n",
+            d.frames,
+            d.time_ratio,
+            d.work_ratio,
+            100.0 * d.work_error,
+            d.sah_ratio,
+            100.0 * d.sah_error
+        ));
+    }
+    let share: Vec<f64> = r.policies.iter().map(|q| q.sample_share).collect();
+    if !share.is_empty() {
+        let mean_ci = mean(r.per_frame.iter().map(|x| x.work_ci95_rel));
+        s.push_str(&format!(
+            "ray sample: 1 ray in {SAMPLE_STRIDE}, {:.2}% of the trace's wall-clock time (largest \
+             over the policies; {:.2}% modelled); mean work per ray known to +-{:.1}% (95%)\n",
+            100.0 * share.iter().copied().fold(0.0, f64::max),
+            100.0 / SAMPLE_STRIDE as f64,
+            100.0 * mean_ci
+        ));
+    }
+    for b in &r.below_oracle {
+        s.push_str(&format!("BELOW THE ORACLE: {b}\n"));
+    }
+    s
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n > 0 { sum / n as f64 } else { 0.0 }
+}
+
 /// The summary table, one line per policy and one for the oracle.
 #[must_use]
 pub fn summary_table(r: &Report) -> String {
@@ -739,8 +1154,15 @@ pub fn summary_table(r: &Report) -> String {
         "{}: {} triangles, {} deforming mesh(es), {} frames, {} rays/frame, {} thread(s)\n",
         r.source, r.triangles, r.deforming_meshes, r.frames, r.rays_per_frame, r.threads
     );
+    s.push_str(&modelled_table(r));
     s.push_str(&format!(
-        "{:<14} {:>10} {:>10} {:>10} {:>9} {:>9} {:>8} {:>8} {:>8} {:>9} {:>8}\n",
+        "wall clock{}:\n{:<14} {:>10} {:>10} {:>10} {:>9} {:>9} {:>8} {:>8} {:>8} {:>9} {:>8}\n",
+        if r.busy {
+            " (BUSY: some run waited for a core over 10% of its CPU time; these figures are \
+             disturbed)"
+        } else {
+            ""
+        },
         "policy",
         "total ms",
         "update ms",

@@ -1,0 +1,135 @@
+//! CPU time of this process's threads as the kernel counts it, and the time they waited for a
+//! core while runnable: on a shared machine, wall clock alone cannot tell the engine's work from
+//! other processes' load, these two can.
+//!
+//! Read from Linux's per-thread scheduler statistics (`/proc/self/task/*/schedstat`: time on a
+//! core, time runnable on a run queue, in ns). Elsewhere both read as unknown.
+
+use std::time::Instant;
+
+/// Sum over this process's live threads: `(ns on a core, ns runnable but waiting for one)`.
+#[must_use]
+pub fn thread_times_ns() -> Option<(u64, u64)> {
+    let dir = std::fs::read_dir("/proc/self/task").ok()?;
+    let (mut run, mut wait) = (0u64, 0u64);
+    let mut any = false;
+    for entry in dir.flatten() {
+        let Ok(text) = std::fs::read_to_string(entry.path().join("schedstat")) else {
+            continue;
+        };
+        let mut fields = text.split_ascii_whitespace().map(str::parse::<u64>);
+        if let (Some(Ok(r)), Some(Ok(w))) = (fields.next(), fields.next()) {
+            run += r;
+            wait += w;
+            any = true;
+        }
+    }
+    any.then_some((run, wait))
+}
+
+/// A stopwatch of wall clock, CPU time and run-queue wait.
+#[derive(Clone, Copy, Debug)]
+pub struct CpuClock {
+    wall: Instant,
+    threads: Option<(u64, u64)>,
+}
+
+/// What a [`CpuClock`] measured, ms (CPU and wait 0 where unknown).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Elapsed {
+    /// Wall clock.
+    pub wall_ms: f64,
+    /// CPU time of all the process's threads.
+    pub cpu_ms: f64,
+    /// Time the process's threads were runnable but waited for a core.
+    pub wait_ms: f64,
+}
+
+impl std::ops::AddAssign for Elapsed {
+    fn add_assign(&mut self, o: Self) {
+        self.wall_ms += o.wall_ms;
+        self.cpu_ms += o.cpu_ms;
+        self.wait_ms += o.wait_ms;
+    }
+}
+
+impl Elapsed {
+    /// True when the threads waited for a core more than `share` of the time they ran: other
+    /// processes held the cores (for one thread, the wall clock exceeded the CPU time by more
+    /// than `share`).
+    #[must_use]
+    pub fn busy(&self, share: f64) -> bool {
+        self.wait_ms > share * self.cpu_ms
+    }
+}
+
+impl CpuClock {
+    /// Starts now.
+    #[must_use]
+    pub fn now() -> Self {
+        Self {
+            threads: thread_times_ns(),
+            wall: Instant::now(),
+        }
+    }
+
+    /// Time since [`CpuClock::now`].
+    #[must_use]
+    pub fn elapsed_ms(&self) -> Elapsed {
+        let wall_ms = self.wall.elapsed().as_secs_f64() * 1e3;
+        let (cpu_ms, wait_ms) = match (self.threads, thread_times_ns()) {
+            (Some((r0, w0)), Some((r1, w1))) => (
+                r1.saturating_sub(r0) as f64 * 1e-6,
+                w1.saturating_sub(w0) as f64 * 1e-6,
+            ),
+            _ => (0.0, 0.0),
+        };
+        Elapsed {
+            wall_ms,
+            cpu_ms,
+            wait_ms,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spinning_counts_cpu_time() {
+        let c = CpuClock::now();
+        let mut x = 0u64;
+        while c.wall.elapsed().as_millis() < 30 {
+            x = std::hint::black_box(x.wrapping_add(1));
+        }
+        let e = c.elapsed_ms();
+        assert!(e.wall_ms >= 30.0);
+        if thread_times_ns().is_some() {
+            // Spinning for 30 ms of wall clock is at least some CPU time, never more than the
+            // wall clock times the cores.
+            assert!(e.cpu_ms > 0.0, "{e:?}");
+            assert!(
+                e.cpu_ms
+                    <= e.wall_ms
+                        * 1.1
+                        * std::thread::available_parallelism().map_or(64, |n| n.get()) as f64
+                        + 5.0,
+                "{e:?}"
+            );
+        }
+        let idle = Elapsed {
+            wall_ms: 10.0,
+            cpu_ms: 10.0,
+            wait_ms: 0.5,
+        };
+        assert!(!idle.busy(0.1));
+        assert!(
+            Elapsed {
+                wait_ms: 2.0,
+                ..idle
+            }
+            .busy(0.1)
+        );
+    }
+}

@@ -1,0 +1,286 @@
+//! Unit prices of the engine's work, so that a frame's cost can be *modelled* from work counts
+//! (triangles refitted and rebuilt, nodes visited and triangles tested by rays) instead of
+//! timed: the same frames then cost the same on every run, whatever else the machine does.
+//!
+//! The prices come from one calibration pass ([`Prices::calibrate`]: a generated mesh refitted,
+//! rebuilt and traced, each timed in CPU time as the median of a few passes) and can be saved
+//! and loaded as JSON, so that several runs share one set.
+
+use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8, TraversalStats};
+use crate::geom::{Ray, shapes};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Nanoseconds per unit of each kind of work.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Prices {
+    /// Refitting one triangle (the binary tree and the wide tree rays walk), ns.
+    pub refit_ns_per_tri: f64,
+    /// Rebuilding, per `n log2 n` of a mesh of `n` triangles (binned build and collapse), ns.
+    pub rebuild_ns_per_tri_log: f64,
+    /// The fresh-build estimate, per triangle of its subsample, ns.
+    pub estimate_ns_per_tri: f64,
+    /// A ray visiting one node (either tree level), ns.
+    pub trace_ns_per_node: f64,
+    /// A ray testing one triangle, ns.
+    pub trace_ns_per_tri: f64,
+}
+
+impl Default for Prices {
+    /// Round figures of the order measured on a 2-core Zen 5 VM (see `docs/ray_work.md`); use
+    /// [`Prices::calibrate`] for the machine at hand.
+    fn default() -> Self {
+        Self {
+            refit_ns_per_tri: 6.0,
+            rebuild_ns_per_tri_log: 6.0,
+            estimate_ns_per_tri: 60.0,
+            trace_ns_per_node: 12.0,
+            trace_ns_per_tri: 4.0,
+        }
+    }
+}
+
+/// `n log2 n` of a mesh of `n` triangles: the units a rebuild is priced in.
+#[must_use]
+pub fn rebuild_units(tris: usize) -> f64 {
+    let n = tris as f64;
+    n * n.max(2.0).log2()
+}
+
+impl Prices {
+    /// Modelled refit of `tris` triangles, ms.
+    #[must_use]
+    pub fn refit_ms(&self, tris: usize) -> f64 {
+        self.refit_ns_per_tri * tris as f64 * 1e-6
+    }
+
+    /// Modelled rebuild of a mesh of `tris` triangles, ms.
+    #[must_use]
+    pub fn rebuild_ms(&self, tris: usize) -> f64 {
+        self.rebuild_ns_per_tri_log * rebuild_units(tris) * 1e-6
+    }
+
+    /// Modelled fresh-build estimate over a subsample of `tris` triangles, ms.
+    #[must_use]
+    pub fn estimate_ms(&self, tris: usize) -> f64 {
+        self.estimate_ns_per_tri * tris as f64 * 1e-6
+    }
+
+    /// Modelled trace time of `work`, ms.
+    #[must_use]
+    pub fn trace_ms(&self, work: TraversalStats) -> f64 {
+        self.trace_ms_f(work.nodes as f64, work.prims as f64)
+    }
+
+    /// Modelled trace time of `nodes` node visits and `tris` triangle tests, ms.
+    #[must_use]
+    pub fn trace_ms_f(&self, nodes: f64, tris: f64) -> f64 {
+        (self.trace_ns_per_node * nodes + self.trace_ns_per_tri * tris) * 1e-6
+    }
+
+    /// Reads prices saved as JSON.
+    ///
+    /// # Errors
+    /// When the file cannot be read or is not a prices object with positive, finite prices.
+    pub fn load(path: &Path) -> crate::Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
+        let p: Prices = serde_json::from_str(&text).map_err(|e| {
+            crate::Error::malformed(path, "prices", format!("not a prices file: {e}"))
+        })?;
+        let all = [
+            p.refit_ns_per_tri,
+            p.rebuild_ns_per_tri_log,
+            p.estimate_ns_per_tri,
+            p.trace_ns_per_node,
+            p.trace_ns_per_tri,
+        ];
+        if all.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(crate::Error::malformed(
+                path,
+                "prices",
+                format!("every price must be positive and finite, found {all:?}"),
+            ));
+        }
+        Ok(p)
+    }
+
+    /// What [`Prices::calibrate`] with these arguments measures on, for reports.
+    #[must_use]
+    pub fn calibration_source(triangles: usize, passes: usize) -> String {
+        format!(
+            "calibrated: bumpy sphere of about {triangles} triangles, {} thread(s), median of {passes} \
+             passes in CPU time",
+            rayon::current_num_threads()
+        )
+    }
+
+    /// Measures the prices on this machine in the current rayon pool: a bumpy sphere of about
+    /// `triangles` triangles is refitted, rebuilt, estimated and traced (camera rays, the wide
+    /// tree), each the median of `passes` passes in CPU time of the whole process (so time
+    /// other processes take is not counted). The two trace prices come from two trees over the
+    /// same rays whose mix of node visits and triangle tests differs (leaves of at most 2 and
+    /// of at most 16 triangles): two equations, two unknowns.
+    #[must_use]
+    pub fn calibrate(triangles: usize, passes: usize) -> Self {
+        let mesh = shapes::bumpy_sphere(triangles.max(1000));
+        let (pos, idx) = (&mesh.positions, &mesh.indices);
+        let n = idx.len();
+        let passes = passes.max(1);
+        let build = BuildParams::BINNED;
+        let mut ws = BuildWorkspace::default();
+        let mut bvh = MeshBvh::build_indexed(pos, idx, &build);
+        let mut wide = MeshBvh8::from_mesh_bvh(&bvh);
+        let refit = median_cpu_ms(passes, || {
+            bvh.refit_indexed(pos, idx);
+            wide.refit_indexed(pos, idx);
+        });
+        let rebuild = median_cpu_ms(passes, || {
+            bvh.rebuild_indexed(pos, idx, &build, &mut ws);
+            wide.collapse_from(&bvh);
+        });
+        let mut fresh = super::estimate::FreshSah::new(n, build.max_leaf_size);
+        let estimate = median_cpu_ms(passes, || {
+            std::hint::black_box(fresh.estimate(pos, idx));
+        });
+        let rays = view_rays(&bvh.bvh().bounds(), 256);
+        let trace_with = |leaf: u32| {
+            let params = BuildParams {
+                max_leaf_size: leaf,
+                ..BuildParams::BINNED
+            };
+            let w = MeshBvh8::from_mesh_bvh(&MeshBvh::build_indexed(pos, idx, &params));
+            let mut work = TraversalStats::default();
+            for r in &rays {
+                let _ = w.closest_hit_counted(r, &mut work);
+            }
+            let ms = median_cpu_ms(passes, || trace_all(&w, &rays));
+            (work, ms)
+        };
+        let (w1, t1) = trace_with(2);
+        let (w2, t2) = trace_with(16);
+        let (node, tri) = solve_trace_prices(w1, t1, w2, t2);
+        Self {
+            refit_ns_per_tri: refit * 1e6 / n as f64,
+            rebuild_ns_per_tri_log: rebuild * 1e6 / rebuild_units(n),
+            estimate_ns_per_tri: estimate * 1e6 / fresh.sample_len().max(1) as f64,
+            trace_ns_per_node: node,
+            trace_ns_per_tri: tri,
+        }
+    }
+}
+
+/// `side x side` rays from a point outside `bounds` towards it, spread over a 45 degree cone.
+fn view_rays(bounds: &crate::geom::Aabb, side: usize) -> Vec<Ray> {
+    let c = bounds.center();
+    let eye = c + Vec3::new(0.45, 0.35, 1.0).normalize() * bounds.extent().length().max(1e-6);
+    let fwd = (c - eye).normalize();
+    let right = fwd.cross(Vec3::Y).normalize();
+    let up = right.cross(fwd);
+    let s = (22.5f32).to_radians().tan();
+    let mut rays = Vec::with_capacity(side * side);
+    for y in 0..side {
+        for x in 0..side {
+            let sx = (2.0 * (x as f32 + 0.5) / side as f32 - 1.0) * s;
+            let sy = (2.0 * (y as f32 + 0.5) / side as f32 - 1.0) * s;
+            rays.push(Ray::new(eye, (fwd + right * sx + up * sy).normalize()));
+        }
+    }
+    rays
+}
+
+fn trace_all(w: &MeshBvh8, rays: &[Ray]) {
+    use rayon::prelude::*;
+    rays.par_chunks(256).for_each(|c| {
+        for r in c {
+            std::hint::black_box(w.closest_hit(r));
+        }
+    });
+}
+
+/// Node and triangle prices (ns) from two timed traces of different work mixes; when the two
+/// mixes cannot separate them (nearly proportional, or a negative solution), one price per
+/// unit of work (nodes plus triangles) from both together.
+fn solve_trace_prices(w1: TraversalStats, t1: f64, w2: TraversalStats, t2: f64) -> (f64, f64) {
+    let (n1, p1, n2, p2) = (
+        w1.nodes as f64,
+        w1.prims as f64,
+        w2.nodes as f64,
+        w2.prims as f64,
+    );
+    let (t1, t2) = (t1 * 1e6, t2 * 1e6);
+    let det = n1 * p2 - n2 * p1;
+    let scale = (n1 * p2).abs().max((n2 * p1).abs());
+    if det.abs() > 0.05 * scale {
+        let node = (t1 * p2 - t2 * p1) / det;
+        let tri = (n1 * t2 - n2 * t1) / det;
+        if node > 0.0 && tri > 0.0 {
+            return (node, tri);
+        }
+    }
+    let unit = (t1 + t2) / (n1 + p1 + n2 + p2).max(1.0);
+    (unit, unit)
+}
+
+/// Median CPU time (ms) of `passes` runs of `f`, after one untimed run.
+fn median_cpu_ms(passes: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut v: Vec<f64> = (0..passes)
+        .map(|_| {
+            let t = crate::cputime::CpuClock::now();
+            f();
+            t.elapsed_ms().cpu_ms
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_mixes_separate_the_prices() {
+        let w = |n, p| TraversalStats { nodes: n, prims: p };
+        // 10 ns a node, 3 a triangle.
+        let (a, b) = (w(1000, 200), w(400, 900));
+        let t = |x: TraversalStats| (10.0 * x.nodes as f64 + 3.0 * x.prims as f64) * 1e-6;
+        let (node, tri) = solve_trace_prices(a, t(a), b, t(b));
+        assert!((node - 10.0).abs() < 1e-9 && (tri - 3.0).abs() < 1e-9);
+        // Proportional mixes: one price for both.
+        let (node, tri) = solve_trace_prices(a, t(a), w(2000, 400), 2.0 * t(a));
+        assert_eq!(node, tri);
+        assert!(node > 0.0);
+    }
+
+    #[test]
+    fn modelled_costs_scale_with_work() {
+        let p = Prices::default();
+        assert!((p.refit_ms(2000) - 2.0 * p.refit_ms(1000)).abs() < 1e-12);
+        assert!(p.rebuild_ms(2000) > 2.0 * p.rebuild_ms(1000));
+        let w = TraversalStats {
+            nodes: 1_000_000,
+            prims: 0,
+        };
+        assert!((p.trace_ms(w) - p.trace_ns_per_node).abs() < 1e-9);
+    }
+
+    #[test]
+    fn prices_round_trip_and_bad_files_are_errors() {
+        let dir = std::env::temp_dir().join(format!("dynbvh-prices-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("p.json");
+        let p = Prices::default();
+        std::fs::write(&f, serde_json::to_string(&p).unwrap()).unwrap();
+        assert_eq!(Prices::load(&f).unwrap(), p);
+        std::fs::write(&f, "{\"refit_ns_per_tri\": 1}").unwrap();
+        let e = Prices::load(&f).unwrap_err().to_string();
+        assert!(e.contains("p.json"), "{e}");
+        let mut bad = p;
+        bad.trace_ns_per_tri = -1.0;
+        std::fs::write(&f, serde_json::to_string(&bad).unwrap()).unwrap();
+        assert!(Prices::load(&f).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

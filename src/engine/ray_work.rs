@@ -1,0 +1,265 @@
+//! Ray-work cost: a tree's cost measured by a sample of the rays a frame really casts (nodes
+//! visited and triangles tested on the trees those rays walk), beside the SAH's prediction for
+//! uniformly random lines.
+//!
+//! The sample is systematic: of the frame's rays, counted in the order they are cast over all
+//! of the frame's calls, every [`SAMPLE_STRIDE`]-th is traced again with counters, starting at
+//! an offset drawn from the frame number. Each ray of the frame is sampled with probability
+//! `1 / stride` whatever the offset, so `stride` times the sampled work is an unbiased estimate
+//! of the frame's total (Horvitz-Thompson), and the same frames and rays give the same sample
+//! on every run. Work is counted per mesh: each entry of a sampled ray into an instance is kept
+//! (the ray in the mesh's space, with the interval it entered with), so that other trees of the
+//! same mesh can be measured on exactly the same rays (the engine's rebuilds and the oracle).
+//!
+//! Why this separates per mesh: traversal is exact, so the distance of the closest hit in an
+//! instance, and whether an any-hit ray is blocked, do not depend on the trees; hence neither do
+//! the top-level traversal nor the interval each instance is entered with. Only the work inside
+//! a mesh's tree depends on that tree.
+
+use super::MeshId;
+use crate::bvh::TraversalStats;
+use crate::geom::Ray;
+use std::fmt;
+use std::str::FromStr;
+
+/// One ray in this many is traced again with counters.
+pub const SAMPLE_STRIDE: u64 = 64;
+
+/// What a policy measures a tree's degradation and a frame's trace cost by.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CostMeasure {
+    /// The SAH: expected cost for uniformly random lines, estimated fresh cost by a quick build.
+    Sah,
+    /// Ray work: the SAH's estimated degradation, scaled by how much of it the sampled rays
+    /// really felt at the last rebuilds (measured on both trees), and the frame's trace cost by
+    /// the sampled work per mesh.
+    #[default]
+    Rays,
+}
+
+impl fmt::Display for CostMeasure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Sah => "sah",
+            Self::Rays => "rays",
+        })
+    }
+}
+
+impl FromStr for CostMeasure {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "sah" => Ok(Self::Sah),
+            "rays" => Ok(Self::Rays),
+            _ => Err(format!("cost {s:?}: expected sah or rays")),
+        }
+    }
+}
+
+/// The query a sampled ray ran.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Query {
+    /// Closest hit.
+    Closest,
+    /// Any hit (shadow and visibility rays).
+    Any,
+}
+
+/// A sampled ray's entry into one instance: the ray in the mesh's space over the interval it
+/// entered with.
+#[derive(Clone, Copy, Debug)]
+pub struct SampleEntry {
+    /// The instance's mesh.
+    pub mesh: MeshId,
+    /// The query.
+    pub query: Query,
+    /// The ray in mesh space; `tmax` is the closest hit found before entering.
+    pub ray: Ray,
+}
+
+/// The frame's sample so far: which rays it takes and the work they cost.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RaySample {
+    /// The frame the sample belongs to.
+    pub frame: u64,
+    /// Rays the frame has cast so far (sampled or not).
+    pub rays: u64,
+    /// Rays sampled.
+    pub sampled: u64,
+    /// Work of the sampled rays, both levels, every mesh.
+    pub work: TraversalStats,
+    /// Work of the sampled rays in the top-level tree.
+    pub top: TraversalStats,
+    /// Sum and sum of squares of each sampled ray's work (nodes plus triangles).
+    sum: f64,
+    sum_sq: f64,
+    offset: u64,
+}
+
+/// The sample's estimate of the frame's mean work per ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct WorkEstimate {
+    /// Rays cast in the frame.
+    pub rays: u64,
+    /// Rays sampled.
+    pub sampled: u64,
+    /// Estimated mean work per ray (nodes visited plus triangles tested).
+    pub mean: f64,
+    /// Half width of the 95% confidence interval of `mean` (normal approximation, sample
+    /// variance with the finite-population correction; 0 when fewer than two rays were
+    /// sampled).
+    pub ci95: f64,
+}
+
+impl RaySample {
+    /// An empty sample of `frame`.
+    #[must_use]
+    pub fn new(frame: u64) -> Self {
+        Self {
+            frame,
+            offset: splitmix(frame) % SAMPLE_STRIDE,
+            ..Self::default()
+        }
+    }
+
+    /// Indices within a batch of `n` rays (cast after the frame's earlier ones) that the sample
+    /// takes; counts the batch's rays.
+    pub fn take(&mut self, n: usize) -> impl Iterator<Item = usize> + use<> {
+        let start = self.rays;
+        self.rays += n as u64;
+        let first = (SAMPLE_STRIDE - (start + self.offset) % SAMPLE_STRIDE) % SAMPLE_STRIDE;
+        (first as usize..n).step_by(SAMPLE_STRIDE as usize)
+    }
+
+    /// Adds one sampled ray's work (`top` of it in the top-level tree).
+    pub fn add(&mut self, work: TraversalStats, top: TraversalStats) {
+        self.sampled += 1;
+        self.work += work;
+        self.top += top;
+        let w = (work.nodes + work.prims) as f64;
+        self.sum += w;
+        self.sum_sq += w * w;
+    }
+
+    /// Scale from sampled work to the frame's estimated total: the stride.
+    #[must_use]
+    pub fn scale(&self) -> f64 {
+        SAMPLE_STRIDE as f64
+    }
+
+    /// Estimated mean work per ray and its confidence interval.
+    #[must_use]
+    pub fn estimate(&self) -> WorkEstimate {
+        let n = self.sampled as f64;
+        if self.sampled == 0 {
+            return WorkEstimate {
+                rays: self.rays,
+                ..WorkEstimate::default()
+            };
+        }
+        let mean = self.sum / n;
+        let ci95 = if self.sampled > 1 {
+            let var = ((self.sum_sq - n * mean * mean) / (n - 1.0)).max(0.0);
+            let fpc = (1.0 - n / self.rays.max(1) as f64).max(0.0);
+            1.96 * (var * fpc / n).sqrt()
+        } else {
+            0.0
+        };
+        WorkEstimate {
+            rays: self.rays,
+            sampled: self.sampled,
+            mean,
+            ci95,
+        }
+    }
+}
+
+/// splitmix64: the frame's sampling offset.
+fn splitmix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_ray_is_sampled_once_in_stride_whatever_the_batches() {
+        for frame in 0..20 {
+            let mut whole = RaySample::new(frame);
+            let all: Vec<usize> = whole.take(1000).collect();
+            let mut split = RaySample::new(frame);
+            let mut parts = Vec::new();
+            let mut base = 0;
+            for n in [1, 63, 64, 65, 7, 800] {
+                parts.extend(split.take(n).map(|i| i + base));
+                base += n;
+            }
+            assert_eq!(all, parts, "frame {frame}");
+            assert_eq!(split.rays, 1000);
+            // One ray in each stride-long run.
+            for w in all.windows(2) {
+                assert_eq!(w[1] - w[0], SAMPLE_STRIDE as usize);
+            }
+            assert!(all[0] < SAMPLE_STRIDE as usize);
+        }
+        // The offset moves with the frame: over many frames every residue comes up.
+        let mut seen = [false; SAMPLE_STRIDE as usize];
+        for frame in 0..2000 {
+            seen[RaySample::new(frame)
+                .take(SAMPLE_STRIDE as usize)
+                .next()
+                .unwrap()] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+    }
+
+    #[test]
+    fn the_estimate_is_unbiased_over_offsets_and_its_interval_covers() {
+        // Work of ray i: a pattern with a strong trend, so a fixed offset would be biased.
+        let work = |i: usize| ((i * 37) % 101 + i / 50) as u64;
+        let n = 5000;
+        let truth = (0..n).map(|i| work(i) as f64).sum::<f64>() / n as f64;
+        let mut mean_of_means = 0.0;
+        let mut covered = 0;
+        for offset in 0..SAMPLE_STRIDE {
+            let mut s = RaySample {
+                offset,
+                ..RaySample::default()
+            };
+            for i in s.take(n).collect::<Vec<_>>() {
+                let w = TraversalStats {
+                    nodes: work(i),
+                    prims: 0,
+                };
+                s.add(w, TraversalStats::default());
+            }
+            let e = s.estimate();
+            // Totals: stride times the sample, the estimate of the frame's total.
+            mean_of_means += s.scale() * e.mean * e.sampled as f64 / n as f64;
+            if (e.mean - truth).abs() <= e.ci95 {
+                covered += 1;
+            }
+        }
+        mean_of_means /= SAMPLE_STRIDE as f64;
+        assert!(
+            (mean_of_means - truth).abs() < 1e-9 * truth,
+            "{mean_of_means} vs {truth}"
+        );
+        assert!(covered >= 56, "interval covered {covered} of 64 offsets");
+    }
+
+    #[test]
+    fn cost_names_round_trip() {
+        for c in [CostMeasure::Sah, CostMeasure::Rays] {
+            assert_eq!(c.to_string().parse::<CostMeasure>().unwrap(), c);
+        }
+        assert!("ray".parse::<CostMeasure>().is_err());
+    }
+}

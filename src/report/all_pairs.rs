@@ -1,0 +1,84 @@
+//! The oracle's inputs: every tree a deforming mesh can have at every frame, measured. For each
+//! build frame `b` the scene is built at `b` and refitted through every later frame `f`; at
+//! each `f` the mesh's tree is recorded by its SAH cost and by the ray work of frame `f`'s
+//! sampled rays (the entries every run of the bench shares, replayed on this tree). `O(F^2)`
+//! refits and replays.
+
+use crate::engine::oracle::WorkCosts;
+use crate::engine::ray_work::{SAMPLE_STRIDE, SampleEntry};
+use crate::engine::source::FrameSource;
+use crate::engine::{EngineConfig, Policy, Prices};
+
+/// One frame's sampled rays, as every run of the bench saw them.
+#[derive(Clone, Debug, Default)]
+pub struct SampledFrame {
+    /// Entries of the sampled rays into instances (tree-independent: see
+    /// [`crate::engine::ray_work`]).
+    pub entries: Vec<SampleEntry>,
+    /// Modelled trace cost no schedule changes: the top-level tree and the meshes that do not
+    /// deform, ms.
+    pub fixed_ms: f64,
+}
+
+/// What the all-pairs pass measured.
+#[derive(Clone, Debug, Default)]
+pub struct AllPairs {
+    /// `sah[mesh][b][f - b]`: SAH cost at frame `f` of the tree built at `b`.
+    pub sah: Vec<Vec<Vec<f32>>>,
+    /// Each deforming mesh's costs in the modelled measure.
+    pub work: Vec<WorkCosts>,
+}
+
+/// Runs the pass over frames `0 ..= frames` (`sampled[f]` for frame `f`; index 0 unused) with
+/// engines made by `config` (its policy is irrelevant: every tree is refitted), pricing refits,
+/// rebuilds and ray work at `prices`.
+pub fn measure(
+    src: &mut dyn FrameSource,
+    config: EngineConfig,
+    sampled: &[SampledFrame],
+    prices: &Prices,
+    frames: usize,
+) -> AllPairs {
+    let ids = src.deforming().to_vec();
+    let config = EngineConfig {
+        policy: Policy::Refit,
+        ..config
+    };
+    let mut sah = vec![vec![Vec::new(); frames + 1]; ids.len()];
+    let mut trace = vec![vec![Vec::new(); frames + 1]; ids.len()];
+    let scale = SAMPLE_STRIDE as f64;
+    let mut tris = vec![0; ids.len()];
+    for b in 0..=frames {
+        let mut e = src.build(b, config);
+        if b == 0 {
+            for (t, m) in tris.iter_mut().zip(&ids) {
+                *t = e.indices(*m).len();
+            }
+        }
+        for f in b..=frames {
+            if f > b {
+                src.advance(&mut e, f);
+                e.update();
+            }
+            for (k, m) in ids.iter().enumerate() {
+                sah[k][b].push(e.mesh_stats(*m).sah);
+                let w = if f == 0 {
+                    0.0
+                } else {
+                    scale * prices.trace_ms(e.mesh_work_on(*m, &sampled[f].entries))
+                };
+                trace[k][b].push(w);
+            }
+        }
+    }
+    let work = tris
+        .iter()
+        .zip(trace)
+        .map(|(&tris, trace_ms)| WorkCosts {
+            refit_ms: vec![prices.refit_ms(tris); frames + 1],
+            rebuild_ms: vec![prices.rebuild_ms(tris); frames + 1],
+            trace_ms,
+        })
+        .collect();
+    AllPairs { sah, work }
+}
