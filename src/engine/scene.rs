@@ -276,6 +276,11 @@ struct MeshEntry {
     weight: f64,
     /// Sum over its visible instances of their world box's half area.
     world_area: f64,
+    /// Ray-work measure: the modelled work per sampled entry into this mesh on its tree when it
+    /// was fresh (the first frame traced after a (re)build); 0 until measured.
+    ray_base: f64,
+    /// The same frame by frame since, over `ray_base`, smoothed over frames; 0 without.
+    ray_observed: f64,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -479,6 +484,8 @@ impl Engine {
             },
             weight: 0.0,
             world_area: 0.0,
+            ray_base: 0.0,
+            ray_observed: 0.0,
         });
         self.sample_work.push(TraversalStats::default());
         MeshId(self.meshes.len() as u32 - 1)
@@ -609,10 +616,12 @@ impl Engine {
         let policy = self.config.policy;
         let build = self.config.build;
         let rays_cost = self.config.cost == CostMeasure::Rays;
-        // Under the ray-work measure the threshold policy, too, decides on the estimated
-        // degradation against a fresh tree.
-        let estimate = PolicyState::needs_fresh_ratio(policy)
-            || (rays_cost && matches!(policy, Policy::Threshold(_)));
+        // The SAH measure estimates a fresh build's cost by a quick build; the ray-work measure
+        // compares the sampled work with the fresh tree's instead (for the threshold policy
+        // too: both against a fresh tree).
+        let estimate = PolicyState::needs_fresh_ratio(policy) && !rays_cost;
+        let ray_judged = rays_cost
+            && (PolicyState::needs_fresh_ratio(policy) || matches!(policy, Policy::Threshold(_)));
         let probes = self.probes();
         let timing = self.config.timing;
         let prices = self.config.prices;
@@ -640,6 +649,8 @@ impl Engine {
                 continue;
             }
             let tris = m.indices.len();
+            // The ray-work degradation before calibration (what a rebuild's replay checks).
+            let mut raw_work_ratio = 0.0f32;
             let decided = m.state.before_refit(policy);
             let mut refit_ms = 0.0;
             // The binary tree changed under the wide one (a revert to the replaced tree).
@@ -683,14 +694,22 @@ impl Engine {
                 } else {
                     0.0
                 };
-                let fresh = m.stats.fresh_ratio;
-                // The ray-work measure: the estimated degradation as far as the rays felt it.
-                let judged = if rays_cost && estimate {
-                    m.stats.work_ratio = 1.0 + m.state.estimate_gain * (fresh - 1.0).max(0.0);
-                    m.stats.work_ratio
+                // The ray-work measure: the sampled work per entry into the mesh over the fresh
+                // tree's (the first frame after the last build), as far as the last rebuilds'
+                // replays showed it right; the policy weighs it as it weighs the SAH's fresh
+                // ratio.
+                let (fresh, judged) = if ray_judged {
+                    raw_work_ratio = if m.ray_observed > 0.0 {
+                        m.ray_observed as f32
+                    } else {
+                        1.0
+                    };
+                    m.stats.work_ratio =
+                        1.0 + m.state.estimate_gain * (raw_work_ratio - 1.0).max(0.0);
+                    (raw_work_ratio, m.stats.work_ratio)
                 } else {
                     m.stats.work_ratio = 0.0;
-                    ratio
+                    (m.stats.fresh_ratio, ratio)
                 };
                 refit_ms = ms_since(t);
                 decided.unwrap_or_else(|| m.state.after_refit(policy, judged, fresh))
@@ -738,15 +757,11 @@ impl Engine {
                     }
                 }
                 rebuild_ms = ms_since(t);
-                if let Some(refit_sah) = refitted
-                    && estimate
-                {
-                    if rays_cost {
-                        if m.stats.measured_work_ratio > 0.0 {
-                            m.state
-                                .calibrate_rays(m.stats.fresh_ratio, m.stats.measured_work_ratio);
-                        }
-                    } else {
+                if let Some(refit_sah) = refitted {
+                    if ray_judged && m.stats.measured_work_ratio > 0.0 {
+                        m.state
+                            .calibrate_rays(raw_work_ratio, m.stats.measured_work_ratio);
+                    } else if estimate {
                         m.state
                             .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
                     }
@@ -773,7 +788,9 @@ impl Engine {
                 }
                 m.stats.sah_ratio = 1.0;
                 m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
-                m.stats.work_ratio = if rays_cost && estimate { 1.0 } else { 0.0 };
+                m.stats.work_ratio = if ray_judged { 1.0 } else { 0.0 };
+                m.ray_base = 0.0;
+                m.ray_observed = 0.0;
                 stats.rebuilds += 1;
             } else {
                 // The wide tree follows the refitted (or reverted-to) binary tree; its time is
@@ -901,6 +918,20 @@ impl Engine {
         };
         match self.config.cost {
             CostMeasure::Rays => {
+                for (k, m) in self.meshes.iter_mut().enumerate() {
+                    let hits = self.entries.iter().filter(|e| e.mesh.0 == k as u32).count();
+                    if hits > 0 {
+                        let per_entry = p.trace_ms(self.sample_work[k]) / hits as f64;
+                        if m.ray_base <= 0.0 {
+                            m.ray_base = per_entry;
+                            m.ray_observed = 1.0;
+                        } else {
+                            let seen = per_entry / m.ray_base;
+                            m.ray_observed =
+                                RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
+                        }
+                    }
+                }
                 for (m, w) in self.meshes.iter_mut().zip(&self.sample_work) {
                     let share = if modelled > 0.0 {
                         scale * p.trace_ms(*w) / modelled
@@ -1180,6 +1211,10 @@ const ESTIMATE_SHARE: f64 = 0.01;
 /// rebuilds on `MorphStressTest` cost twice as much as the rebuild (1.08-1.11 of the oracle);
 /// with half, 1.06.
 const PROBE_SHARE: f64 = 0.5;
+
+/// Weight of the past in the smoothed ray-work ratio (each frame's sample is a few hundred
+/// rays: its mean is known to a few per cent).
+const RAY_SMOOTHING: f64 = 0.5;
 
 /// Rays per parallel task.
 const RAY_CHUNK: usize = 256;

@@ -1,11 +1,11 @@
 //! The oracle's inputs: every tree a deforming mesh can have at every frame, measured. For each
 //! build frame `b` the scene is built at `b` and refitted through every later frame `f`; at
 //! each `f` the mesh's tree is recorded by its SAH cost and by the ray work of frame `f`'s
-//! sampled rays (the entries every run of the bench shares, replayed on this tree). `O(F^2)`
-//! refits and replays.
+//! sampled rays (the bench's sample, whose entries every run shares, replayed on this tree).
+//! `O(F^2)` refits and replays.
 
 use crate::engine::oracle::WorkCosts;
-use crate::engine::ray_work::{SAMPLE_STRIDE, SampleEntry};
+use crate::engine::ray_work::SampleEntry;
 use crate::engine::source::FrameSource;
 use crate::engine::{EngineConfig, Policy, Prices};
 
@@ -18,6 +18,8 @@ pub struct SampledFrame {
     /// Modelled trace cost no schedule changes: the top-level tree and the meshes that do not
     /// deform, ms.
     pub fixed_ms: f64,
+    /// From the sample's work to the frame's: rays per sampled ray.
+    pub scale: f64,
 }
 
 /// What the all-pairs pass measured.
@@ -46,7 +48,6 @@ pub fn measure(
     };
     let mut sah = vec![vec![Vec::new(); frames + 1]; ids.len()];
     let mut trace = vec![vec![Vec::new(); frames + 1]; ids.len()];
-    let scale = SAMPLE_STRIDE as f64;
     let mut tris = vec![0; ids.len()];
     for b in 0..=frames {
         let mut e = src.build(b, config);
@@ -65,7 +66,7 @@ pub fn measure(
                 let w = if f == 0 {
                     0.0
                 } else {
-                    scale * prices.trace_ms(e.mesh_work_on(*m, &sampled[f].entries))
+                    sampled[f].scale * prices.trace_ms(e.mesh_work_on(*m, &sampled[f].entries))
                 };
                 trace[k][b].push(w);
             }

@@ -77,6 +77,10 @@ pub struct Options {
     /// Unit prices of the modelled measure (every engine decides with them: the schedules do
     /// not depend on the machine's load).
     pub prices: Prices,
+    /// Rays per frame the modelled measure counts (every `k`-th, `k` the least stride that
+    /// keeps at most this many; all rays when the frame casts fewer): the judge's sample,
+    /// denser than the engine's own, replayed on every run's trees and on the oracle's.
+    pub judge_rays: usize,
 }
 
 impl Default for Options {
@@ -102,6 +106,7 @@ impl Default for Options {
             traversal: Traversal::DEFAULT,
             cost: CostMeasure::default(),
             prices: Prices::default(),
+            judge_rays: 16384,
         }
     }
 }
@@ -156,8 +161,11 @@ pub struct FrameRow {
     pub predicted_tris_per_ray: f64,
     /// Modelled mesh updates, ms.
     pub model_update_ms: f64,
-    /// Modelled trace cost (the ray-work sample's estimate), ms.
+    /// Modelled trace cost: the work of the bench's sample of the frame's rays on this run's
+    /// trees, scaled to all rays, ms.
     pub model_trace_ms: f64,
+    /// The engine's own estimate of it (its one-in-64 sample), ms.
+    pub est_trace_ms: f64,
     /// Modelled cost of tracing the sample again, ms.
     pub model_sample_ms: f64,
     /// Half width of the 95% confidence interval of the sample's mean work per ray, as a share
@@ -469,34 +477,58 @@ fn run_lockstep(
                 }
             }
         }
+        let judge = judge_sample(&engines[0], rays, opts, f, &deforming);
         for (i, (e, run)) in engines.iter_mut().zip(&mut runs).enumerate() {
             e.record_trace(best[i], rays.len() as u64);
             e.sample_timed(rays, Query::Closest);
             let mut clock = update_clock[i];
             clock += best_clock[i];
             record_frame(e, &deforming, run, rays, step, f, clock);
-            if i == 0
-                && let Some(s) = sampled.as_deref_mut()
-            {
-                s.push(sampled_frame(e, &deforming, &opts.prices));
+            if let Some(row) = run.rows.last_mut() {
+                row.model_trace_ms = judged_trace_ms(e, &judge, &deforming, &opts.prices);
             }
+        }
+        if let Some(s) = sampled.as_deref_mut() {
+            s.push(judge);
         }
     }
     runs
 }
 
-/// What every run shares of engine `e`'s sample of the current frame.
-fn sampled_frame(e: &Engine, deforming: &[MeshId], prices: &Prices) -> SampledFrame {
-    let mut fixed = e.sampled_top_work();
-    for m in (0..e.mesh_count() as u32).map(MeshId) {
-        if !deforming.contains(&m) {
-            fixed += e.sampled_mesh_work(m);
+/// The bench's sample of frame `f`'s rays, traced on engine `e`: what every run shares of it
+/// (the entries into instances, and the work no schedule changes).
+fn judge_sample(
+    e: &Engine,
+    rays: &[Ray],
+    opts: &Options,
+    f: usize,
+    deforming: &[MeshId],
+) -> SampledFrame {
+    let stride = rays.len().div_ceil(opts.judge_rays.max(1)).max(1);
+    // An offset that moves with the frame (Knuth's multiplicative hash).
+    let offset = (f as u64).wrapping_mul(2_654_435_761) as usize % stride;
+    let mut entries = Vec::new();
+    let (mut fixed, per_mesh) = e.trace_sampled(rays, Query::Closest, stride, offset, &mut entries);
+    for (m, w) in per_mesh.iter().enumerate() {
+        if !deforming.contains(&MeshId(m as u32)) {
+            fixed += *w;
         }
     }
+    let scale = stride as f64;
     SampledFrame {
-        entries: e.sampled_entries().to_vec(),
-        fixed_ms: SAMPLE_STRIDE as f64 * prices.trace_ms(fixed),
+        entries,
+        fixed_ms: scale * opts.prices.trace_ms(fixed),
+        scale,
     }
+}
+
+/// Modelled trace cost of engine `e`'s trees on the bench's sample `judge`, ms.
+fn judged_trace_ms(e: &Engine, judge: &SampledFrame, deforming: &[MeshId], prices: &Prices) -> f64 {
+    judge.fixed_ms
+        + deforming
+            .iter()
+            .map(|m| judge.scale * prices.trace_ms(e.mesh_work_on(*m, &judge.entries)))
+            .sum::<f64>()
 }
 
 /// Appends frame `f` of engine `e` (updated, traced and sampled) to `run`.
@@ -565,6 +597,7 @@ fn record_frame(
         predicted_tris_per_ray: pt * p_hit,
         model_update_ms: s.model_update_ms,
         model_trace_ms: s.model_trace_ms,
+        est_trace_ms: s.model_trace_ms,
         model_sample_ms: s.model_sample_ms,
         work_ci95_rel: if work.mean > 0.0 {
             work.ci95 / work.mean

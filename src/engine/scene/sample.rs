@@ -91,22 +91,65 @@ impl Engine {
     }
 
     /// The work `mesh`'s current tree (the one rays walk) costs on `entries` (those of other
-    /// meshes are skipped): how another engine's sample is replayed on this engine's tree.
+    /// meshes are skipped): how another engine's sample is replayed on this engine's tree. In
+    /// parallel for long lists (the sum is the same in any order).
     #[must_use]
     pub fn mesh_work_on(&self, mesh: MeshId, entries: &[SampleEntry]) -> TraversalStats {
+        use rayon::prelude::*;
         let m = &self.meshes[mesh.0 as usize];
-        tree_work(&m.bvh, m.wide.as_ref(), mesh, entries)
+        entries
+            .par_chunks(1024)
+            .map(|c| tree_work(&m.bvh, m.wide.as_ref(), mesh, c))
+            .reduce(TraversalStats::default, |mut a, b| {
+                a += b;
+                a
+            })
+    }
+
+    /// Traces every `stride`-th ray of `rays` from `offset` again with counters (a sample of the
+    /// caller's own, e.g. a benchmark's denser one), appending each entry into an instance to
+    /// `entries`; returns the work in the top-level tree and in each mesh's tree.
+    pub fn trace_sampled(
+        &self,
+        rays: &[Ray],
+        query: Query,
+        stride: usize,
+        offset: usize,
+        entries: &mut Vec<SampleEntry>,
+    ) -> (TraversalStats, Vec<TraversalStats>) {
+        let mut per_mesh = vec![TraversalStats::default(); self.meshes.len()];
+        let mut top = TraversalStats::default();
+        for r in rays.iter().skip(offset).step_by(stride.max(1)) {
+            let (_, t) = self.trace_recording(r, query, entries, &mut per_mesh);
+            top += t;
+        }
+        (top, per_mesh)
     }
 
     /// Traces one sampled ray with counters, keeping its entries: `(all work, top-level work)`.
     fn sample_one(&mut self, ray: &Ray, query: Query) -> (TraversalStats, TraversalStats) {
+        let mut entries = std::mem::take(&mut self.entries);
+        let mut work = std::mem::take(&mut self.sample_work);
+        let out = self.trace_recording(ray, query, &mut entries, &mut work);
+        self.entries = entries;
+        self.sample_work = work;
+        out
+    }
+
+    /// One ray through the scene with counters: each instance entry appended to `entries`, each
+    /// mesh's work added to `per_mesh`; returns `(all work, top-level work)`.
+    fn trace_recording(
+        &self,
+        ray: &Ray,
+        query: Query,
+        entries: &mut Vec<SampleEntry>,
+        sample_work: &mut [TraversalStats],
+    ) -> (TraversalStats, TraversalStats) {
         let Engine {
             tlas,
             tlas_instances,
             instances,
             meshes,
-            entries,
-            sample_work,
             ..
         } = self;
         let prims = tlas.prim_indices();
