@@ -1,0 +1,200 @@
+//! The ray-work measure: the same frames give the same modelled totals and schedules on every
+//! run; the modelled oracle is the exact optimum of every refit-or-rebuild schedule the engine
+//! can run (checked by running each one); the degradation a rebuild measures on the sampled
+//! rays is the one a freshly built engine shows on the same rays; no policy falls below the
+//! oracle.
+
+use dynbvh::anim::Scene;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::ray_work::SAMPLE_STRIDE;
+use dynbvh::engine::source::FrameSource;
+use dynbvh::engine::{CostMeasure, EngineConfig, Policy, Prices, Query, Timing};
+use dynbvh::report::all_pairs::{self, SampledFrame};
+use dynbvh::report::frame_bench::{self, Options, RaySpec};
+use dynbvh::report::rays::camera_rays;
+use std::path::PathBuf;
+
+fn scene(file: &str) -> Scene {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("animations")
+        .join(file);
+    Scene::load(&path).unwrap().0
+}
+
+fn options(cost: CostMeasure) -> Options {
+    Options {
+        rays: RaySpec::Size(48, 48),
+        builders: Vec::new(),
+        tlas_compare: false,
+        trace_repeats: 1,
+        cost,
+        prices: Prices::default(),
+        ..Options::default()
+    }
+}
+
+#[test]
+fn two_runs_give_identical_modelled_totals_and_schedules() {
+    for (file, cost) in [
+        ("explode.glb", CostMeasure::Rays),
+        ("swap.glb", CostMeasure::Sah),
+        ("tube.glb", CostMeasure::Rays),
+    ] {
+        let s = scene(file);
+        let run = || {
+            let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(12)).unwrap();
+            frame_bench::run(&mut src, &options(cost), |_| {})
+        };
+        let (a, b) = (run(), run());
+        assert!(a.oracle_modelled.total_ms > 0.0);
+        assert_eq!(
+            a.oracle_modelled.total_ms.to_bits(),
+            b.oracle_modelled.total_ms.to_bits(),
+            "{file}: oracle"
+        );
+        for (p, q) in a.policies.iter().zip(&b.policies) {
+            assert_eq!(
+                p.modelled_ms.to_bits(),
+                q.modelled_ms.to_bits(),
+                "{file} {}",
+                p.policy
+            );
+            assert_eq!(p.rebuild_frames, q.rebuild_frames, "{file} {}", p.policy);
+            assert!(p.oracle_ratio_modelled >= 1.0 - 1e-9, "{file} {}", p.policy);
+        }
+        assert!(a.below_oracle.is_empty(), "{file}: {:?}", a.below_oracle);
+    }
+}
+
+/// Every schedule of a short clip run for real (each frame refit or rebuild, by switching the
+/// engine's policy), its modelled cost counted on the same sampled rays: the oracle's total is
+/// the least of them, and its schedule's.
+#[test]
+fn the_modelled_oracle_is_the_best_of_every_schedule_run() {
+    let s = scene("explode.glb");
+    let frames = 6;
+    let prices = Prices::default();
+    let config = EngineConfig {
+        timing: Timing::Priced,
+        prices,
+        ..EngineConfig::default()
+    };
+    let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(frames)).unwrap();
+    let rays = camera_rays(&src.build(0, config).bounds(), 40, 40);
+    let m = src.deforming()[0];
+    // The shared sample of each frame: every 3rd ray, entries from an always-refit engine.
+    let mut sampled = vec![SampledFrame::default()];
+    let mut e = src.build(0, config);
+    for f in 1..=frames {
+        src.advance(&mut e, f);
+        e.update();
+        let mut entries = Vec::new();
+        let (top, _) = e.trace_sampled(&rays, Query::Closest, 3, f % 3, &mut entries);
+        sampled.push(SampledFrame {
+            entries,
+            fixed_ms: 3.0 * prices.trace_ms(top),
+            scale: 3.0,
+        });
+    }
+    let pairs = all_pairs::measure(&mut src, config, &sampled, &prices, frames);
+    let costs = &pairs.work[0];
+    let best = costs.best();
+    let mut least = f64::INFINITY;
+    for mask in 0..1u32 << frames {
+        let mut e = src.build(0, config);
+        let tris = e.indices(m).len();
+        let mut total = 0.0;
+        let mut schedule = vec![true];
+        for f in 1..=frames {
+            let rebuild = mask >> (f - 1) & 1 == 1;
+            schedule.push(rebuild);
+            e.set_policy(if rebuild {
+                Policy::Rebuild
+            } else {
+                Policy::Refit
+            });
+            src.advance(&mut e, f);
+            e.update();
+            total += if rebuild {
+                prices.rebuild_ms(tris)
+            } else {
+                prices.refit_ms(tris)
+            };
+            total += 3.0 * prices.trace_ms(e.mesh_work_on(m, &sampled[f].entries));
+        }
+        // The table's cost of this schedule is what running it cost.
+        let table = costs.cost_of(&schedule);
+        assert!(
+            (table - total).abs() <= 1e-9 * total,
+            "schedule {mask:b}: table {table} against the run's {total}"
+        );
+        least = least.min(total);
+    }
+    assert!(
+        (best.cost_ms - least).abs() <= 1e-9 * least,
+        "oracle {} against the best run {least}",
+        best.cost_ms
+    );
+}
+
+/// At each rebuild under the ray-work measure the engine replays the previous frame's sampled
+/// rays on the replaced and the new tree: that ratio is the one an engine built at the replaced
+/// tree's build frame and refitted since, and an engine built now, show on the same entries.
+#[test]
+fn a_rebuilds_measured_ratio_is_the_real_rebuilds() {
+    let s = scene("explode.glb");
+    let frames = 16;
+    let config = |policy| EngineConfig {
+        policy,
+        cost: CostMeasure::Rays,
+        timing: Timing::Priced,
+        ..EngineConfig::default()
+    };
+    let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(frames)).unwrap();
+    let rays = camera_rays(&src.build(0, config(Policy::Refit)).bounds(), 64, 64);
+    let m = src.deforming()[0];
+    let mut hits = vec![None; rays.len()];
+    let mut e = src.build(0, config(Policy::Threshold(1.02)));
+    let p = e.config().prices;
+    let mut built = 0;
+    let mut measured = 0;
+    for f in 1..=frames {
+        let entries = e.sampled_entries().to_vec();
+        src.advance(&mut e, f);
+        e.update();
+        let st = *e.mesh_stats(m);
+        if st.measured_work_ratio > 0.0 {
+            let fresh = src.build(f, config(Policy::Refit));
+            let mut old = src.build(built, config(Policy::Refit));
+            for g in built + 1..=f {
+                src.advance(&mut old, g);
+                old.update();
+            }
+            let new = p.trace_ms(fresh.mesh_work_on(m, &entries));
+            assert_eq!(
+                p.trace_ms(e.mesh_work_on(m, &entries)).to_bits(),
+                new.to_bits(),
+                "frame {f}: the rebuilt tree is a fresh build's"
+            );
+            let want = p.trace_ms(old.mesh_work_on(m, &entries)) / new;
+            assert!(
+                (f64::from(st.measured_work_ratio) - want).abs() <= 1e-5 * want,
+                "frame {f}: measured {} against {want}",
+                st.measured_work_ratio
+            );
+            measured += 1;
+        }
+        if st.action == dynbvh::engine::Action::Rebuild {
+            built = f;
+        }
+        e.trace_frame(&rays, &mut hits);
+        // The engine's sample is one ray in SAMPLE_STRIDE of those cast.
+        let w = e.work_estimate();
+        assert_eq!(w.rays, rays.len() as u64);
+        assert!(w.sampled.abs_diff(rays.len() as u64 / SAMPLE_STRIDE) <= 1);
+    }
+    assert!(
+        measured > 0,
+        "threshold:1.02 under the ray measure never rebuilt after a refit on explode"
+    );
+}
