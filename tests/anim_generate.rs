@@ -23,12 +23,16 @@ fn generated_scenes_pose_to_analytic_positions() {
         assert_eq!(scene.animations.len(), 1);
         assert!((scene.animations[0].duration - g.duration).abs() < 1e-6);
         let classes = scene.classify(Some(0)).unwrap();
-        let want = if kind == Kind::Orbit {
-            InstanceClass::Rigid
-        } else {
-            InstanceClass::Deforming
+        let want: Vec<InstanceClass> = match kind {
+            Kind::Orbit => vec![InstanceClass::Rigid; classes.len()],
+            // The cloth, the ground, six boxes.
+            Kind::LidarCloth => [InstanceClass::Deforming, InstanceClass::Static]
+                .into_iter()
+                .chain([InstanceClass::Rigid; 6])
+                .collect(),
+            _ => vec![InstanceClass::Deforming; classes.len().max(1)],
         };
-        assert!(classes.iter().all(|&c| c == want), "{kind:?}: {classes:?}");
+        assert_eq!(classes, want, "{kind:?}");
         check_poses(&format!("{kind:?}"), &scene, &g);
     }
 }
@@ -102,6 +106,63 @@ fn generation_is_deterministic_and_sized() {
         let small = generate(kind, 100, 1).triangles;
         let big = generate(kind, 20_000, 1).triangles;
         assert!(big > 10 * small, "{kind:?}: {small} vs {big}");
+    }
+}
+
+/// The sensor scene asks for nearly the requested triangle count at every size, and its sheet
+/// moves a lot: between t = 0 and the full fold at t = 2 s a third of it turns over onto the
+/// rest (the sheet's x extent shrinks from [-4, 4] to below the hinge), vertices travel a large
+/// fraction of the sheet's size, and at the end of the clip everything is back where it began.
+#[test]
+fn lidar_cloth_is_sized_folds_and_loops() {
+    for n in [1000, 10_000, 100_000] {
+        let g = generate(Kind::LidarCloth, n, 1);
+        assert!(
+            g.triangles.abs_diff(n) * 50 < n,
+            "{n}: {} triangles",
+            g.triangles
+        );
+    }
+    let g = generate(Kind::LidarCloth, 5000, 3);
+    assert!(
+        g.glb != generate(Kind::LidarCloth, 5000, 4).glb,
+        "the seed moves the boxes"
+    );
+    let (scene, _) =
+        Scene::from_slice(Path::new("cloth.glb"), &g.glb, &LoadOptions::default()).unwrap();
+    let mut poser = scene.poser(Some(0)).unwrap();
+    let mut flat = TriMesh::default();
+    let sheet = scene.instances[0].vertices.clone();
+    let mut at = |t: f32| {
+        poser.pose(t);
+        poser.flatten_into(&mut flat);
+        flat.positions.clone()
+    };
+    let (start, folded, end) = (at(0.0), at(2.0), at(g.duration));
+    let max_x = |p: &[glam::Vec3]| {
+        p[sheet.clone()]
+            .iter()
+            .map(|v| v.x)
+            .fold(f32::MIN, f32::max)
+    };
+    assert!(max_x(&start) > 3.99, "{}", max_x(&start));
+    assert!(
+        max_x(&folded) < 1.5,
+        "folded sheet reaches x = {}",
+        max_x(&folded)
+    );
+    let moved: Vec<f32> = sheet
+        .clone()
+        .map(|v| (folded[v] - start[v]).length())
+        .collect();
+    let mean = moved.iter().sum::<f32>() / moved.len() as f32;
+    let most = moved.iter().copied().fold(0.0, f32::max);
+    assert!(mean > 0.8 && most > 5.0, "mean {mean}, most {most}");
+    for (v, (a, b)) in start.iter().zip(&end).enumerate() {
+        assert!(
+            (*a - *b).abs().max_element() < 1e-4,
+            "vertex {v}: {a} then {b}"
+        );
     }
 }
 

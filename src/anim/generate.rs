@@ -1,6 +1,8 @@
 //! Deterministic animated test scenes written as `.glb`, each with the generator's own
 //! analytic world positions at a few key times (to check the loader and poser against).
 
+mod lidar_cloth;
+
 use super::glb_writer::GlbWriter;
 use glam::{Mat4, Quat, Vec3};
 use serde_json::json;
@@ -19,16 +21,21 @@ pub enum Kind {
     Explode,
     /// Two halves of a mesh that trade places (one morph target).
     Swap,
+    /// A sensor scene: a cloth sheet that billows, ripples and folds over (morph targets and a
+    /// skinned hinge) over a static ground, with a few rigid boxes moving above and around it
+    /// (LINEAR node translations and rotations).
+    LidarCloth,
 }
 
 impl Kind {
     /// All kinds.
-    pub const ALL: [Kind; 5] = [
+    pub const ALL: [Kind; 6] = [
         Kind::Tube,
         Kind::Wave,
         Kind::Orbit,
         Kind::Explode,
         Kind::Swap,
+        Kind::LidarCloth,
     ];
 
     /// Lower-case name, as the CLI takes it.
@@ -40,6 +47,7 @@ impl Kind {
             Kind::Orbit => "orbit",
             Kind::Explode => "explode",
             Kind::Swap => "swap",
+            Kind::LidarCloth => "lidar-cloth",
         }
     }
 
@@ -92,6 +100,7 @@ pub fn generate(kind: Kind, triangles: usize, seed: u64) -> Generated {
         Kind::Orbit => orbit(n, seed),
         Kind::Explode => explode(n, seed),
         Kind::Swap => swap(n),
+        Kind::LidarCloth => lidar_cloth::lidar_cloth(n, seed),
     }
 }
 

@@ -9,7 +9,9 @@ use std::path::PathBuf;
 #[derive(Args)]
 pub struct GenArgs {
     /// Scene kind: tube (skinned bend), wave (morph, cubic weights), orbit (rigid objects,
-    /// STEP and LINEAR), explode (triangles fly apart), swap (two halves trade places).
+    /// STEP and LINEAR), explode (triangles fly apart), swap (two halves trade places),
+    /// lidar-cloth (a sensor scene: a cloth sheet that ripples, billows and folds over, with
+    /// rigid boxes moving above and around it).
     pub kind: String,
     /// Output .glb file.
     #[arg(long)]
@@ -17,7 +19,8 @@ pub struct GenArgs {
     /// Approximate triangle count.
     #[arg(long, default_value_t = 10_000)]
     pub triangles: usize,
-    /// Seed of the random parts (orbit radii and hops, explode speeds).
+    /// Seed of the random parts (orbit radii and hops, explode speeds, lidar-cloth box sizes,
+    /// radii, heights and phases).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// For `tube`: give every vertex 4 non-zero skin weights over a chain of this many joints
