@@ -1,117 +1,22 @@
 //! When to rebuild a deforming mesh's tree instead of refitting it.
 //!
-//! Every policy but `rebuild` refits first, then may rebuild. Two ratios measure a refitted
-//! tree's degradation:
-//! - the **last-build ratio**: its SAH cost over the cost right after its last (re)build
-//!   (reported as `sah_ratio`; what `threshold:R` compares with R);
-//! - the **fresh ratio**: its SAH cost over the cost a rebuild would reach *now*, estimated by a
-//!   quick build over a subsample of the triangles calibrated at the last build
-//!   ([`super::estimate::FreshSah`]); what `amortized` decides on. The two differ when a fresh
-//!   tree's own cost moves: on `animations/explode.glb` a fresh build's SAH falls from 28 to 22
-//!   while the refitted tree's rises to 33, so the last-build ratio peaks at 1.18 while the true
-//!   degradation is 1.5 (the estimate says 1.58); on `swap.glb` the last-build ratio reaches
-//!   3.2 while a fresh tree is only 1.09 better (estimate 1.2).
+//! Every policy but `rebuild` and `periodic` refits first, then may rebuild. What it weighs
+//! depends on the engine's [`super::CostMeasure`]:
+//! - **ray work** (the default): the frame's own rays, sampled ([`super::ray_work`]), give each
+//!   mesh's share of the trace cost, and the degradation is the sampled work per entry into the
+//!   mesh over the fresh tree's (measured the frame after each build), corrected by what each
+//!   rebuild's replay of the sampled rays on both trees showed;
+//! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by a
+//!   quick build over a subsample ([`super::estimate::FreshSah`]), the trace share split by
+//!   expected SAH cost; rebuilds are probed (the replaced tree refitted alongside, and the mesh
+//!   goes back to it if it is better again before the rebuild has paid).
 //!
-//! # Why `amortized` is the default
-//!
-//! `dynbvh bench --all` (run from the repository root) prints, for every shipped animation and
-//! animated sample, each policy's total time over the oracle's, then a conclusion computed from
-//! those rows (per policy its mean and worst ratio, the policy with the lowest worst ratio, and
-//! whether the default stays within 10% of the oracle on every row). What the sweeps recorded
-//! below showed, and why `amortized` is the default. (The ratios in this module's tables were
-//! measured against the oracle before its trace model was calibrated per scene, i.e. with
-//! `α = 1`, which overstated degradation by about 10% on explode; `docs/policy_sweep.md` has
-//! sweeps over every animation against the calibrated oracle: the default's worst ratio was
-//! 1.053 to 1.099, the lowest of the policies in three of four sweeps.)
-//!
-//! - always-refit loses 15-20% where refitting degrades (explode, tube, AnimatedMorphSphere,
-//!   RiggedSimple); always-rebuild up to 1.8x where rebuilds cost more than the rays they save
-//!   (swap, CesiumMan, MorphStressTest); `periodic:8` and `threshold:1.3` are each 10-20% behind
-//!   on some file;
-//! - `amortized` rebuilds when the trace time its degradation has cost since the last build
-//!   (fresh ratio minus one, times the frame's trace time, summed) passes a rebuild's measured
-//!   cost: the optimal period for linearly growing degradation, and no rebuild at all without
-//!   rays or without degradation. Every rebuild that follows a refit shows how much the
-//!   estimate overstated the gain ([`PolicyState::estimate_gain`]);
-//! - a rebuild is then on probation (see [`Policy::Amortized`]): the replaced tree is refitted
-//!   alongside, and if it is the better one again before the rebuild has paid for itself, the
-//!   mesh goes back to it, and the next rebuild must be expected to save twice as much
-//!   ([`PolicyState::rebuild_scale`]);
-//! - its worst ratio over the files is the lowest of the five policies.
-//!
-//! `amortized-plain` ([`Policy::AmortizedPlain`]) is the rule as the issue states it, without
-//! the refinements above: the extra trace time is the last-build ratio minus one times the
-//! mesh's last measured trace time, summed since the last (re)build, and it rebuilds when the
-//! sum exceeds the last (re)build's measured cost. It is selectable and in `dynbvh bench`'s
-//! default set so that the default is always shown next to it. Three runs of `dynbvh bench
-//! animations/F.glb --frames 60 --size 192x192 --no-builders` (2 threads, a machine loaded
-//! about 5x over, so a few per cent either way are noise), ratio to the oracle:
-//!
-//! | file | amortized | amortized-plain |
-//! |------|------|------|
-//! | swap | 0.88, 0.98, 0.92 (3 rebuilds, 2 undone) | 1.03, 1.23, 1.17 (11-12 rebuilds) |
-//! | explode | 1.00, 1.02, 1.04 (5-8 rebuilds) | 0.97, 0.99, 0.97 (3-4 rebuilds) |
-//! | tube | 0.93, 0.92, 1.05 | 0.91, 1.05, 1.21 |
-//!
-//! The plain rule keeps every rebuild it makes (swap: the trees built mid-swap degrade at
-//! once, and it rebuilds again), which probation undoes. On explode its last-build ratio stays
-//! low (1.03 at most: a fresh tree's own cost falls as the pieces fly apart) and it rebuilds
-//! less than the default, which did no better there in these runs. In one `dynbvh bench --all`
-//! sweep (30 frames, 128x128 rays) its worst ratio over the 19 files was 1.28 (swap), the
-//! default's 1.10 (swap), and elsewhere they were within noise of each other.
-//!
-//! ## What probation fixed: `swap.glb`
-//!
-//! Without it, `amortized` was 1.14-1.32 of the oracle on `animations/swap.glb`, the only file
-//! beyond 10%. The oracle never rebuilds there: the frame-0 tree, refitted, is never more than
-//! 1.13 worse than a fresh build, and all the rebuilds in the world save about 2% of the trace
-//! time. But the estimate sees the fresh ratio climb while the two grids pass through each
-//! other, and a tree built then, mid-swap, is 1.6-2.1 worse than a fresh build two frames later:
-//! the old rule rebuilt again and again (6-9 times in 60 frames). Now the first such rebuild is
-//! undone two frames later (the frame-0 tree is back, refitted: nothing lost but the rebuild and
-//! two refits), and the doubled bar keeps the mesh from trying again at the next crossing.
-//! Only a rebuild that earned back less than half its cost counts as a failure: on
-//! AnimatedMorphSphere the morph swings back to where an old tree was built and the old tree
-//! wins after a rebuild that had nearly paid; counting those too cost it rebuilds it needed
-//! (1.13-1.16 of the oracle then, 1.04-1.10 now).
-//!
-//! Two other changes came with it. The fresh-build estimate may spend 1% of the mesh's refit and
-//! trace time instead of 5% (on the small shipped files an estimate costs about a refit, and 5%
-//! was a flat 3-5% on the total, a third of the 10% margin; 2% and 1% decided as well). And the
-//! old tree's refits during probation stop when they have cost half a rebuild (with the whole
-//! rebuild cost, undecided probations on MorphStressTest made each failed rebuild cost double).
-//!
-//! Variants compared in lockstep in the same sweeps (`--all --frames 60 --size 192x192`, two
-//! runs each, mean ratio to the oracle; this machine is shared, and a single frame preempted
-//! during an update moves a small file's ratio by 5%):
-//!
-//! | file | old amortized | + probation | + estimate 2% | + estimate 1% | + probe cost 1/2 |
-//! |------|------|------|------|------|------|
-//! | swap | 1.16-1.26 | 1.07 | 1.07 | 1.04-1.05 | 1.05 |
-//! | tube | 1.06-1.07 | 1.08 | 1.08-1.09 | 1.05-1.06 | 1.06 |
-//! | MorphStressTest | 1.08-1.09 | 1.06 | 1.06-1.15 | 1.08-1.10 | 1.06 |
-//! | CesiumMan | 1.05-1.08 | 1.10 | 1.07 | 1.04-1.05 | 1.04 |
-//! | worst of 19 | 1.16-1.26 | 1.10 | 1.08-1.15 | 1.08-1.10 | 1.07 (1.14 on a one-triangle static file: noise) |
-//!
-//! The default as it stands (all of the above, failures only below half the cost), two sweeps:
-//!
-//! | file | refit | rebuild | periodic:8 | threshold:1.3 | amortized |
-//! |------|------|------|------|------|------|
-//! | explode | 1.15 | 1.12 | 1.03 | 1.16 | 0.99 |
-//! | swap | 1.03 | 1.57 | 1.17 | 1.19 | 1.06 (1.05, 1.08) |
-//! | tube | 1.11 | 1.19 | 1.04 | 1.03 | 1.04 |
-//! | AnimatedMorphSphere | 1.18 | 1.04 | 1.05 | 1.14 | 1.07 (1.04, 1.10) |
-//! | CesiumMan | 1.06 | 1.67 | 1.06 | 1.01 | 1.05 |
-//! | MorphStressTest | 1.05 | 1.47 | 1.10 | 1.04 | 1.06 |
-//! | RiggedSimple | 1.19 | 1.02 | 0.99 | 1.03 | 0.98 |
-//! | worst of 19 (mean of the two) | 1.19 | 1.67 | 1.17 | 1.19 | 1.07 |
-//! | worst of 19 (each sweep) | 1.19, 1.19 | 1.56, 1.77 | 1.15, 1.18 | 1.16, 1.22 | 1.08, 1.10 |
-//!
-//! What is left: `amortized` lags the oracle on AnimatedMorphSphere (7-9 rebuilds where the
-//! oracle makes 12-14: the estimate, refreshed on a budget, misses part of the degradation of
-//! a fast morph) and on MorphStressTest (refitting alone is 1.05 there: the oracle's single
-//! rebuild at frame 6 is one no estimate foresees).
-//!
+//! `amortized` rebuilds when the trace time its degradation has cost since the last build
+//! (degradation minus one, times the mesh's fresh trace time, summed) passes a rebuild's
+//! cost: the optimal period for linearly growing degradation, and no rebuild without rays or
+//! without degradation. `amortized-plain` is that rule on the ratio to the last build, without
+//! estimate, calibration or probation, for comparison. The sweeps that chose the default and
+//! its constants are in `docs/policy_sweep.md` and `docs/ray_work.md`.
 use std::fmt;
 use std::str::FromStr;
 
