@@ -46,6 +46,10 @@ pub struct BenchArgs {
     /// Camera image size WxH (default 256x256).
     #[arg(long, value_name = "WxH")]
     size: Option<String>,
+    /// Cast the `--rays` (default 65536) of a spinning lidar-like fan above the scene instead of
+    /// camera rays; they turn from frame to frame.
+    #[arg(long, conflicts_with = "size")]
+    lidar: bool,
     /// Policy to run (repeatable): refit, rebuild, periodic:N, threshold:R, amortized,
     /// amortized-plain.
     /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized, amortized-plain.
@@ -166,6 +170,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             .collect::<Result<_>>()?;
     }
     opts.rays = match (a.rays, &a.size) {
+        (n, _) if a.lidar => RaySpec::Lidar(n.unwrap_or(65_536).max(1)),
         (Some(n), _) => RaySpec::Count(n.max(1)),
         (None, Some(s)) => {
             let (w, h) = parse_size(s)?;

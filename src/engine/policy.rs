@@ -272,6 +272,22 @@ impl PolicyState {
         }
     }
 
+    /// [`PolicyState::after_refit`] under the ray-work measure, whose degradation `raw` is a
+    /// sampled ratio with noise either side of the truth: `amortized` sums the extra trace time
+    /// with its sign (kept at or above zero), so that noise cancels instead of adding up as if
+    /// it were degradation. `judged` is what `threshold` compares.
+    pub fn after_refit_sampled(&mut self, policy: Policy, judged: f32, raw: f32) -> bool {
+        match policy {
+            Policy::Amortized => {
+                let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
+                let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
+                self.extra_ms = (self.extra_ms + fresh_ms * degradation).max(0.0);
+                self.extra_ms > self.rebuild_ms * self.rebuild_scale
+            }
+            _ => self.after_refit(policy, judged, raw),
+        }
+    }
+
     /// Learns from a rebuild that followed a refit: the fresh ratio was estimated at
     /// `estimated`, and the refitted tree's cost over the rebuilt one's is `measured`. The
     /// estimate's gain factor moves halfway towards what this rebuild showed (within 0 ..= 2).

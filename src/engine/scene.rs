@@ -712,7 +712,13 @@ impl Engine {
                     (m.stats.fresh_ratio, ratio)
                 };
                 refit_ms = ms_since(t);
-                decided.unwrap_or_else(|| m.state.after_refit(policy, judged, fresh))
+                decided.unwrap_or_else(|| {
+                    if ray_judged {
+                        m.state.after_refit_sampled(policy, judged, fresh)
+                    } else {
+                        m.state.after_refit(policy, judged, fresh)
+                    }
+                })
             };
             let mut rebuild_ms = 0.0;
             if rebuild {

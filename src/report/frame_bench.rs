@@ -26,13 +26,34 @@ pub enum RaySpec {
     Count(usize),
     /// A `w x h` image.
     Size(usize, usize),
+    /// This many rays of a spinning lidar-like fan above the scene, turning from frame to
+    /// frame ([`crate::report::rays::lidar_rays`]).
+    Lidar(usize),
 }
 
 impl RaySpec {
-    /// The camera rays for a scene box.
+    /// Frame `frame`'s rays for a scene box (the camera's are the same every frame), into
+    /// `out`.
+    pub fn frame_rays(self, bounds: &Aabb, frame: usize, out: &mut Vec<Ray>) {
+        match self {
+            RaySpec::Lidar(n) => crate::report::rays::lidar_rays(bounds, n, frame, out),
+            _ => {
+                if out.is_empty() {
+                    *out = self.rays(bounds);
+                }
+            }
+        }
+    }
+
+    /// The rays of frame 0 for a scene box.
     #[must_use]
     pub fn rays(self, bounds: &Aabb) -> Vec<Ray> {
         match self {
+            RaySpec::Lidar(n) => {
+                let mut out = Vec::new();
+                crate::report::rays::lidar_rays(bounds, n, 0, &mut out);
+                out
+            }
             RaySpec::Size(w, h) => camera_rays(bounds, w, h),
             RaySpec::Count(n) => {
                 let w = (n as f64).sqrt().ceil().max(1.0) as usize;
@@ -423,15 +444,17 @@ struct Run {
 fn run_lockstep(
     src: &mut dyn FrameSource,
     configs: &[EngineConfig],
-    rays: &[Ray],
+    bounds: &Aabb,
     opts: &Options,
     frames: usize,
     mut sampled: Option<&mut Vec<SampledFrame>>,
 ) -> Vec<Run> {
     let deforming = src.deforming().to_vec();
     let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
-    let mut hits: Vec<Option<SceneHit>> = vec![None; rays.len()];
-    let step = (rays.len() / opts.counted_rays.max(1)).max(1);
+    let mut frame_rays = Vec::new();
+    opts.rays.frame_rays(bounds, 0, &mut frame_rays);
+    let mut hits: Vec<Option<SceneHit>> = vec![None; frame_rays.len()];
+    let step = (frame_rays.len() / opts.counted_rays.max(1)).max(1);
     let mut runs: Vec<Run> = configs
         .iter()
         .map(|&config| Run {
@@ -451,13 +474,16 @@ fn run_lockstep(
     }
     // Warm-up: one untimed pass each.
     for e in &engines {
-        e.trace_closest(rays, &mut hits);
+        e.trace_closest(&frame_rays, &mut hits);
     }
     let n = engines.len();
     let mut best = vec![f64::INFINITY; n];
     let mut best_clock = vec![Elapsed::default(); n];
     let mut update_clock = vec![Elapsed::default(); n];
     for f in 1..=frames {
+        opts.rays.frame_rays(bounds, f, &mut frame_rays);
+        hits.resize(frame_rays.len(), None);
+        let rays = frame_rays.as_slice();
         for (e, u) in engines.iter_mut().zip(&mut update_clock) {
             let c = CpuClock::now();
             src.advance(e, f);
@@ -723,10 +749,8 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         prices: opts.prices,
         timing: Timing::Priced,
     };
-    let rays = {
-        let e = src.build(0, config(Policy::Refit));
-        opts.rays.rays(&e.bounds())
-    };
+    let bounds = src.build(0, config(Policy::Refit)).bounds();
+    let rays_per_frame = opts.rays.rays(&bounds).len();
     let deforming = src.deforming().len();
 
     // The measured runs: the asked policies, plus always-refit and always-rebuild when the
@@ -768,7 +792,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             .join(", ")
     ));
     let mut sampled = Vec::new();
-    let mut all_runs = run_lockstep(src, &configs, &rays, opts, frames, Some(&mut sampled));
+    let mut all_runs = run_lockstep(src, &configs, &bounds, opts, frames, Some(&mut sampled));
 
     let mut oracle = OracleSummary::default();
     let mut modelled = ModelledOracle::default();
@@ -852,7 +876,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 build: *b,
                 ..config(Policy::Rebuild)
             };
-            let r = run_lockstep(src, &[cfg], &rays, opts, bf, None).remove(0);
+            let r = run_lockstep(src, &[cfg], &bounds, opts, bf, None).remove(0);
             let s = summarize(Policy::Rebuild, &r.rows, 0.0);
             speed.push(SpeedPoint {
                 name: b.name(),
@@ -889,7 +913,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         triangles: src.triangle_count(),
         deforming_meshes: deforming,
         frames,
-        rays_per_frame: rays.len(),
+        rays_per_frame,
         threads: rayon::current_num_threads(),
         cost: opts.cost,
         prices: opts.prices,

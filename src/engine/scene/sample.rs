@@ -16,6 +16,10 @@ impl Engine {
     /// sample at the next [`Engine::update`]. Allocates only to grow the entry buffer past the
     /// largest frame's sample so far.
     pub fn sample_rays(&mut self, rays: &[Ray], query: Query) {
+        // Nothing was refitted or rebuilt: no policy has anything to weigh.
+        if !self.meshes.iter().any(|m| m.moved) {
+            return;
+        }
         if self.sample.frame != self.frame {
             self.sample = RaySample::new(self.frame);
             self.entries.clear();
