@@ -173,6 +173,7 @@ const SHIPPED: &[(&str, Kind, usize)] = &[
     ("orbit.glb", Kind::Orbit, 2000),
     ("explode.glb", Kind::Explode, 2000),
     ("swap.glb", Kind::Swap, 2000),
+    ("lidar_cloth.glb", Kind::LidarCloth, 8000),
 ];
 
 #[test]
