@@ -4,5 +4,6 @@ pub mod all_pairs;
 pub mod build_bench;
 pub mod charts;
 pub mod frame_bench;
+pub mod ray_sweep;
 pub mod rays;
 pub mod wide_bench;
