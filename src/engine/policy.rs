@@ -304,8 +304,10 @@ impl PolicyState {
     /// felt: the first measurement replaces the prior of 1, later ones are averaged in with
     /// weight `max(1 / (n + 1), 0.3)` (so it follows a change within a few rebuilds).
     pub fn calibrate_rays(&mut self, estimated: f32, measured: f32) {
-        if estimated > 1.0 + 1e-3 && measured.is_finite() {
-            let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(0.0, 2.0);
+        // A small estimated degradation says nothing about the gain (the replay's ratio is
+        // then mostly the sample's noise): learn only from clear ones.
+        if estimated > 1.0 + MIN_RAY_SIGNAL && measured.is_finite() {
+            let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(MIN_RAY_GAIN, MAX_RAY_GAIN);
             let w = (1.0 / (self.ray_calibrations as f32 + 1.0)).max(0.3);
             self.estimate_gain += w * (seen - self.estimate_gain);
             self.ray_calibrations += 1;
@@ -334,6 +336,15 @@ impl PolicyState {
         self.traced_ratio = 1.0;
     }
 }
+
+/// Bound of the ray-work measure's gain: how much more the replays may show than the sampled
+/// ratio said (the fresh tree's own work per entry moves while the refitted one degrades).
+const MAX_RAY_GAIN: f32 = 8.0;
+/// Lower bound of that gain: the sampled ratio is the rays' own measure, so it is never
+/// believed to be mostly noise.
+const MIN_RAY_GAIN: f32 = 0.25;
+/// Estimated degradation below which a replay teaches nothing.
+const MIN_RAY_SIGNAL: f32 = 0.05;
 
 /// Bound of [`PolicyState::rebuild_scale`].
 const MAX_REBUILD_SCALE: f64 = 64.0;

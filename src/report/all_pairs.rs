@@ -56,7 +56,7 @@ pub fn measure(
                 *t = e.indices(*m).len();
             }
         }
-        for f in b..=frames {
+        for (f, frame) in sampled.iter().enumerate().take(frames + 1).skip(b) {
             if f > b {
                 src.advance(&mut e, f);
                 e.update();
@@ -66,7 +66,7 @@ pub fn measure(
                 let w = if f == 0 {
                     0.0
                 } else {
-                    sampled[f].scale * prices.trace_ms(e.mesh_work_on(*m, &sampled[f].entries))
+                    frame.scale * prices.trace_ms(e.mesh_work_on(*m, &frame.entries))
                 };
                 trace[k][b].push(w);
             }
