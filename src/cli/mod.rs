@@ -1,5 +1,6 @@
 //! Subcommands of the `dynbvh` binary, one per file.
 
+pub mod args;
 pub mod bench;
 pub mod build_bench;
 pub mod default_job;

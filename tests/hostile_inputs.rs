@@ -1,0 +1,355 @@
+//! Hostile files and arguments through the binary, as the fuzzing campaign of issue 16 found
+//! them: every run ends with a clean error (non-zero exit, no panic, a message naming the
+//! argument or object) or a bounded result. A run still going after `GUARD` is killed and
+//! fails the test: a hang guard, far above the few seconds these runs take.
+
+mod anim_util;
+mod cli_util;
+
+use cli_util::tmp_dir;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Kill a run after this long.
+const GUARD: Duration = Duration::from_secs(60);
+
+/// What a run printed and how it ended.
+struct Run {
+    success: bool,
+    stdout: String,
+    stderr: String,
+}
+
+/// Runs `dynbvh args`, killing it after [`GUARD`].
+fn run<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Run {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dynbvh"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run dynbvh");
+    let start = Instant::now();
+    let line: Vec<String> = args
+        .iter()
+        .map(|a| a.as_ref().to_string_lossy().into_owned())
+        .collect();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            break;
+        }
+        if start.elapsed() > GUARD {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("dynbvh {} still running after {GUARD:?}", line.join(" "));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let o = child.wait_with_output().expect("output");
+    let r = Run {
+        success: o.status.success(),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    };
+    assert!(
+        !r.stderr.contains("panicked") && o.status.code().is_some(),
+        "dynbvh {} crashed: {}",
+        line.join(" "),
+        r.stderr
+    );
+    r
+}
+
+/// A clean error whose message contains every one of `names`.
+#[track_caller]
+fn refused<S: AsRef<std::ffi::OsStr>>(args: &[S], names: &[&str]) -> String {
+    let r = run(args);
+    let line: Vec<_> = args.iter().map(|a| a.as_ref().to_string_lossy()).collect();
+    assert!(
+        !r.success,
+        "dynbvh {} succeeded:\n{}",
+        line.join(" "),
+        r.stdout
+    );
+    for n in names {
+        assert!(
+            r.stderr.contains(n),
+            "dynbvh {}: the error does not name {n:?}: {}",
+            line.join(" "),
+            r.stderr
+        );
+    }
+    r.stderr
+}
+
+/// A successful run; returns its stdout and stderr.
+#[track_caller]
+fn bounded<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> (String, String) {
+    let r = run(args);
+    let line: Vec<_> = args.iter().map(|a| a.as_ref().to_string_lossy()).collect();
+    assert!(r.success, "dynbvh {} failed: {}", line.join(" "), r.stderr);
+    (r.stdout, r.stderr)
+}
+
+fn s(p: &Path) -> String {
+    p.to_string_lossy().into_owned()
+}
+
+/// Little-endian bytes of floats.
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// A glTF document of one triangle on one node, translated by a LINEAR channel through the
+/// key `times` (the node moves up by 1 per key), all data in one data URI.
+fn clip(times: &[f32]) -> serde_json::Value {
+    let positions = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let keys: Vec<f32> = (0..times.len())
+        .flat_map(|k| [0.0, k as f32, 0.0])
+        .collect();
+    let mut data = f32_bytes(&positions);
+    let times_at = data.len();
+    data.extend(f32_bytes(times));
+    let keys_at = data.len();
+    data.extend(f32_bytes(&keys));
+    let n = times.len();
+    let tmax = times.iter().copied().fold(f32::MIN, f32::max);
+    let tmin = times.iter().copied().fold(f32::MAX, f32::min);
+    json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "buffers": [{"byteLength": data.len(), "uri": anim_util::data_uri(&data)}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": times_at, "byteLength": 4 * n},
+            {"buffer": 0, "byteOffset": keys_at, "byteLength": 12 * n}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": n, "type": "SCALAR",
+             "min": [tmin], "max": [tmax]},
+            {"bufferView": 2, "componentType": 5126, "count": n, "type": "VEC3"}
+        ],
+        "animations": [{
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+            "samplers": [{"input": 1, "output": 2, "interpolation": "LINEAR"}]
+        }]
+    })
+}
+
+/// Writes `doc` as `name` in `dir`.
+fn write(dir: &Path, name: &str, doc: &serde_json::Value) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, serde_json::to_vec(doc).unwrap()).unwrap();
+    p
+}
+
+/// A small animated file of a few hundred triangles, for the argument cases.
+fn small_scene(dir: &Path) -> String {
+    let p = dir.join("wave.glb");
+    bounded(&["gen", "wave", "--triangles", "200", "--out", &s(&p)]);
+    s(&p)
+}
+
+/// The bench's quick form: no oracle, builders or top-level comparison, few rays.
+const QUICK: [&str; 3] = ["--no-oracle", "--no-builders", "--no-tlas-compare"];
+
+fn bench(file: &str, extra: &[&str]) -> Vec<String> {
+    let mut v: Vec<String> = vec![
+        "bench".into(),
+        file.into(),
+        "--policy".into(),
+        "refit".into(),
+    ];
+    v.extend(QUICK.iter().map(|s| (*s).to_string()));
+    v.extend(extra.iter().map(|s| (*s).to_string()));
+    v
+}
+
+#[test]
+fn clips_with_key_times_up_to_3e38_render_and_bench_bounded() {
+    let d = tmp_dir("hostile", "long_clip");
+    let long = write(&d, "long.gltf", &clip(&[0.0, 1.0, 1e7, 3e38]));
+    let corrupt = write(&d, "corrupt.gltf", &clip(&[0.0, 0.5, 1e30]));
+    for f in [&long, &corrupt] {
+        let out = d.join("frames");
+        let (_, err) = bounded(&["render", &s(f), "--size", "16x12", "--out", &s(&out)]);
+        assert!(err.contains("--max-frames"), "no note on the cut: {err}");
+        let pngs = std::fs::read_dir(&out).unwrap().count();
+        assert_eq!(pngs, 300, "the frames a long clip is cut to");
+        std::fs::remove_dir_all(&out).unwrap();
+        bounded(&bench(&s(f), &["--rays", "64", "--frames", "20"]));
+        refused(
+            &bench(&s(f), &["--rays", "64", "--fps", "30"]),
+            &["--fps", "--max-frames"],
+        );
+        refused(
+            &[
+                "render",
+                &s(f),
+                "--fps",
+                "30",
+                "--frames",
+                "0..2",
+                "--bench",
+            ],
+            &["--fps 30", "timeline", "--frames N"],
+        );
+    }
+}
+
+#[test]
+fn hostile_frame_counts_and_rates_are_refused() {
+    let d = tmp_dir("hostile", "frames");
+    let f = small_scene(&d);
+    let out = s(&d.join("r"));
+    refused(
+        &bench(&f, &["--fps", "1e30"]),
+        &["--fps", "e30 frames", "--max-frames"],
+    );
+    refused(
+        &[
+            "render", &f, "--fps", "1e30", "--frames", "0..2", "--out", &out,
+        ],
+        &["bound"],
+    );
+    for cmd in ["bench", "render"] {
+        let mut a = vec![cmd, &f, "--frames", "18446744073709551615", "--out", &out];
+        if cmd == "bench" {
+            a.push("--no-oracle");
+        }
+        refused(&a, &["--frames", "18446744073709551615", "--max-frames"]);
+    }
+    refused(
+        &["render", &f, "--frames", "1000000000", "--out", &out],
+        &["--frames", "1000000000", "1000", "--max-frames"],
+    );
+    refused(
+        &bench(&f, &["--frames", "1000000000"]),
+        &["--frames", "1000000000", "--max-frames"],
+    );
+    refused(
+        &["render", &f, "--frames", "0..1000000000", "--bench"],
+        &["--frames", "--max-frames"],
+    );
+    refused(&bench(&f, &["--fps", "0"]), &["--fps", "positive"]);
+    refused(&bench(&f, &["--fps", "inf"]), &["--fps"]);
+    // Raising the bound lets a bigger request through (to the animation's own frames).
+    refused(
+        &[
+            "render",
+            &f,
+            "--frames",
+            "0..5000",
+            "--max-frames",
+            "5000",
+            "--bench",
+        ],
+        &["--frames 0..5000", "the animation has frames"],
+    );
+}
+
+#[test]
+fn hostile_sizes_repeats_and_threads_are_refused_or_capped() {
+    let d = tmp_dir("hostile", "sizes");
+    let f = small_scene(&d);
+    refused(
+        &bench(&f, &["--repeats", "1000000000"]),
+        &["--repeats", "1000000000", "1..=1000"],
+    );
+    refused(&bench(&f, &["--repeats", "0"]), &["--repeats"]);
+    refused(
+        &bench(&f, &["--size", "20000x20000"]),
+        &["--size", "20000", "16384"],
+    );
+    refused(
+        &bench(&f, &["--size", "100000x100000"]),
+        &["--size", "100000"],
+    );
+    refused(
+        &bench(&f, &["--size", "16384x16384"]),
+        &["--size", "16384x16384", "--max-memory"],
+    );
+    refused(
+        &bench(&f, &["--rays", "10000000000"]),
+        &["--rays", "10000000000"],
+    );
+    refused(&bench(&f, &["--size", "32x"]), &["--size", "32x", "height"]);
+    refused(
+        &["render", &f, "--size", "32x", "--bench"],
+        &["--size", "32x"],
+    );
+    refused(
+        &["render", &f, "--size", "0x10", "--bench"],
+        &["--size", "width"],
+    );
+    refused(
+        &["render", &f, "--size", "16384x16384", "--bench"],
+        &["--size", "--max-memory"],
+    );
+    refused(
+        &["render", &f, "--threads", "0", "--bench"],
+        &["--threads", "0"],
+    );
+    refused(&bench(&f, &["--threads", "0"]), &["--threads"]);
+    let (_, err) = bounded(&[
+        "render",
+        &f,
+        "--threads",
+        "100000",
+        "--frames",
+        "2",
+        "--size",
+        "16x16",
+        "--bench",
+    ]);
+    assert!(
+        err.contains("--threads 100000") && err.contains("cores"),
+        "{err}"
+    );
+    let (_, err) = bounded(&bench(
+        &f,
+        &["--threads", "1000", "--frames", "2", "--rays", "64"],
+    ));
+    assert!(err.contains("--threads 1000"), "{err}");
+    bounded(&bench(
+        &f,
+        &["--frames", "2", "--rays", "64", "--repeats", "1"],
+    ));
+}
+
+#[test]
+fn hostile_triangle_and_joint_counts_are_refused() {
+    let d = tmp_dir("hostile", "triangles");
+    let out = s(&d.join("x.glb"));
+    refused(
+        &["gen", "tube", "--triangles", "1000000000000", "--out", &out],
+        &["--triangles", "1000000000000"],
+    );
+    refused(
+        &["gen", "orbit", "--triangles", "100000000", "--out", &out],
+        &["--triangles 100000000", "--max-memory"],
+    );
+    refused(
+        &["gen", "tube", "--four-weights", "1000000", "--out", &out],
+        &["--four-weights", "1000000", "65536"],
+    );
+    refused(
+        &["gen", "tube", "--four-weights", "3", "--out", &out],
+        &["--four-weights"],
+    );
+    refused(
+        &["build-bench", "--synthetic", "1000000000000"],
+        &["--synthetic", "1000000000000"],
+    );
+    refused(
+        &["build-bench", "--synthetic", "100000000"],
+        &["--synthetic 100000000", "--max-memory"],
+    );
+    assert!(!Path::new(&out).exists());
+}
