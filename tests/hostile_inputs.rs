@@ -104,6 +104,11 @@ fn f32_bytes(v: &[f32]) -> Vec<u8> {
 /// A glTF document of one triangle on one node, translated by a LINEAR channel through the
 /// key `times` (the node moves up by 1 per key), all data in one data URI.
 fn clip(times: &[f32]) -> serde_json::Value {
+    clip_parts(times).0
+}
+
+/// [`clip`] and the bytes of its buffer.
+fn clip_parts(times: &[f32]) -> (serde_json::Value, Vec<u8>) {
     let positions = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     let keys: Vec<f32> = (0..times.len())
         .flat_map(|k| [0.0, k as f32, 0.0])
@@ -116,7 +121,7 @@ fn clip(times: &[f32]) -> serde_json::Value {
     let n = times.len();
     let tmax = times.iter().copied().fold(f32::MIN, f32::max);
     let tmin = times.iter().copied().fold(f32::MAX, f32::min);
-    json!({
+    let doc = json!({
         "asset": {"version": "2.0"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
@@ -139,7 +144,8 @@ fn clip(times: &[f32]) -> serde_json::Value {
             "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
             "samplers": [{"input": 1, "output": 2, "interpolation": "LINEAR"}]
         }]
-    })
+    });
+    (doc, data)
 }
 
 /// Writes `doc` as `name` in `dir`.
@@ -352,4 +358,112 @@ fn hostile_triangle_and_joint_counts_are_refused() {
         &["--synthetic 100000000", "--max-memory"],
     );
     assert!(!Path::new(&out).exists());
+}
+
+/// `clip` with its buffer in a file named by `uri` (relative to the glTF file) instead of a
+/// data URI.
+fn clip_with_buffer_uri(uri: &str, byte_length: usize) -> serde_json::Value {
+    let mut doc = clip(&[0.0, 1.0]);
+    doc["buffers"][0] = json!({"byteLength": byte_length, "uri": uri});
+    doc
+}
+
+#[test]
+fn files_that_are_not_regular_are_refused_before_reading() {
+    let d = tmp_dir("hostile", "not_regular");
+    refused(&["info", &s(&d)], &[&s(&d), "directory"]);
+    let fifo = d.join("pipe.glb");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|st| st.success()) {
+        refused(&["info", &s(&fifo)], &["pipe.glb", "not a regular file"]);
+        refused(
+            &["build-bench", &s(&fifo)],
+            &["pipe.glb", "not a regular file"],
+        );
+    }
+    if Path::new("/dev/zero").exists() {
+        // A buffer on a device is refused even where outside files are allowed.
+        let f = write(&d, "zero.gltf", &clip_with_buffer_uri("/dev/zero", 96));
+        refused(&["info", &s(&f)], &["zero.gltf", "buffer 0", "/dev/zero"]);
+        refused(
+            &["--allow-outside-files", "info", &s(&f)],
+            &["zero.gltf", "buffer 0", "not a regular file"],
+        );
+    }
+}
+
+#[test]
+fn buffers_outside_the_folder_are_refused_unless_allowed() {
+    let d = tmp_dir("hostile", "outside");
+    let inner = d.join("inner");
+    std::fs::create_dir_all(inner.join("sub")).unwrap();
+    let (_, data) = clip_parts(&[0.0, 1.0]);
+    // The buffer with trailing bytes beyond its byteLength, which are not read.
+    let mut padded = data.clone();
+    padded.extend([0xAB; 1000]);
+    std::fs::write(d.join("outside.bin"), &padded).unwrap();
+    std::fs::write(inner.join("inside.bin"), &padded).unwrap();
+    let up = write(
+        &inner,
+        "up.gltf",
+        &clip_with_buffer_uri("../outside.bin", data.len()),
+    );
+    refused(
+        &["info", &s(&up)],
+        &[
+            "up.gltf",
+            "buffer 0",
+            "../outside.bin",
+            "--allow-outside-files",
+        ],
+    );
+    bounded(&["info", &s(&up), "--allow-outside-files"]);
+    let abs = s(&d.join("outside.bin"));
+    let absolute = write(&inner, "abs.gltf", &clip_with_buffer_uri(&abs, data.len()));
+    refused(
+        &["info", &s(&absolute)],
+        &[
+            "abs.gltf",
+            "buffer 0",
+            "inside the file's folder",
+            "absolute",
+        ],
+    );
+    let ok = write(
+        &inner,
+        "ok.gltf",
+        &clip_with_buffer_uri("./sub/../inside.bin", data.len()),
+    );
+    bounded(&["info", &s(&ok)]);
+}
+
+#[test]
+fn broken_containers_and_deep_json_are_clean_errors() {
+    let d = tmp_dir("hostile", "containers");
+    // A GLB whose JSON chunk claims more bytes than the file has.
+    let json = br#"{"asset":{"version":"2.0"}}  "#;
+    let mut glb = Vec::new();
+    glb.extend(b"glTF");
+    glb.extend(2u32.to_le_bytes());
+    glb.extend((12 + 8 + json.len() as u32).to_le_bytes());
+    glb.extend(0x7FFF_FFF0u32.to_le_bytes());
+    glb.extend(0x4E4F_534Au32.to_le_bytes());
+    glb.extend(json);
+    let p = d.join("chunk.glb");
+    std::fs::write(&p, &glb).unwrap();
+    refused(&["info", &s(&p)], &["chunk.glb", "GLB container", "chunk"]);
+    // JSON nested thousands deep: where the document is parsed, an error; in `extras`,
+    // which are kept as raw text, a file that loads.
+    let nest = |key: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"{key}":{}{}}}"#,
+            "[".repeat(5000),
+            "]".repeat(5000)
+        )
+    };
+    let p = d.join("deep.gltf");
+    std::fs::write(&p, nest("nodes")).unwrap();
+    refused(&["info", &s(&p)], &["deep.gltf", "JSON"]);
+    std::fs::write(&p, nest("extras")).unwrap();
+    bounded(&["info", &s(&p)]);
 }

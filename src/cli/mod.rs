@@ -12,12 +12,22 @@ pub mod render;
 use anyhow::Result;
 use std::path::Path;
 
+/// Whether glTF files may name buffers outside their folder (`--allow-outside-files`), set
+/// once by `main` before any command runs.
+static ALLOW_OUTSIDE_FILES: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+
+/// Sets what `--allow-outside-files` said, for every file the command loads.
+pub fn set_allow_outside_files(allow: bool) {
+    let _ = ALLOW_OUTSIDE_FILES.set(allow);
+}
+
 /// Loads a glTF file (its default scene, or `scene`) and prints the loader's warnings.
 pub fn load_scene(path: &Path, scene: Option<usize>) -> Result<dynbvh::anim::Scene> {
     let (scene, warnings) = dynbvh::anim::Scene::load_with(
         path,
         &dynbvh::anim::LoadOptions {
             scene,
+            allow_outside_files: ALLOW_OUTSIDE_FILES.get().copied().unwrap_or(false),
             ..Default::default()
         },
     )?;
