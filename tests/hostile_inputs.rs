@@ -467,3 +467,86 @@ fn broken_containers_and_deep_json_are_clean_errors() {
     std::fs::write(&p, nest("extras")).unwrap();
     bounded(&["info", &s(&p)]);
 }
+
+/// A file whose `nodes` nodes each place one mesh of `count` vertices read from an accessor
+/// without a buffer view (all zeros, as the specification allows): `count / 3` degenerate
+/// triangles per node, from a few hundred bytes of JSON.
+fn zeros_placed(count: usize, nodes: usize) -> serde_json::Value {
+    let node_list: Vec<_> = (0..nodes).map(|_| json!({"mesh": 0})).collect();
+    let roots: Vec<usize> = (0..nodes).collect();
+    json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": roots}],
+        "nodes": node_list,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"componentType": 5126, "count": count, "type": "VEC3",
+                       "min": [0.0, 0.0, 0.0], "max": [0.0, 0.0, 0.0]}]
+    })
+}
+
+#[test]
+fn accessors_without_data_and_instanced_huge_meshes_are_bounded() {
+    let d = tmp_dir("hostile", "zeros");
+    let obj = s(&d.join("p.obj"));
+    // 5.6M vertices (the loader's bound on components without a buffer view), placed 1001
+    // times: the loader reads the accessor once, the flattening would make 5.6G vertices.
+    let many = write(&d, "many.gltf", &zeros_placed(5_592_405, 1001));
+    refused(
+        &["pose", &s(&many), "--out", &obj],
+        &[
+            "many.gltf",
+            "pose",
+            "1001 mesh instances",
+            "mesh 0",
+            "--max-memory",
+        ],
+    );
+    refused(
+        &bench(&s(&many), &["--rays", "64"]),
+        &["many.gltf", "bench", "--max-memory"],
+    );
+    refused(
+        &["render", &s(&many), "--bench", "--frames", "1"],
+        &["many.gltf", "render", "--max-memory"],
+    );
+    refused(
+        &["build-bench", &s(&many)],
+        &["many.gltf", "build-bench", "--max-memory"],
+    );
+    let (out, _) = bounded(&["info", &s(&many)]);
+    assert!(out.contains("1001"), "{out}");
+    // Once: fine to pose (a few hundred MB), refused by the bench's own estimate.
+    let one = write(&d, "one.gltf", &zeros_placed(5_592_405, 1));
+    refused(
+        &bench(&s(&one), &["--rays", "64"]),
+        &["one.gltf", "1864135 triangles", "--max-memory"],
+    );
+    refused(
+        &["pose", &s(&one), "--out", &obj, "--max-memory", "100M"],
+        &["one.gltf", "100.0 MiB", "--max-memory"],
+    );
+    // Beyond the loader's bound on data without a buffer view: an error naming the accessor.
+    let huge = write(&d, "huge.gltf", &zeros_placed(16_777_216, 1));
+    refused(
+        &["info", &s(&huge)],
+        &["huge.gltf", "accessor 0", "without a buffer view"],
+    );
+}
+
+#[test]
+fn flattening_past_32_bit_indices_is_refused_whatever_the_memory_bound() {
+    let d = tmp_dir("hostile", "index_bound");
+    let many = write(&d, "many.gltf", &zeros_placed(5_592_405, 1001));
+    refused(
+        &[
+            "pose",
+            &s(&many),
+            "--out",
+            &s(&d.join("p.obj")),
+            "--max-memory",
+            "1000T",
+        ],
+        &["many.gltf", "2^32"],
+    );
+}

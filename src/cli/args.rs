@@ -4,6 +4,7 @@
 
 use anyhow::{Result, bail};
 use clap::Args;
+use dynbvh::anim::Scene;
 use std::fmt;
 use std::str::FromStr;
 
@@ -179,6 +180,101 @@ impl MemoryLimit {
             );
         }
         Ok(())
+    }
+}
+
+/// What a job keeps per flattened triangle and vertex of a scene (with a margin over what was
+/// measured), for [`MemoryLimit::check_scene`].
+#[derive(Clone, Copy, Debug)]
+pub struct PerElement {
+    /// The job, for the message (e.g. `bench`).
+    pub job: &'static str,
+    /// Bytes per flattened triangle.
+    pub triangle: u64,
+    /// Bytes per flattened vertex.
+    pub vertex: u64,
+}
+
+/// `pose`: the flattened mesh and the OBJ or PLY text of it.
+pub const POSE_MEMORY: PerElement = PerElement {
+    job: "pose",
+    triangle: 48,
+    vertex: 48,
+};
+
+/// `render`, per policy: an engine's trees and its shading normals.
+pub const RENDER_MEMORY: PerElement = PerElement {
+    job: "render",
+    triangle: 500,
+    vertex: 48,
+};
+
+/// `bench`: every configuration's engine, run in lockstep, and the reference copies.
+pub const BENCH_MEMORY: PerElement = PerElement {
+    job: "bench",
+    triangle: 2500,
+    vertex: 100,
+};
+
+/// `build-bench` on a glTF file: the flattened mesh and its trees.
+pub const BUILD_MEMORY: PerElement = PerElement {
+    job: "build-bench",
+    triangle: BUILD_BYTES_PER_TRIANGLE,
+    vertex: 12,
+};
+
+impl MemoryLimit {
+    /// Refuses a job on `scene` (repeated `copies` times, e.g. once per policy) whose
+    /// flattened triangles and vertices, every mesh instance counted, would need more than
+    /// `--max-memory`; the message names the file, the counts and the most repeated mesh.
+    pub fn check_scene(&self, scene: &Scene, per: PerElement, copies: u64) -> Result<()> {
+        let tris = scene.triangle_count() as u64;
+        let verts = scene.vertex_count() as u64;
+        let estimate = tris
+            .saturating_mul(per.triangle)
+            .saturating_add(verts.saturating_mul(per.vertex))
+            .saturating_mul(copies.max(1));
+        if verts > u64::from(u32::MAX) {
+            bail!(
+                "{}: {}: {verts} vertices over {} mesh instances, more than the 2^32 a \
+                 flattened mesh can index",
+                scene.path.display(),
+                per.job,
+                scene.instances.len()
+            );
+        }
+        if estimate <= self.max_memory.0 {
+            return Ok(());
+        }
+        let mut placed = vec![0u64; scene.meshes.len()];
+        for i in &scene.instances {
+            placed[i.mesh] += 1;
+        }
+        let heaviest = (0..scene.meshes.len())
+            .max_by_key(|&m| placed[m] * scene.meshes[m].indices.len() as u64)
+            .map(|m| {
+                format!(
+                    " (mesh {} of {} triangles placed by {} node(s))",
+                    scene.meshes[m].gltf_index,
+                    scene.meshes[m].indices.len(),
+                    placed[m]
+                )
+            })
+            .unwrap_or_default();
+        let copies = if copies > 1 {
+            format!(", {copies} times over")
+        } else {
+            String::new()
+        };
+        self.check_memory(
+            &format!(
+                "{}: {}: {tris} triangles and {verts} vertices over {} mesh instances{heaviest}{copies}",
+                scene.path.display(),
+                per.job,
+                scene.instances.len()
+            ),
+            estimate,
+        )
     }
 }
 

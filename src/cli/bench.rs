@@ -148,6 +148,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let report = match (&a.file, a.synthetic) {
         (Some(path), _) => {
             let scene = super::load_scene(path, None)?;
+            a.limits.memory.check_scene(&scene, args::BENCH_MEMORY, 1)?;
             let anim = match &a.animation {
                 Some(k) => Some(
                     scene
@@ -174,6 +175,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
             frame_bench::run(&mut src, &opts, progress)
         }
         (None, Some(n)) => {
+            a.limits.check_memory(
+                &format!("--synthetic {n}"),
+                (n as u64).saturating_mul(args::BENCH_MEMORY.triangle),
+            )?;
             let frames = match times {
                 FrameTimes::Count(n) => n,
                 FrameTimes::Fps(f) => {

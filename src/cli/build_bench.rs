@@ -78,7 +78,7 @@ fn parse_method(s: &str) -> Result<BuildParams> {
 }
 
 /// Loads a mesh by extension.
-pub fn load_mesh(path: &Path) -> Result<TriMesh> {
+pub fn load_mesh(path: &Path, limit: &MemoryLimit) -> Result<TriMesh> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -87,7 +87,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh> {
     Ok(match ext.as_str() {
         "tri" => dynbvh::io::read_tri(path)?,
         "obj" => dynbvh::io::read_obj(path)?,
-        "glb" | "gltf" => crate::cli::flatten_gltf_at_rest(path)?,
+        "glb" | "gltf" => crate::cli::flatten_gltf_at_rest(path, limit, args::BUILD_MEMORY)?,
         _ => bail!(
             "{}: unknown mesh format (expected .glb, .gltf, .obj or .tri)",
             path.display()
@@ -99,7 +99,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh> {
 pub fn run(args: BuildBenchArgs) -> Result<()> {
     args::init_threads(args.threads)?;
     let (name, mesh) = match (&args.file, args.synthetic) {
-        (Some(f), _) => (f.display().to_string(), load_mesh(f)?),
+        (Some(f), _) => (f.display().to_string(), load_mesh(f, &args.limits)?),
         (None, Some(n)) => {
             args.limits.check_memory(
                 &format!("--synthetic {n} (the mesh and its trees)"),

@@ -38,7 +38,14 @@ pub fn load_scene(path: &Path, scene: Option<usize>) -> Result<dynbvh::anim::Sce
 }
 
 /// Loads a glTF file and flattens its default scene at rest (no animation applied), printing
-/// the loader's warnings.
-pub fn flatten_gltf_at_rest(path: &Path) -> Result<dynbvh::geom::TriMesh> {
-    Ok(load_scene(path, None)?.flatten_rest())
+/// the loader's warnings; refused when the flattened scene and `per`'s allocations for it
+/// would pass `limit`.
+pub fn flatten_gltf_at_rest(
+    path: &Path,
+    limit: &args::MemoryLimit,
+    per: args::PerElement,
+) -> Result<dynbvh::geom::TriMesh> {
+    let scene = load_scene(path, None)?;
+    limit.check_scene(&scene, per, 1)?;
+    Ok(scene.flatten_rest())
 }

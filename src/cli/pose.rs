@@ -1,5 +1,6 @@
 //! `dynbvh pose`: a scene's triangles at time `t`, written as OBJ or PLY.
 
+use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::geom::TriMesh;
@@ -28,11 +29,14 @@ pub struct PoseArgs {
     /// Output file: .obj (text) or .ply (binary).
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub limits: MemoryLimit,
 }
 
 /// Poses and writes.
 pub fn run(a: PoseArgs) -> Result<()> {
     let scene = super::load_scene(&a.file, a.scene)?;
+    a.limits.check_scene(&scene, args::POSE_MEMORY, 1)?;
     let anim = match &a.animation {
         None if a.rest => None,
         None if scene.animations.is_empty() => {

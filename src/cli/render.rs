@@ -426,6 +426,9 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     };
 
     let scene = super::load_scene(&a.file, None)?;
+    a.limits
+        .memory
+        .check_scene(&scene, args::RENDER_MEMORY, policies.len() as u64)?;
     let anim = match &a.animation {
         Some(k) => Some(
             scene
