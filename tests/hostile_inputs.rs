@@ -550,3 +550,36 @@ fn flattening_past_32_bit_indices_is_refused_whatever_the_memory_bound() {
         &["many.gltf", "2^32"],
     );
 }
+
+#[test]
+fn negative_times_parse_and_parse_errors_name_the_option() {
+    let d = tmp_dir("hostile", "parse");
+    let f = small_scene(&d);
+    let obj = s(&d.join("p.obj"));
+    bounded(&["pose", &f, "--time", "-0.5", "--out", &obj]);
+    bounded(&["pose", &f, "--time=-0.5", "--out", &obj]);
+    refused(
+        &["pose", &f, "--time", "inf", "--out", &obj],
+        &["--time", "inf", "finite"],
+    );
+    refused(
+        &["pose", &f, "--time", "x", "--out", &obj],
+        &["--time", "\"x\""],
+    );
+    refused(&["render", &f, "--fps", "-3", "--bench"], &["--fps", "-3"]);
+    refused(&["bench", &f, "--frames", "-3"], &["--frames", "-3"]);
+    refused(
+        &["gen", "tube", "--triangles", "1e12", "--out", &obj],
+        &["--triangles", "1e12"],
+    );
+    refused(
+        &["bench", &f, "--max-memory", "4Q"],
+        &["--max-memory", "4Q"],
+    );
+    // `scene: 0` with an empty `scenes` list.
+    let mut doc = clip(&[0.0, 1.0]);
+    doc["scenes"] = json!([]);
+    let p = write(&d, "no_scenes.gltf", &doc);
+    let err = refused(&["info", &s(&p)], &["no_scenes.gltf", "scene", "empty"]);
+    assert!(!err.contains("below 0"), "{err}");
+}

@@ -259,6 +259,15 @@ fn choose_scene(
             )));
         }
         (Some(s), _) => s,
+        (None, Some(s)) if scenes.is_empty() => {
+            return Err(rd.err(
+                "scene",
+                format!(
+                    "a scene to refer to, found scene {} but the file's scenes list is empty",
+                    s.value()
+                ),
+            ));
+        }
         (None, Some(s)) if s.value() >= scenes.len() => {
             return Err(rd.err(
                 "scene",

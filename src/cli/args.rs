@@ -282,7 +282,7 @@ impl MemoryLimit {
 #[derive(Args, Debug, Clone, Copy, Default)]
 pub struct Limits {
     /// Most frames a run may ask for (through --frames, or the clip's duration x --fps).
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_FRAMES,
+    #[arg(long, allow_negative_numbers = true, value_name = "N", default_value_t = DEFAULT_MAX_FRAMES,
           value_parser = clap::value_parser!(u64).range(1..=MAX_TIMELINE))]
     pub max_frames: u64,
     #[command(flatten)]
@@ -324,6 +324,15 @@ pub fn count(n: f64) -> String {
 #[must_use]
 pub fn frames_at(duration: f32, fps: f32) -> f64 {
     (f64::from(duration) * f64::from(fps)).ceil().max(1.0)
+}
+
+/// Parses a time in seconds: any finite number, negative included.
+pub fn finite_time(s: &str) -> std::result::Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(t) if t.is_finite() => Ok(t),
+        Ok(t) => Err(format!("{t} s: must be finite")),
+        Err(_) => Err(format!("{s:?} is not a number of seconds")),
+    }
 }
 
 /// Parses a frame rate: positive and finite.

@@ -33,19 +33,19 @@ pub struct BenchArgs {
     #[arg(long = "dir", requires = "all")]
     dirs: Vec<PathBuf>,
     /// Instead of a file: a bumpy sphere of about N triangles deformed by a travelling wave.
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     synthetic: Option<usize>,
     /// Animation name or index (default: the first).
     #[arg(long, short)]
     animation: Option<String>,
     /// Frames spread over one loop of the animation (default 60).
-    #[arg(long, conflicts_with = "fps")]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "fps")]
     frames: Option<usize>,
     /// Frames per second of animation time instead of a frame count.
-    #[arg(long, value_parser = args::frame_rate)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     fps: Option<f32>,
     /// Rays per frame, from a camera looking at the first frame.
-    #[arg(long, conflicts_with = "size",
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "size",
           value_parser = clap::value_parser!(u64).range(1..=1 << 28))]
     rays: Option<u64>,
     /// Camera image size WxH (default 256x256; sides up to 16384).
@@ -75,10 +75,10 @@ pub struct BenchArgs {
     #[arg(long)]
     no_tlas_compare: bool,
     /// Trace passes per frame, the fastest counting.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
     repeats: u64,
     /// Worker threads (default: all cores; more than the cores are capped).
-    #[arg(long, value_parser = args::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]

@@ -17,20 +17,20 @@ pub struct BuildBenchArgs {
     #[arg(required_unless_present = "synthetic", conflicts_with = "synthetic")]
     file: Option<PathBuf>,
     /// Use a bumpy geodesic sphere of about N triangles instead of a file.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
+    #[arg(long, allow_negative_numbers = true, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
     synthetic: Option<u64>,
     /// Ray file(s) in the shared `.rays` format; without any, a 1024x1024 camera and 2^20
     /// random rays of its own.
     #[arg(long = "rays", value_name = "RAYFILE")]
     rays: Vec<PathBuf>,
     /// Worker threads (default: all cores; more than the cores are capped).
-    #[arg(long, value_parser = args::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
     /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all).
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Builds per method; the median is reported.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
     runs: u64,
     /// Print the rows as JSON instead of a table.
     #[arg(long)]

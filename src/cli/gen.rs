@@ -16,14 +16,14 @@ pub struct GenArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Approximate triangle count.
-    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
     pub triangles: u64,
     /// Seed of the random parts (orbit radii and hops, explode speeds).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     pub seed: u64,
     /// For `tube`: give every vertex 4 non-zero skin weights over a chain of this many joints
     /// (cubic B-spline falloff; at least 4), as the posing benchmark does, instead of 2.
-    #[arg(long, value_name = "JOINTS", value_parser = clap::value_parser!(u64).range(4..=MAX_JOINTS))]
+    #[arg(long, allow_negative_numbers = true, value_name = "JOINTS", value_parser = clap::value_parser!(u64).range(4..=MAX_JOINTS))]
     pub four_weights: Option<u64>,
     #[command(flatten)]
     pub limits: MemoryLimit,

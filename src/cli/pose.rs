@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 pub struct PoseArgs {
     /// The .gltf or .glb file.
     pub file: PathBuf,
-    /// Time in seconds (wraps beyond the animation's duration).
-    #[arg(long, default_value_t = 0.0)]
+    /// Time in seconds (wraps beyond the animation's duration; may be negative).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = args::finite_time)]
     pub time: f32,
     /// Animation name or index (default: the file's first animation; the rest pose when the
     /// file has none).
@@ -24,7 +24,7 @@ pub struct PoseArgs {
     #[arg(long, conflicts_with = "animation")]
     pub rest: bool,
     /// glTF scene index (default: the file's default scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub scene: Option<usize>,
     /// Output file: .obj (text) or .ply (binary).
     #[arg(long)]

@@ -30,10 +30,10 @@ pub struct RenderArgs {
     /// Frames: a count N spread over one loop of the animation, or a range A..B (B excluded)
     /// of the frames at --fps (default 30). Each run starts with a fresh build at its first
     /// frame, so a long sequence can be split over processes. Default: every frame at --fps.
-    #[arg(long, value_name = "N|A..B")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N|A..B")]
     pub frames: Option<String>,
     /// Frames per second of animation time (default 30).
-    #[arg(long, value_parser = args::frame_rate)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     pub fps: Option<f32>,
     /// Image size WxH (sides up to 16384).
     #[arg(long, value_name = "WxH", default_value = "640x480")]
@@ -54,7 +54,12 @@ pub struct RenderArgs {
     #[arg(long)]
     pub heatmap: bool,
     /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
-    #[arg(long, default_value_t = 150, value_name = "WORK")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        default_value_t = 150,
+        value_name = "WORK"
+    )]
     pub heat_max: u32,
     /// Cast a shadow ray toward the key light from every lit point.
     #[arg(long)]
@@ -77,7 +82,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub bench: bool,
     /// Worker threads (default: all cores; more than the cores are capped).
-    #[arg(long, value_parser = args::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     pub threads: Option<usize>,
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
     /// Shaded frames only: heat maps trace ray by ray.
