@@ -583,3 +583,78 @@ fn negative_times_parse_and_parse_errors_name_the_option() {
     let err = refused(&["info", &s(&p)], &["no_scenes.gltf", "scene", "empty"]);
     assert!(!err.contains("below 0"), "{err}");
 }
+
+#[test]
+fn overflowing_transforms_are_reported_naming_node_and_mesh() {
+    let d = tmp_dir("hostile", "overflow");
+    // Two nested nodes scaled by 1e30 each: finite transforms whose product is not.
+    let mut doc = clip(&[0.0, 1.0]);
+    doc["nodes"] = json!([
+        {"name": "outer", "scale": [1e30, 1e30, 1e30], "children": [1]},
+        {"name": "inner", "scale": [1e30, 1e30, 1e30], "mesh": 0}
+    ]);
+    doc["animations"][0]["channels"][0]["target"]["node"] = json!(1);
+    let p = write(&d, "overflow.gltf", &doc);
+    let (_, err) = bounded(&["pose", &s(&p), "--out", &s(&d.join("p.obj"))]);
+    assert!(
+        err.contains("node 1 \"inner\"") && err.contains("mesh 0") && err.contains("not finite"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_far_vertex_does_not_collapse_the_tree() {
+    use dynbvh::bvh::MeshBvh;
+    use dynbvh::geom::TriMesh;
+    use glam::Vec3;
+    // A 100x100 grid (20k triangles) and the same with one vertex at 1e30: the far vertex's
+    // triangle must not make the rest of the tree worse. Counted work per ray, not time.
+    let n = 100u32;
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            positions.push(Vec3::new(i as f32, j as f32, 0.0));
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            indices.push([a, a + 1, a + n + 1]);
+            indices.push([a + 1, a + n + 2, a + n + 1]);
+        }
+    }
+    let grid = TriMesh {
+        positions: positions.clone(),
+        indices: indices.clone(),
+    };
+    let far_at = |p: Vec3| {
+        let mut far = grid.clone();
+        far.positions[(n / 2 * (n + 1) + n / 2) as usize] = p;
+        far
+    };
+    let work = |m: &TriMesh| {
+        let bvh = MeshBvh::build(m, &dynbvh::bvh::BuildParams::BINNED);
+        let mut stats = dynbvh::bvh::TraversalStats::default();
+        for k in 0..400u32 {
+            let (x, y) = ((k % 20) as f32 * 5.0 + 0.3, (k / 20) as f32 * 5.0 + 0.7);
+            let ray = dynbvh::geom::Ray::new(Vec3::new(x, y, 5.0), Vec3::new(0.0, 0.0, -1.0));
+            assert!(bvh.closest_hit_counted(&ray, &mut stats).is_some());
+        }
+        stats.nodes + stats.prims
+    };
+    let plain = work(&grid);
+    for p in [
+        Vec3::splat(1e30),
+        Vec3::new(1e30, 0.0, 0.0),
+        Vec3::new(50.0, 50.0, 1e30),
+        Vec3::new(1e25, 1e25, 0.0),
+        Vec3::new(-3e38, 3e38, 3e38),
+    ] {
+        let with_far = work(&far_at(p));
+        assert!(
+            with_far <= 3 * plain,
+            "work with one vertex at {p}: {with_far}, without it {plain}"
+        );
+    }
+}

@@ -67,6 +67,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         })?),
     };
     let mesh = scene.flatten_at(anim, a.time)?;
+    warn_nonfinite(&scene, &mesh);
     let ext = a
         .out
         .extension()
@@ -86,6 +87,38 @@ pub fn run(a: PoseArgs) -> Result<()> {
         mesh.positions.len()
     );
     Ok(())
+}
+
+/// Warns, per mesh instance, about posed vertices that are NaN or infinite (finite node
+/// transforms can overflow when multiplied), naming the node and the mesh; they are written
+/// as they are.
+fn warn_nonfinite(scene: &dynbvh::anim::Scene, mesh: &TriMesh) {
+    for inst in &scene.instances {
+        let Some(v) = mesh.positions.get(inst.vertices.clone()) else {
+            continue;
+        };
+        let bad = v.iter().filter(|p| !p.is_finite()).count();
+        if bad > 0 {
+            let m = &scene.meshes[inst.mesh];
+            eprintln!(
+                "warning: {}: node {}{} mesh {}{}: {bad} of {} posed vertices are not finite \
+                 (NaN or infinite; the transforms overflow)",
+                scene.path.display(),
+                inst.node,
+                scene.nodes[inst.node]
+                    .name
+                    .as_deref()
+                    .map(|n| format!(" \"{n}\""))
+                    .unwrap_or_default(),
+                m.gltf_index,
+                m.name
+                    .as_deref()
+                    .map(|n| format!(" \"{n}\""))
+                    .unwrap_or_default(),
+                v.len()
+            );
+        }
+    }
 }
 
 /// Writes `bytes` to `path`.
