@@ -7,7 +7,37 @@ use glam::Vec3;
 use std::path::Path;
 
 fn read(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| Error::io(path, e))
+    read_file(path, None)
+}
+
+/// Reads a regular file, at most `limit` bytes of it when given. Anything else (a FIFO, a
+/// device, a directory) is refused before it is opened: reading a FIFO without a writer
+/// blocks forever, and a device such as `/dev/zero` never ends.
+pub fn read_file(path: &Path, limit: Option<u64>) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a directory"
+        } else {
+            "not a regular file (a FIFO, socket or device)"
+        };
+        return Err(Error::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("{kind}; only regular files are read"),
+            ),
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = meta.len();
+    let take = limit.map_or(len, |l| l.min(len));
+    let mut out = Vec::with_capacity(usize::try_from(take).unwrap_or(0));
+    file.take(limit.unwrap_or(u64::MAX))
+        .read_to_end(&mut out)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(out)
 }
 
 /// Reads `u32 count` then `count * floats_per_item` little-endian f32.

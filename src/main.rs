@@ -13,6 +13,10 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// Let glTF files read buffers whose URI is absolute or leaves the file's folder (refused
+    /// by default: a file should not make dynbvh read what its user did not hand it).
+    #[arg(long, global = true)]
+    allow_outside_files: bool,
 }
 
 #[derive(Subcommand)]
@@ -46,6 +50,7 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    cli::set_allow_outside_files(cli.allow_outside_files);
     match cli.command {
         Some(Command::BuildBench(a)) => cli::build_bench::run(a),
         Some(Command::Bench(a)) => cli::bench::run(a),

@@ -25,6 +25,10 @@ pub struct LoadOptions {
     /// error naming it and the mesh or accessor that went over, raised before the memory is
     /// allocated.
     pub max_decoded_bytes: Option<u64>,
+    /// Read external buffers whose URI is absolute or leaves the glTF file's folder (through
+    /// `..`). Off by default, so that a file cannot make the loader read what its user did
+    /// not hand it.
+    pub allow_outside_files: bool,
 }
 
 /// What the engine ignores of an extension listed in `extensionsUsed`, or `None` when it
@@ -73,7 +77,7 @@ impl Scene {
     /// Loads a `.gltf` or `.glb` file with options.
     pub fn load_with(path: impl AsRef<Path>, opts: &LoadOptions) -> Result<(Scene, Vec<Warning>)> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_file(path, None)?;
         Self::from_slice(path, &bytes, opts)
     }
 
@@ -83,7 +87,7 @@ impl Scene {
         bytes: &[u8],
         opts: &LoadOptions,
     ) -> Result<(Scene, Vec<Warning>)> {
-        let src = Source::parse(path, bytes)?;
+        let src = Source::parse(path, bytes, opts.allow_outside_files)?;
         let input = bytes.len() as u64 + src.buffers.iter().map(|b| b.len() as u64).sum::<u64>();
         let limit = opts
             .max_decoded_bytes
@@ -255,6 +259,15 @@ fn choose_scene(
             )));
         }
         (Some(s), _) => s,
+        (None, Some(s)) if scenes.is_empty() => {
+            return Err(rd.err(
+                "scene",
+                format!(
+                    "a scene to refer to, found scene {} but the file's scenes list is empty",
+                    s.value()
+                ),
+            ));
+        }
         (None, Some(s)) if s.value() >= scenes.len() => {
             return Err(rd.err(
                 "scene",

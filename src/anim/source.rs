@@ -127,10 +127,33 @@ fn percent_decode(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
+/// Whether a decoded relative URI stays inside the folder it is resolved in: not absolute, no
+/// scheme or drive (`file:`, `C:`), and no `..` that climbs above its start.
+fn inside_folder(rel: &str) -> bool {
+    if rel.starts_with(['/', '\\']) || rel.contains(':') {
+        return false;
+    }
+    let mut depth = 0i64;
+    for part in rel.split(['/', '\\']) {
+        match part {
+            "" | "." => {}
+            ".." => {
+                depth -= 1;
+                if depth < 0 {
+                    return false;
+                }
+            }
+            _ => depth += 1,
+        }
+    }
+    true
+}
+
 impl Source {
     /// Parses `bytes` (the content of `path`, GLB or JSON) and reads every buffer; external
-    /// buffers are resolved relative to `path`'s folder.
-    pub fn parse(path: &Path, bytes: &[u8]) -> Result<Self> {
+    /// buffers are resolved relative to `path`'s folder, read up to their `byteLength`, and
+    /// refused when their URI is absolute or leaves that folder unless `allow_outside`.
+    pub fn parse(path: &Path, bytes: &[u8], allow_outside: bool) -> Result<Self> {
         let (json, blob) = if bytes.starts_with(b"glTF") {
             split_glb(path, bytes)?
         } else {
@@ -170,8 +193,20 @@ impl Source {
                     })?
                 }
                 (Some(uri), _, _) => {
-                    let file: PathBuf = base.join(percent_decode(uri));
-                    std::fs::read(&file).map_err(|e| {
+                    let rel = percent_decode(uri);
+                    if !allow_outside && !inside_folder(&rel) {
+                        return Err(Error::malformed(
+                            path,
+                            &object,
+                            format!(
+                                "a uri inside the file's folder, found {uri:?} (absolute or \
+                                 leaving it; LoadOptions::allow_outside_files, or the \
+                                 command line's --allow-outside-files, allows it)"
+                            ),
+                        ));
+                    }
+                    let file: PathBuf = base.join(rel);
+                    crate::io::read_file(&file, Some(declared)).map_err(|e| {
                         Error::malformed(
                             path,
                             &object,
@@ -214,6 +249,19 @@ mod tests {
     fn percent() {
         assert_eq!(percent_decode("a%20b.bin"), "a b.bin");
         assert_eq!(percent_decode("a%2"), "a%2");
+    }
+
+    #[test]
+    fn uris_inside_the_folder() {
+        assert!(inside_folder("a.bin"));
+        assert!(inside_folder("sub/../a.bin"));
+        assert!(inside_folder("./sub/a%20.bin"));
+        assert!(!inside_folder("../a.bin"));
+        assert!(!inside_folder("sub/../../a.bin"));
+        assert!(!inside_folder("/dev/zero"));
+        assert!(!inside_folder("\\\\server\\a.bin"));
+        assert!(!inside_folder("C:/a.bin"));
+        assert!(!inside_folder("file:///etc/hostname"));
     }
 
     #[test]

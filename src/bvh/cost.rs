@@ -45,7 +45,7 @@ impl Bvh {
             .nodes
             .iter()
             .map(|n| {
-                let a = n.bounds().half_area() as f64;
+                let a = n.bounds().half_area_f64();
                 if n.is_leaf() {
                     c.intersection as f64 * n.count as f64 * a
                 } else {
@@ -53,7 +53,7 @@ impl Bvh {
                 }
             })
             .sum();
-        normalise(sum, root.bounds().half_area(), root.count, c)
+        normalise(sum, root.bounds().half_area_f64(), root.count, c)
     }
 
     /// SAH cost of every subtree, each normalised by its own root's area, written to `out`
@@ -71,16 +71,17 @@ impl Bvh {
             };
         }
         for (cost, n) in out.iter_mut().zip(&self.nodes) {
-            *cost = normalise(*cost as f64, n.bounds().half_area(), n.count, c);
+            *cost = normalise(f64::from(*cost), n.bounds().half_area_f64(), n.count, c);
         }
     }
 }
 
-/// Divides by the area; a tree whose root has no area (all primitives in one point) costs what
-/// its primitives cost.
-fn normalise(sum: f64, area: f32, root_count: u32, c: SahCost) -> f32 {
+/// Divides by the area (in `f64`: a root box with extents past about 1e19 has an area beyond
+/// `f32`); a tree whose root has no area (all primitives in one point) costs what its
+/// primitives cost.
+fn normalise(sum: f64, area: f64, root_count: u32, c: SahCost) -> f32 {
     if area > 0.0 && area.is_finite() {
-        (sum / area as f64) as f32
+        (sum / area) as f32
     } else if root_count > 0 {
         c.intersection * root_count as f32
     } else {

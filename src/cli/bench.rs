@@ -1,5 +1,6 @@
 //! `dynbvh bench`: every refit-or-rebuild policy on the same frames and rays of an animation.
 
+use super::args::{self, Limits, Size};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::anim::Scene;
@@ -8,6 +9,9 @@ use dynbvh::engine::source::{FrameSource, SineSphere};
 use dynbvh::engine::{CostMeasure, Policy, Prices, Traversal};
 use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep, SweepFailure};
 use std::path::{Path, PathBuf};
+
+/// Bytes a camera ray of the benchmark costs: the ray, and each configuration's hit record.
+const RAY_BYTES: u64 = 128;
 
 /// Arguments of `bench`.
 #[derive(Args, Debug)]
@@ -29,23 +33,24 @@ pub struct BenchArgs {
     #[arg(long = "dir", requires = "all")]
     dirs: Vec<PathBuf>,
     /// Instead of a file: a bumpy sphere of about N triangles deformed by a travelling wave.
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     synthetic: Option<usize>,
     /// Animation name or index (default: the first).
     #[arg(long, short)]
     animation: Option<String>,
     /// Frames spread over one loop of the animation (default 60).
-    #[arg(long, conflicts_with = "fps")]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "fps")]
     frames: Option<usize>,
     /// Frames per second of animation time instead of a frame count.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     fps: Option<f32>,
     /// Rays per frame, from a camera looking at the first frame.
-    #[arg(long, conflicts_with = "size")]
-    rays: Option<usize>,
-    /// Camera image size WxH (default 256x256).
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "size",
+          value_parser = clap::value_parser!(u64).range(1..=1 << 28))]
+    rays: Option<u64>,
+    /// Camera image size WxH (default 256x256; sides up to 16384).
     #[arg(long, value_name = "WxH")]
-    size: Option<String>,
+    size: Option<Size>,
     /// Cast the `--rays` (default 65536) of a spinning lidar-like fan above the scene instead of
     /// camera rays; they turn from frame to frame.
     #[arg(long, conflicts_with = "size")]
@@ -74,10 +79,10 @@ pub struct BenchArgs {
     #[arg(long)]
     no_tlas_compare: bool,
     /// Trace passes per frame, the fastest counting.
-    #[arg(long, default_value_t = 3)]
-    repeats: usize,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
+    repeats: u64,
+    /// Worker threads (default: all cores; more than the cores are capped).
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
@@ -92,6 +97,8 @@ pub struct BenchArgs {
     /// Write the prices used to this file (JSON), to reuse with `--prices`.
     #[arg(long, value_name = "FILE")]
     save_prices: Option<PathBuf>,
+    #[command(flatten)]
+    limits: Limits,
 }
 
 /// Triangles of the calibration mesh, and passes per price.
@@ -131,27 +138,11 @@ fn prices(a: &BenchArgs) -> Result<Prices> {
     Ok(p)
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("size {s:?}: expected WxH"))?;
-    let (w, h): (usize, usize) = (w.trim().parse()?, h.trim().parse()?);
-    if w == 0 || h == 0 {
-        bail!("size {s:?}: both sides must be positive");
-    }
-    Ok((w, h))
-}
-
 /// Runs `bench`.
 pub fn run(a: BenchArgs) -> Result<()> {
-    if let Some(t) = a.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build_global()
-            .context("setting up the thread pool")?;
-    }
+    args::init_threads(a.threads)?;
     let mut opts = Options {
-        trace_repeats: a.repeats.max(1),
+        trace_repeats: a.repeats as usize,
         oracle: !a.no_oracle,
         tlas_compare: !a.no_tlas_compare,
         traversal: a.traversal,
@@ -169,18 +160,30 @@ pub fn run(a: BenchArgs) -> Result<()> {
             .map(|p| p.parse::<Policy>().map_err(anyhow::Error::from))
             .collect::<Result<_>>()?;
     }
-    opts.rays = match (a.rays, &a.size) {
-        (n, _) if a.lidar => RaySpec::Lidar(n.unwrap_or(65_536).max(1)),
-        (Some(n), _) => RaySpec::Count(n.max(1)),
-        (None, Some(s)) => {
-            let (w, h) = parse_size(s)?;
-            RaySpec::Size(w, h)
-        }
+    opts.rays = match (a.rays, a.size) {
+        (n, _) if a.lidar => RaySpec::Lidar(n.map_or(65_536, |n| n as usize)),
+        (Some(n), _) => RaySpec::Count(n as usize),
+        (None, Some(s)) => RaySpec::Size(s.w as usize, s.h as usize),
         (None, None) => RaySpec::Size(256, 256),
     };
+    let ray_count = match opts.rays {
+        RaySpec::Count(n) | RaySpec::Lidar(n) => n as u64,
+        RaySpec::Size(w, h) => (w * h) as u64,
+    };
+    let ray_arg = match (a.rays, a.size) {
+        (Some(n), _) => format!("--rays {n}"),
+        (None, Some(s)) => format!("--size {s}"),
+        (None, None) => "the default 256x256 rays".into(),
+    };
+    a.limits.check_memory(
+        &format!("{ray_arg} ({ray_count} rays per frame)"),
+        ray_count * RAY_BYTES,
+    )?;
+    if let Some(n) = a.frames {
+        a.limits.check_frames(&format!("--frames {n}"), n as f64)?;
+    }
     let times = match (a.frames, a.fps) {
-        (_, Some(fps)) if fps > 0.0 && fps.is_finite() => FrameTimes::Fps(fps),
-        (_, Some(fps)) => bail!("--fps {fps}: must be positive"),
+        (_, Some(fps)) => FrameTimes::Fps(fps),
         (Some(n), None) => FrameTimes::Count(n.max(1)),
         (None, None) => FrameTimes::Count(60),
     };
@@ -199,6 +202,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let report = match (&a.file, a.synthetic) {
         (Some(path), _) => {
             let scene = super::load_scene(path, None)?;
+            a.limits.memory.check_scene(&scene, args::BENCH_MEMORY, 1)?;
             let anim = match &a.animation {
                 Some(k) => Some(
                     scene
@@ -214,14 +218,28 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 }
                 None => Some(0),
             };
+            if let FrameTimes::Fps(fps) = times {
+                let d = anim.map_or(0.0, |k| scene.animations[k].duration);
+                let n = args::frames_at(d, fps);
+                a.limits
+                    .check_frames(&format!("--fps {fps} over the animation's {d} s"), n)?;
+            }
             let mut src = GltfSource::new(&scene, anim, times)?;
             eprintln!("{}: {} frames", src.name(), src.frames());
             frame_bench::run(&mut src, &opts, progress)
         }
         (None, Some(n)) => {
+            a.limits.check_memory(
+                &format!("--synthetic {n}"),
+                (n as u64).saturating_mul(args::BENCH_MEMORY.triangle),
+            )?;
             let frames = match times {
                 FrameTimes::Count(n) => n,
-                FrameTimes::Fps(f) => f.ceil() as usize,
+                FrameTimes::Fps(f) => {
+                    let n = args::frames_at(1.0, f);
+                    a.limits.check_frames(&format!("--fps {f} over 1 s"), n)?;
+                    n as usize
+                }
             };
             let mut src = SineSphere::new(n, frames, 0.02, 0.15);
             eprintln!("{}: {} frames", src.name(), src.frames());
@@ -341,6 +359,18 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
                     .as_deref()
                     .map_or(String::new(), |n| format!(" {n:?}"))
             );
+            if let FrameTimes::Fps(fps) = times {
+                let d = scene.animations[anim].duration;
+                let n = args::frames_at(d, fps);
+                if let Err(e) = a.limits.check_frames(&format!("--fps {fps} over {d} s"), n) {
+                    eprintln!("{label}: FAILED: {e}");
+                    failed.push(SweepFailure {
+                        source: label,
+                        error: e.to_string(),
+                    });
+                    continue;
+                }
+            }
             let mut src = match GltfSource::new(&scene, Some(anim), times) {
                 Ok(s) => s,
                 Err(e) => {

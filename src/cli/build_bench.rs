@@ -1,5 +1,6 @@
 //! `dynbvh build-bench`: every builder on one mesh, as a table or JSON.
 
+use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::bvh::{BuildParams, Method};
@@ -16,21 +17,21 @@ pub struct BuildBenchArgs {
     #[arg(required_unless_present = "synthetic", conflicts_with = "synthetic")]
     file: Option<PathBuf>,
     /// Use a bumpy geodesic sphere of about N triangles instead of a file.
-    #[arg(long, value_name = "N")]
-    synthetic: Option<usize>,
+    #[arg(long, allow_negative_numbers = true, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
+    synthetic: Option<u64>,
     /// Ray file(s) in the shared `.rays` format; without any, a 1024x1024 camera and 2^20
     /// random rays of its own.
     #[arg(long = "rays", value_name = "RAYFILE")]
     rays: Vec<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads (default: all cores; more than the cores are capped).
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
     /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all).
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Builds per method; the median is reported.
-    #[arg(long, default_value_t = 5)]
-    runs: usize,
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
+    runs: u64,
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -42,6 +43,8 @@ pub struct BuildBenchArgs {
     /// they are only written to `--out`, so stdout stays one JSON array.
     #[arg(long)]
     no_wide: bool,
+    #[command(flatten)]
+    limits: MemoryLimit,
 }
 
 fn parse_method(s: &str) -> Result<BuildParams> {
@@ -75,7 +78,7 @@ fn parse_method(s: &str) -> Result<BuildParams> {
 }
 
 /// Loads a mesh by extension.
-pub fn load_mesh(path: &Path) -> Result<TriMesh> {
+pub fn load_mesh(path: &Path, limit: &MemoryLimit) -> Result<TriMesh> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -84,7 +87,7 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh> {
     Ok(match ext.as_str() {
         "tri" => dynbvh::io::read_tri(path)?,
         "obj" => dynbvh::io::read_obj(path)?,
-        "glb" | "gltf" => crate::cli::flatten_gltf_at_rest(path)?,
+        "glb" | "gltf" => crate::cli::flatten_gltf_at_rest(path, limit, args::BUILD_MEMORY)?,
         _ => bail!(
             "{}: unknown mesh format (expected .glb, .gltf, .obj or .tri)",
             path.display()
@@ -94,20 +97,25 @@ pub fn load_mesh(path: &Path) -> Result<TriMesh> {
 
 /// Runs `build-bench`.
 pub fn run(args: BuildBenchArgs) -> Result<()> {
-    if let Some(t) = args.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build_global()
-            .context("setting up the thread pool")?;
-    }
+    args::init_threads(args.threads)?;
     let (name, mesh) = match (&args.file, args.synthetic) {
-        (Some(f), _) => (f.display().to_string(), load_mesh(f)?),
-        (None, Some(n)) => (
-            format!("synthetic sphere of about {n} triangles"),
-            shapes::bumpy_sphere(n),
-        ),
+        (Some(f), _) => (f.display().to_string(), load_mesh(f, &args.limits)?),
+        (None, Some(n)) => {
+            args.limits.check_memory(
+                &format!("--synthetic {n} (the mesh and its trees)"),
+                n.saturating_mul(args::BUILD_BYTES_PER_TRIANGLE),
+            )?;
+            (
+                format!("synthetic sphere of about {n} triangles"),
+                shapes::bumpy_sphere(n as usize),
+            )
+        }
         (None, None) => unreachable!("clap requires one"),
     };
+    args.limits.check_memory(
+        &format!("{name}: {} triangles (the mesh and its trees)", mesh.len()),
+        (mesh.len() as u64).saturating_mul(args::BUILD_BYTES_PER_TRIANGLE),
+    )?;
     mesh.check().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     let methods = if args.methods.is_empty() {
         build_bench::default_methods()
@@ -145,7 +153,7 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
     let threads = rayon::current_num_threads();
     eprintln!("{name}: {} triangles, {threads} thread(s)", mesh.len());
     let opts = Options {
-        build_runs: args.runs,
+        build_runs: args.runs as usize,
         ..Options::default()
     };
     let rows = build_bench::run(&mesh, &methods, &sets, opts, |m| eprintln!("  {m} ..."));

@@ -23,7 +23,7 @@ pub struct InfoArgs {
     /// The .gltf or .glb file.
     pub file: PathBuf,
     /// glTF scene index (default: the file's default scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub scene: Option<usize>,
 }
 

@@ -1,5 +1,6 @@
 //! `dynbvh pose`: a scene's triangles at time `t`, written as OBJ or PLY.
 
+use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::geom::TriMesh;
@@ -11,8 +12,8 @@ use std::path::{Path, PathBuf};
 pub struct PoseArgs {
     /// The .gltf or .glb file.
     pub file: PathBuf,
-    /// Time in seconds (wraps beyond the animation's duration).
-    #[arg(long, default_value_t = 0.0)]
+    /// Time in seconds (wraps beyond the animation's duration; may be negative).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true, value_parser = args::finite_time)]
     pub time: f32,
     /// Animation name or index (default: the file's first animation; the rest pose when the
     /// file has none).
@@ -23,16 +24,19 @@ pub struct PoseArgs {
     #[arg(long, conflicts_with = "animation")]
     pub rest: bool,
     /// glTF scene index (default: the file's default scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub scene: Option<usize>,
     /// Output file: .obj (text) or .ply (binary).
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub limits: MemoryLimit,
 }
 
 /// Poses and writes.
 pub fn run(a: PoseArgs) -> Result<()> {
     let scene = super::load_scene(&a.file, a.scene)?;
+    a.limits.check_scene(&scene, args::POSE_MEMORY, 1)?;
     let anim = match &a.animation {
         None if a.rest => None,
         None if scene.animations.is_empty() => {
@@ -63,6 +67,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         })?),
     };
     let mesh = scene.flatten_at(anim, a.time)?;
+    warn_nonfinite(&scene, &mesh);
     let ext = a
         .out
         .extension()
@@ -82,6 +87,38 @@ pub fn run(a: PoseArgs) -> Result<()> {
         mesh.positions.len()
     );
     Ok(())
+}
+
+/// Warns, per mesh instance, about posed vertices that are NaN or infinite (finite node
+/// transforms can overflow when multiplied), naming the node and the mesh; they are written
+/// as they are.
+fn warn_nonfinite(scene: &dynbvh::anim::Scene, mesh: &TriMesh) {
+    for inst in &scene.instances {
+        let Some(v) = mesh.positions.get(inst.vertices.clone()) else {
+            continue;
+        };
+        let bad = v.iter().filter(|p| !p.is_finite()).count();
+        if bad > 0 {
+            let m = &scene.meshes[inst.mesh];
+            eprintln!(
+                "warning: {}: node {}{} mesh {}{}: {bad} of {} posed vertices are not finite \
+                 (NaN or infinite; the transforms overflow)",
+                scene.path.display(),
+                inst.node,
+                scene.nodes[inst.node]
+                    .name
+                    .as_deref()
+                    .map(|n| format!(" \"{n}\""))
+                    .unwrap_or_default(),
+                m.gltf_index,
+                m.name
+                    .as_deref()
+                    .map(|n| format!(" \"{n}\""))
+                    .unwrap_or_default(),
+                v.len()
+            );
+        }
+    }
 }
 
 /// Writes `bytes` to `path`.

@@ -1,6 +1,7 @@
 //! `dynbvh render`: an animation's frames as numbered PNGs (and an animated GIF), shaded or as
 //! traversal-work heat maps, under one policy or two side by side.
 
+use super::args::{self, Limits, Size};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::anim::Scene;
@@ -29,14 +30,14 @@ pub struct RenderArgs {
     /// Frames: a count N spread over one loop of the animation, or a range A..B (B excluded)
     /// of the frames at --fps (default 30). Each run starts with a fresh build at its first
     /// frame, so a long sequence can be split over processes. Default: every frame at --fps.
-    #[arg(long, value_name = "N|A..B")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N|A..B")]
     pub frames: Option<String>,
     /// Frames per second of animation time (default 30).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     pub fps: Option<f32>,
-    /// Image size WxH.
+    /// Image size WxH (sides up to 16384).
     #[arg(long, value_name = "WxH", default_value = "640x480")]
-    pub size: String,
+    pub size: Size,
     /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized,
     /// amortized-plain.
     #[arg(long, short, default_value = "amortized")]
@@ -53,7 +54,12 @@ pub struct RenderArgs {
     #[arg(long)]
     pub heatmap: bool,
     /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
-    #[arg(long, default_value_t = 150, value_name = "WORK")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        default_value_t = 150,
+        value_name = "WORK"
+    )]
     pub heat_max: u32,
     /// Cast a shadow ray toward the key light from every lit point.
     #[arg(long)]
@@ -75,8 +81,8 @@ pub struct RenderArgs {
     /// is left out).
     #[arg(long)]
     pub bench: bool,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads (default: all cores; more than the cores are capped).
+    #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     pub threads: Option<usize>,
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
     /// Shaded frames only: heat maps trace ray by ray.
@@ -86,6 +92,8 @@ pub struct RenderArgs {
     /// the pictures are the same).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
     pub traversal: Traversal,
+    #[command(flatten)]
+    pub limits: Limits,
 }
 
 /// Parses `--packets`.
@@ -170,17 +178,6 @@ impl RenderSummary {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("size {s:?}: expected WxH"))?;
-    let (w, h): (u32, u32) = (w.trim().parse()?, h.trim().parse()?);
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        bail!("size {s:?}: sides must be within 1..=16384");
-    }
-    Ok((w, h))
-}
-
 /// The frame timeline and the range of it to render.
 fn timeline(
     frames: Option<&str>,
@@ -188,7 +185,7 @@ fn timeline(
 ) -> Result<(FrameTimes, Option<(usize, usize)>)> {
     let fps = match fps {
         Some(f) if f > 0.0 && f.is_finite() => Some(f),
-        Some(f) => bail!("--fps {f}: must be positive"),
+        Some(f) => bail!("--fps {f}: must be positive and finite"),
         None => None,
     };
     match frames {
@@ -409,14 +406,16 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
 
 /// Renders as `a` asks and returns what was done.
 pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
-    if let Some(t) = a.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build_global()
-            .context("setting up the thread pool")?;
+    args::init_threads(a.threads)?;
+    let Size { w, h } = a.size;
+    let (mut times, range) = timeline(a.frames.as_deref(), a.fps)?;
+    match (times, range) {
+        (FrameTimes::Count(n), _) => a.limits.check_frames(&format!("--frames {n}"), n as f64)?,
+        (_, Some((s, e))) => a
+            .limits
+            .check_frames(&format!("--frames {s}..{e}"), (e - s) as f64)?,
+        (FrameTimes::Fps(_), None) => {}
     }
-    let (w, h) = parse_size(&a.size)?;
-    let (times, range) = timeline(a.frames.as_deref(), a.fps)?;
     let policies: Vec<Policy> = match &a.compare {
         Some(c) => {
             let p: Vec<Policy> = c
@@ -432,6 +431,9 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     };
 
     let scene = super::load_scene(&a.file, None)?;
+    a.limits
+        .memory
+        .check_scene(&scene, args::RENDER_MEMORY, policies.len() as u64)?;
     let anim = match &a.animation {
         Some(k) => Some(
             scene
@@ -441,6 +443,39 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         None if scene.animations.is_empty() => None,
         None => Some(0),
     };
+    if let FrameTimes::Fps(fps) = times {
+        let d = anim.map_or(0.0, |k| scene.animations[k].duration);
+        let n = args::frames_at(d, fps);
+        if range.is_some() && n > args::MAX_TIMELINE as f64 {
+            bail!(
+                "{}: --fps {fps} over the animation's {d} s is a timeline of {} frames, above \
+                 the bound of {} that --frames A..B indexes into (--frames N spreads N frames \
+                 over the animation)",
+                a.file.display(),
+                args::count(n),
+                args::MAX_TIMELINE
+            );
+        }
+        if range.is_none() && n > a.limits.max_frames as f64 {
+            let cut = args::LONG_CLIP_FRAMES.min(a.limits.max_frames);
+            eprintln!(
+                "note: {}: the animation is {d} s long, {} frames at {fps} fps, above \
+                 --max-frames {}; rendering {cut} frames spread over it (--frames N spreads N, \
+                 --frames A..B renders a stretch at --fps)",
+                a.file.display(),
+                args::count(n),
+                a.limits.max_frames
+            );
+            times = FrameTimes::Count(cut as usize);
+        }
+    }
+    // Per pipeline its image and the renderer's buffers, plus the composed image and the
+    // GIF's RGBA copy.
+    let images = a.size.pixels() * (16 * policies.len() as u64 + 8);
+    a.limits.check_memory(
+        &format!("--size {} (x{} policies)", a.size, policies.len()),
+        images,
+    )?;
     let packets = parse_packets(&a.packets)?;
     let settings = Settings {
         width: w,
@@ -666,7 +701,5 @@ mod tests {
         assert!(timeline(Some("5..5"), None).is_err());
         assert!(timeline(Some("12"), Some(10.0)).is_err());
         assert!(timeline(Some("x"), None).is_err());
-        assert_eq!(parse_size("96x72").unwrap(), (96, 72));
-        assert!(parse_size("0x5").is_err());
     }
 }

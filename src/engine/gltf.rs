@@ -27,6 +27,10 @@ pub enum FrameTimes {
     Fps(f32),
 }
 
+/// Most frames a [`GltfSource`] timeline may hold (its frame times are kept in memory):
+/// about 9.7 hours at 30 fps.
+pub const MAX_FRAMES: usize = 1 << 20;
+
 /// An animated glTF scene replayed frame by frame.
 pub struct GltfSource<'s> {
     poser: Poser<'s>,
@@ -48,22 +52,43 @@ enum Plan {
 
 impl<'s> GltfSource<'s> {
     /// Replays animation `anim` of `scene` (`None`: the rest pose, every frame the same) at the
-    /// given frame times; frame 0 is the animation's start.
+    /// given frame times; frame 0 is the animation's start. More than [`MAX_FRAMES`] frames
+    /// is an [`Error::InvalidArgument`](crate::Error::InvalidArgument).
     pub fn new(scene: &'s Scene, anim: Option<usize>, times: FrameTimes) -> Result<Self> {
         let poser = scene.poser(anim)?;
         let duration = anim.map_or(0.0, |a| scene.animations[a].duration);
+        let frames = match times {
+            FrameTimes::Count(n) => n as f64,
+            FrameTimes::Fps(fps) => (f64::from(duration) * f64::from(fps)).ceil().max(1.0),
+        };
+        if frames > MAX_FRAMES as f64 {
+            let asked = match times {
+                FrameTimes::Count(n) => format!("{n} frames"),
+                FrameTimes::Fps(fps) => format!("{fps} fps over {duration} s: {frames:.3e} frames"),
+            };
+            return Err(crate::Error::InvalidArgument(format!(
+                "{}: {asked}, above the bound of {MAX_FRAMES} frames",
+                scene.path.display()
+            )));
+        }
         let times = match times {
             FrameTimes::Count(n) => (0..=n)
                 .map(|k| {
                     if n == 0 {
                         0.0
                     } else {
-                        duration * k as f32 / n as f32
+                        // The product overflows for durations near f32::MAX.
+                        let t = duration * k as f32;
+                        if t.is_finite() {
+                            t / n as f32
+                        } else {
+                            duration * (k as f32 / n as f32)
+                        }
                     }
                 })
                 .collect(),
             FrameTimes::Fps(fps) => {
-                let n = (duration * fps).ceil().max(1.0) as usize;
+                let n = frames as usize;
                 (0..=n).map(|k| (k as f32 / fps).min(duration)).collect()
             }
         };

@@ -85,6 +85,16 @@ impl Aabb {
         e.x * e.y + e.y * e.z + e.z * e.x
     }
 
+    /// [`Aabb::half_area`] in `f64`, which does not overflow for any finite box (the `f32`
+    /// products overflow once extents pass about 1e19), for costs summed over a tree.
+    #[must_use]
+    #[inline]
+    pub fn half_area_f64(&self) -> f64 {
+        let e = (self.max - self.min).max(Vec3::ZERO);
+        let (x, y, z) = (f64::from(e.x), f64::from(e.y), f64::from(e.z));
+        x * y + y * z + z * x
+    }
+
     /// Index (0, 1, 2) of the longest axis.
     #[must_use]
     pub fn largest_axis(&self) -> usize {

@@ -183,7 +183,7 @@ pub struct GltfCamera {
 /// Reads the JSON of `scene.path` again (the animation loader keeps no cameras).
 pub fn gltf_cameras(scene: &Scene) -> Result<Vec<GltfCamera>> {
     let path = scene.path.as_path();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_file(path, None)?;
     cameras_from_bytes(scene, path, &bytes)
 }
 

@@ -146,13 +146,16 @@ fn unpack(v: f32x8) -> Box3 {
     }
 }
 
-/// Half the surface area of a `[min, -max]` box (0 when empty).
+/// Half the surface area of a `[min, -max]` box (0 when empty), in `f64`: the products of
+/// extents beyond about 1e19 overflow `f32`, and one far vertex would price every split of
+/// the nodes above it at infinity.
 #[inline(always)]
-fn half_area8(v: f32x8) -> f32 {
+fn half_area8(v: f32x8) -> f64 {
     let a = v.as_array();
     // max - min = -(-max + min)
     let e = (-(Vec3A::new(a[4], a[5], a[6]) + Vec3A::new(a[0], a[1], a[2]))).max(Vec3A::ZERO);
-    e.x * e.y + e.y * e.z + e.z * e.x
+    let (x, y, z) = (f64::from(e.x), f64::from(e.y), f64::from(e.z));
+    x * y + y * z + z * x
 }
 
 impl Bins {
@@ -516,8 +519,8 @@ impl Ctx {
         // Cost of splitting after each bin on each axis: right-to-left areas times counts,
         // then left to right `A_L N_L + A_R N_R`. A side with no primitive prices its candidate
         // at infinity; empty bins leave both sides unchanged (ties keep the first candidate).
-        let mut best = (f32::INFINITY, 0usize, 0usize);
-        let mut right_cost = [0f32; MAX_BINS];
+        let mut best = (f64::INFINITY, 0usize, 0usize);
+        let mut right_cost = [0f64; MAX_BINS];
         for axis in (0..3).filter(|&a| map.usable(a)) {
             let bx = &bins.b[axis][..k];
             let mut acc = EMPTY8;
@@ -525,17 +528,17 @@ impl Ctx {
             for i in (1..k).rev() {
                 acc = acc.fast_min(bx[i]);
                 count += count_of(bx[i]);
-                let c = half_area8(acc) * count as f32;
-                right_cost[i - 1] = if count == 0 { f32::INFINITY } else { c };
+                let c = half_area8(acc) * f64::from(count);
+                right_cost[i - 1] = if count == 0 { f64::INFINITY } else { c };
             }
             let mut acc = EMPTY8;
             let mut count = 0u32;
-            let (mut best_cost, mut best_bin) = (f32::INFINITY, 0);
+            let (mut best_cost, mut best_bin) = (f64::INFINITY, 0);
             for i in 0..k - 1 {
                 acc = acc.fast_min(bx[i]);
                 count += count_of(bx[i]);
-                let c = half_area8(acc) * count as f32 + right_cost[i];
-                let c = if count == 0 { f32::INFINITY } else { c };
+                let c = half_area8(acc) * f64::from(count) + right_cost[i];
+                let c = if count == 0 { f64::INFINITY } else { c };
                 // Branch-free: which candidate wins is unpredictable.
                 let better = c < best_cost;
                 best_cost = if better { c } else { best_cost };
@@ -549,9 +552,10 @@ impl Ctx {
         if !cost.is_finite() {
             return None;
         }
-        let area = info.bounds.half_area();
-        let split_cost = self.traversal_cost * area + self.intersection_cost * cost;
-        let leaf_cost = self.intersection_cost * area * n as f32;
+        let area = info.bounds.half_area_f64();
+        let split_cost =
+            f64::from(self.traversal_cost) * area + f64::from(self.intersection_cost) * cost;
+        let leaf_cost = f64::from(self.intersection_cost) * area * n as f64;
         if split_cost >= leaf_cost && n <= self.max_leaf_size {
             return None;
         }

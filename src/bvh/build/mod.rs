@@ -206,6 +206,14 @@ impl Box3 {
         e.x * e.y + e.y * e.z + e.z * e.x
     }
 
+    /// [`Box3::half_area`] in `f64`, which does not overflow for any finite box.
+    #[inline(always)]
+    pub fn half_area_f64(&self) -> f64 {
+        let e = (self.max - self.min).max(Vec3A::ZERO);
+        let (x, y, z) = (f64::from(e.x), f64::from(e.y), f64::from(e.z));
+        x * y + y * z + z * x
+    }
+
     pub fn to_aabb(self) -> Aabb {
         Aabb::new(self.min.into(), self.max.into())
     }
