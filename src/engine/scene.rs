@@ -699,10 +699,12 @@ impl Engine {
                 // replays showed it right; the policy weighs it as it weighs the SAH's fresh
                 // ratio.
                 let (fresh, judged) = if ray_judged {
+                    // Without a sample (the caller traces without `trace_frame` or
+                    // `sample_rays`), the SAH's ratio to the last build stands in.
                     raw_work_ratio = if m.ray_observed > 0.0 {
                         m.ray_observed as f32
                     } else {
-                        1.0
+                        ratio
                     };
                     m.stats.work_ratio =
                         1.0 + m.state.estimate_gain * (raw_work_ratio - 1.0).max(0.0);
