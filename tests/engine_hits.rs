@@ -19,7 +19,7 @@ use dynbvh::bvh::{MeshBvh4, MeshBvh8, PacketMode, brute_force_any, brute_force_c
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{
-    Engine, EngineConfig, MeshId, Policy, SceneHit, Timing, TlasPolicy, Traversal,
+    CostMeasure, Engine, EngineConfig, MeshId, Policy, SceneHit, Timing, TlasPolicy, Traversal,
 };
 use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use dynbvh::report::rays::{camera_rays, random_rays};
@@ -410,7 +410,14 @@ fn default_config_matches_brute_force_through_rebuilds_and_reverts() {
         rebuild_ns_per_tri: 200.0,
         estimate_ns_per_tri: 75.0,
     };
+    // Probation (and so reverts) is the SAH measure's; the default ray-work measure runs
+    // beside it on the same frames and rays, checked against brute force too.
     let config = EngineConfig {
+        timing,
+        cost: CostMeasure::Sah,
+        ..EngineConfig::default()
+    };
+    let default = EngineConfig {
         timing,
         ..EngineConfig::default()
     };
@@ -428,7 +435,7 @@ fn default_config_matches_brute_force_through_rebuilds_and_reverts() {
             &scene,
             Some(0),
             frames,
-            &[config],
+            &[config, default],
             Trace::Rebuilds(k),
             &mut tally,
         );
