@@ -189,6 +189,9 @@ fn view_rays(bounds: &crate::geom::Aabb, side: usize) -> Vec<Ray> {
     rays
 }
 
+/// Least wall-clock length of one timed pass of the calibration, ms.
+const MIN_PASS_MS: f64 = 50.0;
+
 fn trace_all(w: &MeshBvh8, rays: &[Ray]) {
     use rayon::prelude::*;
     rays.par_chunks(256).for_each(|c| {
@@ -222,14 +225,23 @@ fn solve_trace_prices(w1: TraversalStats, t1: f64, w2: TraversalStats, t2: f64) 
     (unit, unit)
 }
 
-/// Median CPU time (ms) of `passes` runs of `f`, after one untimed run.
+/// Median CPU time (ms) of one run of `f` over `passes` passes, after one untimed run. Each
+/// pass repeats `f` for at least [`MIN_PASS_MS`] of wall clock and divides: the kernel's
+/// per-thread CPU time advances only at scheduler events, too coarsely for a single short run.
 fn median_cpu_ms(passes: usize, mut f: impl FnMut()) -> f64 {
     f();
     let mut v: Vec<f64> = (0..passes)
         .map(|_| {
             let t = crate::cputime::CpuClock::now();
-            f();
-            t.elapsed_ms().cpu_ms
+            let mut runs = 0u32;
+            while runs == 0 || t.elapsed_ms().wall_ms < MIN_PASS_MS {
+                f();
+                runs += 1;
+            }
+            let e = t.elapsed_ms();
+            // Without CPU times (not Linux), the wall clock.
+            let ms = if e.cpu_ms > 0.0 { e.cpu_ms } else { e.wall_ms };
+            ms / f64::from(runs)
         })
         .collect();
     v.sort_by(f64::total_cmp);
