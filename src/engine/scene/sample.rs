@@ -43,21 +43,31 @@ impl Engine {
         self.stats.work = sample.estimate();
     }
 
+    /// True when the sample belongs to the frame traced since the last update.
+    fn sample_is_current(&self) -> bool {
+        self.sample.frame == self.frame
+    }
+
+    /// `f` of the current frame's sample, or the default before any ray of it was sampled.
+    fn current<T: Default>(&self, f: impl FnOnce(&Self) -> T) -> T {
+        if self.sample_is_current() {
+            f(self)
+        } else {
+            T::default()
+        }
+    }
+
     /// The ray-work sample of the frame traced since the last update (empty before any).
     #[must_use]
     pub fn work_estimate(&self) -> WorkEstimate {
-        if self.sample.frame == self.frame {
-            self.sample.estimate()
-        } else {
-            WorkEstimate::default()
-        }
+        self.current(|e| e.sample.estimate())
     }
 
     /// Every entry of this frame's sampled rays into an instance (empty before any ray of the
     /// frame was sampled).
     #[must_use]
     pub fn sampled_entries(&self) -> &[SampleEntry] {
-        if self.sample.frame == self.frame {
+        if self.sample_is_current() {
             &self.entries
         } else {
             &[]
@@ -67,31 +77,19 @@ impl Engine {
     /// Sampled work this frame in `mesh`'s tree (all its instances).
     #[must_use]
     pub fn sampled_mesh_work(&self, mesh: MeshId) -> TraversalStats {
-        if self.sample.frame == self.frame {
-            self.sample_work[mesh.0 as usize]
-        } else {
-            TraversalStats::default()
-        }
+        self.current(|e| e.sample_work[mesh.0 as usize])
     }
 
     /// Sampled work this frame, both levels.
     #[must_use]
     pub fn sampled_work(&self) -> TraversalStats {
-        if self.sample.frame == self.frame {
-            self.sample.work
-        } else {
-            TraversalStats::default()
-        }
+        self.current(|e| e.sample.work)
     }
 
     /// Sampled work this frame in the top-level tree.
     #[must_use]
     pub fn sampled_top_work(&self) -> TraversalStats {
-        if self.sample.frame == self.frame {
-            self.sample.top
-        } else {
-            TraversalStats::default()
-        }
+        self.current(|e| e.sample.top)
     }
 
     /// The work `mesh`'s current tree (the one rays walk) costs on `entries` (those of other
