@@ -28,8 +28,9 @@ pub struct Prices {
 }
 
 impl Default for Prices {
-    /// Round figures of the order measured on a 2-core Zen 5 VM (see `docs/ray_work.md`); use
-    /// [`Prices::calibrate`] for the machine at hand.
+    /// Placeholder figures of a plausible order, not a measurement: what an engine never given
+    /// calibrated prices models with (tests, library users); use [`Prices::calibrate`] for the
+    /// machine at hand.
     fn default() -> Self {
         Self {
             refit_ns_per_tri: 6.0,

@@ -366,6 +366,8 @@ pub struct Engine {
     entries: Vec<SampleEntry>,
     /// Its work per mesh.
     sample_work: Vec<TraversalStats>,
+    /// Its entries per mesh.
+    sample_entries: Vec<u32>,
 }
 
 impl Engine {
@@ -389,6 +391,7 @@ impl Engine {
             sample: RaySample::new(u64::MAX),
             entries: Vec::new(),
             sample_work: Vec::new(),
+            sample_entries: Vec::new(),
         }
     }
 
@@ -488,6 +491,7 @@ impl Engine {
             ray_observed: 0.0,
         });
         self.sample_work.push(TraversalStats::default());
+        self.sample_entries.push(0);
         MeshId(self.meshes.len() as u32 - 1)
     }
 
@@ -927,9 +931,9 @@ impl Engine {
         match self.config.cost {
             CostMeasure::Rays => {
                 for (k, m) in self.meshes.iter_mut().enumerate() {
-                    let hits = self.entries.iter().filter(|e| e.mesh.0 == k as u32).count();
+                    let hits = self.sample_entries[k];
                     if hits > 0 {
-                        let per_entry = p.trace_ms(self.sample_work[k]) / hits as f64;
+                        let per_entry = p.trace_ms(self.sample_work[k]) / f64::from(hits);
                         if m.ray_base <= 0.0 {
                             m.ray_base = per_entry;
                             m.ray_observed = 1.0;

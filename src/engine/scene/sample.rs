@@ -24,6 +24,7 @@ impl Engine {
             self.sample = RaySample::new(self.frame);
             self.entries.clear();
             self.sample_work.fill(TraversalStats::default());
+            self.sample_entries.fill(0);
         }
         let mut sample = self.sample;
         let capacity = self.entries.capacity();
@@ -132,7 +133,11 @@ impl Engine {
     fn sample_one(&mut self, ray: &Ray, query: Query) -> (TraversalStats, TraversalStats) {
         let mut entries = std::mem::take(&mut self.entries);
         let mut work = std::mem::take(&mut self.sample_work);
+        let before = entries.len();
         let out = self.trace_recording(ray, query, &mut entries, &mut work);
+        for e in &entries[before..] {
+            self.sample_entries[e.mesh.0 as usize] += 1;
+        }
         self.entries = entries;
         self.sample_work = work;
         out
