@@ -1,0 +1,264 @@
+//! Insertion-based optimisation (Bittner, Hapala & Havran 2013): take out the interior nodes
+//! that cost most and reinsert their two subtrees where they cost least, on a refitted tree or
+//! a fresh one. Leaves are never split or merged, so the result is a valid tree over the same
+//! leaves; it is written back in the builders' layout ([`super::topology`]).
+//!
+//! A node is chosen by the paper's combined measure `A(n) * A(n) / (A(l) + A(r)) * A(n) /
+//! min(A(l), A(r))` (large boxes over small, unbalanced children: what refitting moving parts
+//! makes). Its subtree leaves the tree (its sibling takes the parent's place) and is inserted
+//! again as the sibling of the node that minimises the increase of the summed areas, found by
+//! branch and bound over the tree (Bittner et al., section 4.2), unless putting it back where
+//! it was costs as little, so the SAH never grows (the paper reinserts the node's two children
+//! instead, which may): the
+//! cost of inserting box `b` beside `x` is `A(x ∪ b)` plus the growth `A(y ∪ b) - A(y)` of
+//! every ancestor `y` of `x`, a bound that only grows going down.
+
+use super::MeshBvh;
+use super::topology::{NONE, RestructureWorkspace, Topology};
+use crate::geom::Aabb;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// How much an optimisation may do.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OptimizeBudget {
+    /// Share of the interior nodes taken out and reinserted per pass (0 ..= 1).
+    pub share: f32,
+    /// Passes (each picks its nodes anew).
+    pub passes: u32,
+    /// Most candidate positions one insertion looks at (bounds the search on bad trees).
+    pub max_visits: u32,
+}
+
+impl Default for OptimizeBudget {
+    fn default() -> Self {
+        Self {
+            share: 0.01,
+            passes: 1,
+            max_visits: 4096,
+        }
+    }
+}
+
+/// What an optimisation did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OptimizeStats {
+    /// Nodes taken out and reinserted.
+    pub moved: u32,
+    /// Summed half areas (the SAH's numerator with constants 1) before and after.
+    pub sum_before: f64,
+    pub sum_after: f64,
+}
+
+/// Scratch of the insertion search, kept between calls.
+#[derive(Clone, Debug, Default)]
+pub struct OptimizeScratch {
+    picks: Vec<(f32, u32)>,
+    heap: BinaryHeap<Candidate>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Candidate {
+    /// Lower bound of any insertion at or below `node`: the induced cost plus the new box's area.
+    bound: f32,
+    /// Growth of the ancestors' areas above `node`.
+    induced: f32,
+    node: u32,
+}
+
+impl Eq for Candidate {}
+
+impl Ord for Candidate {
+    fn cmp(&self, o: &Self) -> Ordering {
+        // Smallest bound first.
+        o.bound.total_cmp(&self.bound)
+    }
+}
+
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+impl Topology {
+    /// Optimises in place within `budget` (see the module docs).
+    pub fn optimize(&mut self, budget: OptimizeBudget, s: &mut OptimizeScratch) -> OptimizeStats {
+        let mut stats = OptimizeStats {
+            sum_before: self.sah_sum(),
+            ..OptimizeStats::default()
+        };
+        let interior = self.child.iter().filter(|c| c[0] != NONE).count();
+        let k = ((interior as f64 * f64::from(budget.share.clamp(0.0, 1.0))).ceil() as usize)
+            .min(interior);
+        for _ in 0..budget.passes {
+            if k == 0 {
+                break;
+            }
+            self.pick(k, &mut s.picks);
+            for i in 0..s.picks.len() {
+                let n = s.picks[i].1;
+                if self.reinsert(n, budget.max_visits, &mut s.heap) {
+                    stats.moved += 1;
+                }
+            }
+        }
+        stats.sum_after = self.sah_sum();
+        stats
+    }
+
+    /// The `k` reachable interior nodes (not the root nor its children) with the largest
+    /// combined measure, into `picks`.
+    fn pick(&self, k: usize, picks: &mut Vec<(f32, u32)>) {
+        picks.clear();
+        for n in 0..self.len() as u32 {
+            // Interior and not the root (unreachable ids have no parent either).
+            if self.is_leaf(n) || self.parent[n as usize] == NONE {
+                continue;
+            }
+            let [l, r] = self.child[n as usize];
+            let (a, al, ar) = (self.area(n), self.area(l), self.area(r));
+            let m = if al + ar > 0.0 && al.min(ar) > 0.0 {
+                a * (a / (al + ar)) * (a / al.min(ar))
+            } else {
+                a
+            };
+            picks.push((m, n));
+        }
+        if picks.len() > k {
+            picks.select_nth_unstable_by(k, |a, b| b.0.total_cmp(&a.0));
+            picks.truncate(k);
+        }
+        // Worst first, and the same order on every run.
+        picks.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    }
+
+    /// Takes the subtree at `n` out (its sibling takes its parent's place) and inserts it
+    /// where it costs least, if that is cheaper than where it was: the summed areas never
+    /// grow. Returns true when it moved.
+    fn reinsert(&mut self, n: u32, max_visits: u32, heap: &mut BinaryHeap<Candidate>) -> bool {
+        let p = self.parent[n as usize];
+        if p == NONE {
+            return false;
+        }
+        let sibling = self.child[p as usize][1 - self.side(n)];
+        let g = self.parent[p as usize];
+        if g == NONE {
+            self.root = sibling;
+            self.parent[sibling as usize] = NONE;
+        } else {
+            let side = self.side(p);
+            self.link(g, side, sibling);
+            self.refit_up(g);
+        }
+        let b = self.bounds[n as usize];
+        let ab = b.half_area();
+        // What putting it back costs: beside its old sibling, with that one's ancestors grown.
+        let mut back = self.bounds[sibling as usize].union(b).half_area();
+        let mut y = self.parent[sibling as usize];
+        while y != NONE {
+            back += self.bounds[y as usize].union(b).half_area() - self.area(y);
+            y = self.parent[y as usize];
+        }
+        let (best, cost) = self.best_sibling(b, ab, max_visits, heap);
+        let moved = cost < back * (1.0 - MIN_GAIN) && best != sibling;
+        self.insert(n, p, if moved { best } else { sibling });
+        moved
+    }
+
+    /// Inserts subtree `x` as the sibling of `best`, with `free` (an unused interior id) as
+    /// their new parent.
+    fn insert(&mut self, x: u32, free: u32, best: u32) {
+        let b = self.bounds[x as usize];
+        let gp = self.parent[best as usize];
+        self.bounds[free as usize] = self.bounds[best as usize].union(b);
+        self.child[free as usize] = [best, x];
+        self.leaf[free as usize] = [0, 0];
+        if gp == NONE {
+            self.root = free;
+            self.parent[free as usize] = NONE;
+        } else {
+            let side = self.side(best);
+            self.link(gp, side, free);
+        }
+        self.parent[best as usize] = free;
+        self.parent[x as usize] = free;
+        self.refit_up(gp);
+    }
+
+    /// Branch and bound for the node beside which box `b` (half area `ab`) costs least.
+    fn best_sibling(
+        &self,
+        b: Aabb,
+        ab: f32,
+        max_visits: u32,
+        heap: &mut BinaryHeap<Candidate>,
+    ) -> (u32, f32) {
+        heap.clear();
+        heap.push(Candidate {
+            bound: ab,
+            induced: 0.0,
+            node: self.root,
+        });
+        let (mut best, mut best_cost) = (self.root, f32::INFINITY);
+        let mut visits = 0;
+        while let Some(c) = heap.pop() {
+            if c.bound >= best_cost || visits >= max_visits {
+                break;
+            }
+            visits += 1;
+            let joined = self.bounds[c.node as usize].union(b).half_area();
+            let direct = joined + c.induced;
+            if direct < best_cost {
+                best_cost = direct;
+                best = c.node;
+            }
+            if !self.is_leaf(c.node) {
+                let induced = c.induced + joined - self.area(c.node);
+                let bound = induced + ab;
+                if bound < best_cost {
+                    for &k in &self.child[c.node as usize] {
+                        heap.push(Candidate {
+                            bound,
+                            induced,
+                            node: k,
+                        });
+                    }
+                }
+            }
+        }
+        (best, best_cost)
+    }
+}
+
+/// Relative gain below which a subtree stays where it is (rounding would otherwise move
+/// subtrees back and forth for nothing).
+const MIN_GAIN: f32 = 1e-4;
+
+impl MeshBvh {
+    /// Optimises the tree in place (see the module docs) and writes it back; the triangles move
+    /// with their leaves. Allocates nothing once `ws` and `s` have grown to the tree's size.
+    /// Leaves the tree as it was when the result would be deeper than [`super::MAX_DEPTH`]
+    /// (then `moved` is 0).
+    pub fn optimize(
+        &mut self,
+        budget: OptimizeBudget,
+        ws: &mut RestructureWorkspace,
+        s: &mut OptimizeScratch,
+    ) -> OptimizeStats {
+        if self.bvh.nodes.len() < 5 {
+            return OptimizeStats::default();
+        }
+        ws.topo.load(&self.bvh);
+        let stats = ws.topo.optimize(budget, s);
+        if self.apply_topology(ws) {
+            stats
+        } else {
+            OptimizeStats {
+                moved: 0,
+                sum_after: stats.sum_before,
+                ..stats
+            }
+        }
+    }
+}
