@@ -35,6 +35,10 @@ enum Command {
     /// Render an animation's frames as PNGs (and a GIF): shaded, as traversal-work heat maps,
     /// or under two policies side by side.
     Render(cli::render::RenderArgs),
+    /// The rungs between refit and rebuild (optimise, partial rebuild, rebuild) on an
+    /// animation's largest deforming mesh: time, and how much of the quality lost to
+    /// refitting each wins back.
+    Rungs(cli::rungs::RungsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -58,6 +62,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Pose(a)) => cli::pose::run(a),
         Some(Command::Gen(a)) => cli::r#gen::run(a),
         Some(Command::Render(a)) => cli::render::run(a),
+        Some(Command::Rungs(a)) => cli::rungs::run(a),
         None => cli::default_job::run(),
     }
 }

@@ -84,7 +84,7 @@ fn run_clip(file: &str, frames: usize) -> (f64, f64, f64, f64) {
             let what = format!("{file} mesh {k} frame {f}");
             refitted.refit(mesh);
             let mut o = refitted.clone();
-            let st = o.optimize(budget, &mut ws, &mut os);
+            o.optimize(budget, &mut ws, &mut os);
             check(mesh, &o, &format!("{what}, optimised"));
             let mut p = refitted.clone();
             let mut c = cut.clone();
@@ -120,14 +120,23 @@ fn run_clip(file: &str, frames: usize) -> (f64, f64, f64, f64) {
 
 #[test]
 fn optimised_and_partly_rebuilt_trees_are_exact_on_every_frame() {
-    for file in ["explode.glb", "swap.glb", "tube.glb", "wave.glb", "lidar_cloth.glb"] {
+    for file in [
+        "explode.glb",
+        "swap.glb",
+        "tube.glb",
+        "wave.glb",
+        "lidar_cloth.glb",
+    ] {
         let (refit, opt, partial, fresh) = run_clip(file, 24);
         eprintln!(
             "{file}: summed SAH refit {refit:.1}, optimised {opt:.1}, partial {partial:.1}, \
              fresh {fresh:.1}"
         );
         assert!(opt < refit, "{file}: optimising did not lower the SAH");
-        assert!(partial <= refit * 1.001, "{file}: partial rebuild raised the SAH");
+        assert!(
+            partial <= refit * 1.001,
+            "{file}: partial rebuild raised the SAH"
+        );
     }
 }
 
@@ -157,9 +166,12 @@ fn optimise_lowers_the_sah_of_a_fresh_build() {
     );
     check(&mesh, &bvh, "bumpy sphere");
     let after = bvh.bvh().sah_cost();
-    eprintln!("fresh binned16 SAH {before} -> {after} ({} moved)", st.moved);
+    eprintln!(
+        "fresh binned16 SAH {before} -> {after} ({} moved)",
+        st.moved
+    );
     assert!(after < before, "{before} -> {after}");
-    assert!(st.sum_after < st.sum_before);
+    assert!(st.gain > 0.0);
 }
 
 #[test]
@@ -167,13 +179,18 @@ fn degenerate_inputs_survive_both_operations() {
     let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
     let cases: Vec<(&str, TriMesh)> = vec![
         ("one triangle", TriMesh::from_soup(&[tri])),
-        ("two triangles", TriMesh::from_soup(&[tri, tri.map(|v| v + Vec3::Z)])),
+        (
+            "two triangles",
+            TriMesh::from_soup(&[tri, tri.map(|v| v + Vec3::Z)]),
+        ),
         ("coincident centroids", TriMesh::from_soup(&vec![tri; 500])),
         (
             "coplanar",
             TriMesh::from_soup(
                 &(0..800)
-                    .map(|i| tri.map(|v| v * 0.1 + Vec3::new((i % 40) as f32, (i / 40) as f32, 0.0)))
+                    .map(|i| {
+                        tri.map(|v| v * 0.1 + Vec3::new((i % 40) as f32, (i / 40) as f32, 0.0))
+                    })
                     .collect::<Vec<_>>(),
             ),
         ),

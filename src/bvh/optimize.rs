@@ -43,11 +43,11 @@ impl Default for OptimizeBudget {
 /// What an optimisation did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OptimizeStats {
-    /// Nodes taken out and reinserted.
+    /// Nodes taken out and reinserted elsewhere.
     pub moved: u32,
-    /// Summed half areas (the SAH's numerator with constants 1) before and after.
-    pub sum_before: f64,
-    pub sum_after: f64,
+    /// How much the summed half areas of the interior nodes (the SAH's numerator with
+    /// constants 1) went down.
+    pub gain: f64,
 }
 
 /// Scratch of the insertion search, kept between calls.
@@ -84,10 +84,7 @@ impl PartialOrd for Candidate {
 impl Topology {
     /// Optimises in place within `budget` (see the module docs).
     pub fn optimize(&mut self, budget: OptimizeBudget, s: &mut OptimizeScratch) -> OptimizeStats {
-        let mut stats = OptimizeStats {
-            sum_before: self.sah_sum(),
-            ..OptimizeStats::default()
-        };
+        let mut stats = OptimizeStats::default();
         let interior = self.child.iter().filter(|c| c[0] != NONE).count();
         let k = ((interior as f64 * f64::from(budget.share.clamp(0.0, 1.0))).ceil() as usize)
             .min(interior);
@@ -98,12 +95,12 @@ impl Topology {
             self.pick(k, &mut s.picks);
             for i in 0..s.picks.len() {
                 let n = s.picks[i].1;
-                if self.reinsert(n, budget.max_visits, &mut s.heap) {
+                if let Some(gain) = self.reinsert(n, budget.max_visits, &mut s.heap) {
                     stats.moved += 1;
+                    stats.gain += f64::from(gain);
                 }
             }
         }
-        stats.sum_after = self.sah_sum();
         stats
     }
 
@@ -135,11 +132,16 @@ impl Topology {
 
     /// Takes the subtree at `n` out (its sibling takes its parent's place) and inserts it
     /// where it costs least, if that is cheaper than where it was: the summed areas never
-    /// grow. Returns true when it moved.
-    fn reinsert(&mut self, n: u32, max_visits: u32, heap: &mut BinaryHeap<Candidate>) -> bool {
+    /// grow. Returns how much they went down when it moved.
+    fn reinsert(
+        &mut self,
+        n: u32,
+        max_visits: u32,
+        heap: &mut BinaryHeap<Candidate>,
+    ) -> Option<f32> {
         let p = self.parent[n as usize];
         if p == NONE {
-            return false;
+            return None;
         }
         let sibling = self.child[p as usize][1 - self.side(n)];
         let g = self.parent[p as usize];
@@ -163,7 +165,7 @@ impl Topology {
         let (best, cost) = self.best_sibling(b, ab, max_visits, heap);
         let moved = cost < back * (1.0 - MIN_GAIN) && best != sibling;
         self.insert(n, p, if moved { best } else { sibling });
-        moved
+        moved.then_some(back - cost)
     }
 
     /// Inserts subtree `x` as the sibling of `best`, with `free` (an unused interior id) as
@@ -254,11 +256,7 @@ impl MeshBvh {
         if self.apply_topology(ws) {
             stats
         } else {
-            OptimizeStats {
-                moved: 0,
-                sum_after: stats.sum_before,
-                ..stats
-            }
+            OptimizeStats::default()
         }
     }
 }

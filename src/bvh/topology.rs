@@ -113,33 +113,6 @@ impl Topology {
         }
     }
 
-    /// Sum of the reachable nodes' half areas, interior nodes once and leaves once per
-    /// primitive (the SAH's numerator with both constants 1).
-    #[must_use]
-    /// Allocates only to grow.
-    pub fn sah_sum(&mut self) -> f64 {
-        if self.bounds.is_empty() {
-            return 0.0;
-        }
-        let mut stack = std::mem::take(&mut self.stack);
-        stack.clear();
-        stack.push((self.root, 0, 0));
-        let mut sum = 0.0f64;
-        while let Some((n, _, _)) = stack.pop() {
-            let a = f64::from(self.area(n));
-            if self.is_leaf(n) {
-                sum += a * f64::from(self.leaf[n as usize][1]);
-            } else {
-                sum += a;
-                for &c in &self.child[n as usize] {
-                    stack.push((c, 0, 0));
-                }
-            }
-        }
-        self.stack = stack;
-        sum
-    }
-
     /// Where node `n` went in the last write-back.
     #[must_use]
     pub fn position(&self, n: u32) -> u32 {
@@ -229,15 +202,19 @@ impl MeshBvh {
         }
         debug_assert_eq!(ws.perm.len(), self.tris.len());
         std::mem::swap(&mut self.bvh.nodes, &mut ws.nodes);
-        ws.old_prims.clone_from(&self.bvh.prim_indices);
-        ws.old_tris.clone_from(&self.tris);
-        ws.old_leaf_indices.clone_from(&self.leaf_indices);
-        for (new, &old) in ws.perm.iter().enumerate() {
-            let old = old as usize;
-            self.bvh.prim_indices[new] = ws.old_prims[old];
-            self.tris[new] = ws.old_tris[old];
-            self.leaf_indices[new] = ws.old_leaf_indices[old];
-        }
+        // Gathered into the scratch, which then trades places with the tree's arrays.
+        gather(&mut ws.old_prims, &self.bvh.prim_indices, &ws.perm);
+        gather(&mut ws.old_tris, &self.tris, &ws.perm);
+        gather(&mut ws.old_leaf_indices, &self.leaf_indices, &ws.perm);
+        std::mem::swap(&mut self.bvh.prim_indices, &mut ws.old_prims);
+        std::mem::swap(&mut self.tris, &mut ws.old_tris);
+        std::mem::swap(&mut self.leaf_indices, &mut ws.old_leaf_indices);
         true
     }
+}
+
+/// `out[i] = from[perm[i]]`.
+fn gather<T: Copy>(out: &mut Vec<T>, from: &[T], perm: &[u32]) {
+    out.clear();
+    out.extend(perm.iter().map(|&p| from[p as usize]));
 }

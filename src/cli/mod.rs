@@ -8,6 +8,7 @@ pub mod r#gen;
 pub mod info;
 pub mod pose;
 pub mod render;
+pub mod rungs;
 
 use anyhow::Result;
 use std::path::Path;

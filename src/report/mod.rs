@@ -6,4 +6,5 @@ pub mod charts;
 pub mod frame_bench;
 pub mod ray_sweep;
 pub mod rays;
+pub mod rungs;
 pub mod wide_bench;
