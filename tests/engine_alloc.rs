@@ -80,7 +80,8 @@ fn run_frames(config: EngineConfig, trace_ms: Option<f64>, frames: usize) -> Vec
         }
         let (rebuilds, reverts, tlas_rebuilt) = {
             let s = e.update();
-            (s.rebuilds, s.reverts, s.tlas_rebuilt)
+            // Optimisations and partial rebuilds count with the rebuilds.
+            (s.rebuilds + s.restructures, s.reverts, s.tlas_rebuilt)
         };
         match trace_ms {
             None => {
@@ -223,6 +224,35 @@ fn frames_allocate_nothing(traversal: Traversal) {
             40,
             1,
             1,
+        ),
+        // The rungs between refit and rebuild, with a second of tracing a frame: optimisations
+        // and partial rebuilds write the tree back into storage their first use sized.
+        (
+            Policy::Optimize(0.05),
+            TlasPolicy::DEFAULT,
+            MODELED,
+            Some(1000.0),
+            40,
+            2,
+            0,
+        ),
+        (
+            Policy::Partial(0.25),
+            TlasPolicy::DEFAULT,
+            MODELED,
+            Some(1000.0),
+            40,
+            2,
+            0,
+        ),
+        (
+            Policy::Ladder,
+            TlasPolicy::DEFAULT,
+            MODELED,
+            Some(1000.0),
+            40,
+            2,
+            0,
         ),
         // The plain rule rebuilds into the tree's own storage and never probes.
         (

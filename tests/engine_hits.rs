@@ -32,6 +32,11 @@ const GRAZE: f32 = 1e-3;
 fn policies() -> Vec<Policy> {
     let mut p = Policy::standard_set();
     p.push(Policy::Periodic(3));
+    p.extend([
+        Policy::Optimize(0.05),
+        Policy::Partial(0.25),
+        Policy::Ladder,
+    ]);
     p
 }
 

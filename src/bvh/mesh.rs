@@ -147,6 +147,16 @@ impl MeshBvh {
             + to(&mut self.leaf_indices, n)
     }
 
+    /// Reserves room for the most nodes any tree over its triangles can have (`2 n - 1`), so
+    /// that operations that change the node count (a partial rebuild) allocate nothing.
+    pub fn reserve_any_shape(&mut self) {
+        let want = (2 * self.tris.len()).max(1);
+        let nodes = &mut self.bvh.nodes;
+        if nodes.capacity() < want {
+            nodes.reserve_exact(want - nodes.len());
+        }
+    }
+
     /// Bytes held: nodes, primitive indices, and the leaf-ordered triangles and vertex indices.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {

@@ -45,6 +45,8 @@ impl Default for OptimizeBudget {
 pub struct OptimizeStats {
     /// Nodes taken out and reinserted elsewhere.
     pub moved: u32,
+    /// Candidate positions the searches looked at.
+    pub visits: u64,
     /// How much the summed half areas of the interior nodes (the SAH's numerator with
     /// constants 1) went down.
     pub gain: f64,
@@ -64,6 +66,16 @@ struct Candidate {
     /// Growth of the ancestors' areas above `node`.
     induced: f32,
     node: u32,
+}
+
+impl OptimizeScratch {
+    /// Reserves the search's queue for `budget` (it holds at most two entries per visit).
+    pub fn reserve(&mut self, budget: OptimizeBudget) {
+        let want = 2 * budget.max_visits as usize + 2;
+        if self.heap.capacity() < want {
+            self.heap.reserve(want - self.heap.len());
+        }
+    }
 }
 
 impl Eq for Candidate {}
@@ -95,7 +107,9 @@ impl Topology {
             self.pick(k, &mut s.picks);
             for i in 0..s.picks.len() {
                 let n = s.picks[i].1;
-                if let Some(gain) = self.reinsert(n, budget.max_visits, &mut s.heap) {
+                let (moved, visits) = self.reinsert(n, budget.max_visits, &mut s.heap);
+                stats.visits += u64::from(visits);
+                if let Some(gain) = moved {
                     stats.moved += 1;
                     stats.gain += f64::from(gain);
                 }
@@ -138,10 +152,10 @@ impl Topology {
         n: u32,
         max_visits: u32,
         heap: &mut BinaryHeap<Candidate>,
-    ) -> Option<f32> {
+    ) -> (Option<f32>, u32) {
         let p = self.parent[n as usize];
         if p == NONE {
-            return None;
+            return (None, 0);
         }
         let sibling = self.child[p as usize][1 - self.side(n)];
         let g = self.parent[p as usize];
@@ -162,10 +176,10 @@ impl Topology {
             back += self.bounds[y as usize].union(b).half_area() - self.area(y);
             y = self.parent[y as usize];
         }
-        let (best, cost) = self.best_sibling(b, ab, max_visits, heap);
+        let (best, cost, visits) = self.best_sibling(b, ab, max_visits, heap);
         let moved = cost < back * (1.0 - MIN_GAIN) && best != sibling;
         self.insert(n, p, if moved { best } else { sibling });
-        moved.then_some(back - cost)
+        (moved.then_some(back - cost), visits)
     }
 
     /// Inserts subtree `x` as the sibling of `best`, with `free` (an unused interior id) as
@@ -195,7 +209,7 @@ impl Topology {
         ab: f32,
         max_visits: u32,
         heap: &mut BinaryHeap<Candidate>,
-    ) -> (u32, f32) {
+    ) -> (u32, f32, u32) {
         heap.clear();
         heap.push(Candidate {
             bound: ab,
@@ -229,7 +243,7 @@ impl Topology {
                 }
             }
         }
-        (best, best_cost)
+        (best, best_cost, visits)
     }
 }
 

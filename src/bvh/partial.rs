@@ -67,6 +67,19 @@ impl PartialCut {
         self.roots.is_empty()
     }
 
+    /// Forgets the cut (after an operation that moved its subtrees): the next partial rebuild
+    /// takes a new one.
+    pub fn clear(&mut self) {
+        self.roots.clear();
+        self.reference.clear();
+    }
+
+    /// Marks every cut subtree as degraded, so that the next partial rebuild of share 1
+    /// rebuilds them all (to size scratch buffers ahead of the frame loop).
+    pub fn mark_all_degraded(&mut self) {
+        self.reference.fill(f32::MIN_POSITIVE);
+    }
+
     /// Takes the cut of a freshly built tree. Allocates only to grow.
     pub fn reset(&mut self, tree: &MeshBvh, s: &mut PartialScratch) {
         self.roots.clear();
@@ -75,8 +88,38 @@ impl PartialCut {
         if bvh.nodes().is_empty() {
             return;
         }
+        // Per-node scratch for any tree over these primitives (fewer than `2 n` nodes).
+        let nodes = 2 * bvh.prim_count();
+        if s.counts.capacity() < nodes {
+            s.counts.reserve_exact(nodes - s.counts.len());
+        }
+        if s.costs.capacity() < nodes {
+            s.costs.reserve_exact(nodes - s.costs.len());
+        }
         prim_counts(bvh, &mut s.counts);
         let limit = (bvh.prim_count() / CUT_TARGET).max(2 * bvh.max_leaf_size() as usize) as u32;
+        // Every cut subtree's parent holds more than `limit` primitives, and fewer than
+        // `2 n / limit` nodes do: room for the largest cut any tree over these primitives has,
+        // so that taking the cut of a later build allocates nothing.
+        let most = (4 * bvh.prim_count() / limit.max(1) as usize + 2).min(bvh.prim_count());
+        if self.roots.capacity() < most {
+            self.roots.reserve_exact(most);
+            self.reference.reserve_exact(most);
+        }
+        if s.boxes.capacity() < most {
+            // The top's build over that many subtrees, once, so that its tree and scratch have
+            // grown to it.
+            s.boxes.clear();
+            s.boxes.extend((0..most).map(|i| {
+                let p = glam::Vec3::new(i as f32, (i % 7) as f32, (i % 3) as f32);
+                Aabb::new(p, p + glam::Vec3::ONE)
+            }));
+            let params = BuildParams {
+                max_leaf_size: 1,
+                ..BuildParams::BINNED
+            };
+            s.top.rebuild(&s.boxes, &params, &mut s.build);
+        }
         // Depth first from the root: a node within the limit (or a leaf) is a cut subtree.
         let mut stack = std::mem::take(&mut s.ranked);
         stack.clear();

@@ -178,6 +178,30 @@ pub struct RestructureWorkspace {
 }
 
 impl RestructureWorkspace {
+    /// Reserves what a tree over `tris` primitives can need whatever its shape: a binary tree
+    /// has fewer than `2 tris` nodes, and a partial rebuild's linked form holds the old nodes
+    /// and the new ones side by side.
+    pub fn reserve(&mut self, tris: usize) {
+        fn to<T>(v: &mut Vec<T>, cap: usize) {
+            if v.capacity() < cap {
+                v.reserve_exact(cap - v.len());
+            }
+        }
+        let nodes = 2 * tris.max(1);
+        let t = &mut self.topo;
+        to(&mut t.bounds, 2 * nodes);
+        to(&mut t.child, 2 * nodes);
+        to(&mut t.parent, 2 * nodes);
+        to(&mut t.leaf, 2 * nodes);
+        to(&mut t.pos, 2 * nodes);
+        to(&mut t.stack, 2 * MAX_DEPTH + 2);
+        to(&mut self.nodes, nodes);
+        to(&mut self.perm, tris);
+        to(&mut self.old_prims, tris);
+        to(&mut self.old_tris, tris);
+        to(&mut self.old_leaf_indices, tris);
+    }
+
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
@@ -201,14 +225,16 @@ impl MeshBvh {
             return false;
         }
         debug_assert_eq!(ws.perm.len(), self.tris.len());
-        std::mem::swap(&mut self.bvh.nodes, &mut ws.nodes);
-        // Gathered into the scratch, which then trades places with the tree's arrays.
+        // Gathered into the scratch and copied back: the scratch is shared by meshes of every
+        // size, so it keeps its own (largest) storage rather than trading it with one tree.
+        self.bvh.nodes.clear();
+        self.bvh.nodes.extend_from_slice(&ws.nodes);
         gather(&mut ws.old_prims, &self.bvh.prim_indices, &ws.perm);
         gather(&mut ws.old_tris, &self.tris, &ws.perm);
         gather(&mut ws.old_leaf_indices, &self.leaf_indices, &ws.perm);
-        std::mem::swap(&mut self.bvh.prim_indices, &mut ws.old_prims);
-        std::mem::swap(&mut self.tris, &mut ws.old_tris);
-        std::mem::swap(&mut self.leaf_indices, &mut ws.old_leaf_indices);
+        self.bvh.prim_indices.copy_from_slice(&ws.old_prims);
+        self.tris.copy_from_slice(&ws.old_tris);
+        self.leaf_indices.copy_from_slice(&ws.old_leaf_indices);
         true
     }
 }

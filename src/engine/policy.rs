@@ -56,6 +56,76 @@ pub enum Policy {
     /// ([`super::Timing`]); a rebuild resets the sum. Selectable as `amortized-plain`, for
     /// comparison with the default.
     AmortizedPlain,
+    /// [`Policy::Amortized`]'s rule with insertion-based optimisation of this share of the
+    /// interior nodes ([`crate::bvh::optimize`]) as the only action besides refit: it acts when
+    /// the extra trace time it is expected to win back passes its cost.
+    Optimize(f32),
+    /// The same with a partial rebuild of at most this share of the triangles
+    /// ([`crate::bvh::partial`]).
+    Partial(f32),
+    /// The ladder: refit, optimise ([`LADDER_OPTIMIZE`]), partial rebuild ([`LADDER_PARTIAL`])
+    /// or full rebuild, whichever is expected to win back the most extra trace time over its
+    /// cost once one of them has paid; each rung's cost and share of the degradation it
+    /// recovers are learnt per mesh from what it did (see [`RungModel`]).
+    Ladder,
+}
+
+/// The optimisation budget of [`Policy::Ladder`]: a share of the interior nodes.
+pub const LADDER_OPTIMIZE: f32 = 0.01;
+/// The partial rebuild of [`Policy::Ladder`]: at most this share of the triangles.
+pub const LADDER_PARTIAL: f32 = 0.25;
+
+/// What a policy decided for one mesh in one frame, before it is done.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Decision {
+    /// Refit only.
+    Refit,
+    /// Refit, then optimise this share of the interior nodes.
+    Optimize(f32),
+    /// Refit, then rebuild the top and at most this share of the triangles.
+    Partial(f32),
+    /// Rebuild (possibly after a refit that measured the degradation).
+    Rebuild,
+}
+
+impl Decision {
+    /// The rung's index among [`PolicyState::rungs`] (optimise 0, partial 1), if it is one.
+    #[must_use]
+    pub fn rung(self) -> Option<usize> {
+        match self {
+            Decision::Optimize(_) => Some(0),
+            Decision::Partial(_) => Some(1),
+            _ => None,
+        }
+    }
+}
+
+/// What a policy knows of one intermediate rung on one mesh: its cost and the share of the
+/// degradation it wins back, as measured the last times it ran.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RungModel {
+    /// Predicted cost, ms (the last run's; before any, a prior the engine sets).
+    pub cost_ms: f64,
+    /// Share of the degradation (`ratio - 1`) it removes (0 ..= 1), learnt as the rays or the
+    /// SAH showed it.
+    pub recovery: f32,
+    /// Runs it was learnt from.
+    pub runs: u32,
+}
+
+impl RungModel {
+    /// Learns from one run that cost `ms` and took the degradation from `before` to `after`
+    /// (ratios to a fresh tree, or the measured ratio of the old tree's cost to the new one's
+    /// with `after` 1).
+    pub fn learn(&mut self, ms: f64, before: f32, after: f32) {
+        self.cost_ms = ms;
+        if before > 1.0 + MIN_RAY_SIGNAL && after.is_finite() {
+            let seen = ((before - after) / (before - 1.0)).clamp(0.0, 1.0);
+            let w = (1.0 / (self.runs as f32 + 1.0)).max(0.3);
+            self.recovery += w * (seen - self.recovery);
+            self.runs += 1;
+        }
+    }
 }
 
 impl Policy {
@@ -74,6 +144,16 @@ impl Policy {
             Policy::Amortized,
             Policy::AmortizedPlain,
         ]
+    }
+
+    /// True when the policy may optimise or rebuild partly: actions outside the
+    /// refit-or-rebuild oracle's, which such a policy may therefore beat.
+    #[must_use]
+    pub fn uses_rungs(self) -> bool {
+        matches!(
+            self,
+            Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder
+        )
     }
 
     /// True when the policy refits before deciding (so it has a SAH ratio to decide on).
@@ -98,6 +178,9 @@ impl fmt::Display for Policy {
             Policy::Threshold(r) => write!(f, "threshold:{r}"),
             Policy::Amortized => f.write_str("amortized"),
             Policy::AmortizedPlain => f.write_str("amortized-plain"),
+            Policy::Optimize(b) => write!(f, "optimize:{b}"),
+            Policy::Partial(b) => write!(f, "partial:{b}"),
+            Policy::Ladder => f.write_str("ladder"),
         }
     }
 }
@@ -117,13 +200,13 @@ impl std::error::Error for ParsePolicyError {}
 impl FromStr for Policy {
     type Err = ParsePolicyError;
 
-    /// `refit`, `rebuild`, `periodic:N` (N >= 1), `threshold:R` (R >= 1), `amortized` or
-    /// `amortized-plain`.
+    /// `refit`, `rebuild`, `periodic:N` (N >= 1), `threshold:R` (R >= 1), `amortized`,
+    /// `amortized-plain`, `optimize:B` and `partial:F` (shares in (0, 1]) or `ladder`.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let bad = |why: &str| {
             ParsePolicyError(format!(
-                "policy {s:?}: {why} (expected refit, rebuild, periodic:N, threshold:R, amortized \
-                 or amortized-plain)"
+                "policy {s:?}: {why} (expected refit, rebuild, periodic:N, threshold:R, amortized, \
+                 amortized-plain, optimize:B, partial:F or ladder)"
             ))
         };
         let s = s.trim();
@@ -136,6 +219,15 @@ impl FromStr for Policy {
             ("rebuild", None) => Ok(Policy::Rebuild),
             ("amortized", None) => Ok(Policy::Amortized),
             ("amortized-plain", None) => Ok(Policy::AmortizedPlain),
+            ("ladder", None) => Ok(Policy::Ladder),
+            ("optimize" | "partial", Some(a)) => match a.parse::<f32>() {
+                Ok(b) if b > 0.0 && b <= 1.0 => Ok(if name.eq_ignore_ascii_case("optimize") {
+                    Policy::Optimize(b)
+                } else {
+                    Policy::Partial(b)
+                }),
+                _ => Err(bad("the share must be a number in (0, 1]")),
+            },
             ("periodic", Some(a)) => match a.parse::<u32>() {
                 Ok(n) if n >= 1 => Ok(Policy::Periodic(n)),
                 _ => Err(bad("N must be a whole number >= 1")),
@@ -144,8 +236,10 @@ impl FromStr for Policy {
                 Ok(r) if r >= 1.0 && r.is_finite() => Ok(Policy::Threshold(r)),
                 _ => Err(bad("R must be a number >= 1")),
             },
-            ("periodic" | "threshold", None) => Err(bad("missing argument")),
-            ("refit" | "rebuild" | "amortized" | "amortized-plain", Some(_)) => {
+            ("periodic" | "threshold" | "optimize" | "partial", None) => {
+                Err(bad("missing argument"))
+            }
+            ("refit" | "rebuild" | "amortized" | "amortized-plain" | "ladder", Some(_)) => {
                 Err(bad("takes no argument"))
             }
             _ => Err(bad("unknown policy")),
@@ -162,8 +256,23 @@ pub enum Action {
     None,
     /// Refitted.
     Refit,
+    /// Refitted, then optimised.
+    Optimize,
+    /// Refitted, then partly rebuilt.
+    Partial,
     /// Rebuilt (possibly after a refit that measured the degradation).
     Rebuild,
+}
+
+impl From<Decision> for Action {
+    fn from(d: Decision) -> Self {
+        match d {
+            Decision::Refit => Action::Refit,
+            Decision::Optimize(_) => Action::Optimize,
+            Decision::Partial(_) => Action::Partial,
+            Decision::Rebuild => Action::Rebuild,
+        }
+    }
 }
 
 impl Action {
@@ -173,6 +282,8 @@ impl Action {
         match self {
             Action::None => "none",
             Action::Refit => "refit",
+            Action::Optimize => "optimize",
+            Action::Partial => "partial",
             Action::Rebuild => "rebuild",
         }
     }
@@ -206,6 +317,8 @@ pub struct PolicyState {
     pub rebuild_scale: f64,
     /// Rebuilds the ray-work measure has learnt `estimate_gain` from.
     pub ray_calibrations: u32,
+    /// The intermediate rungs: optimise, partial rebuild.
+    pub rungs: [RungModel; 2],
 }
 
 impl Default for PolicyState {
@@ -221,27 +334,54 @@ impl Default for PolicyState {
             estimate_gain: 1.0,
             rebuild_scale: 1.0,
             ray_calibrations: 0,
+            rungs: [
+                RungModel {
+                    cost_ms: f64::INFINITY,
+                    recovery: 0.3,
+                    runs: 0,
+                },
+                RungModel {
+                    cost_ms: f64::INFINITY,
+                    recovery: 0.6,
+                    runs: 0,
+                },
+            ],
         }
     }
 }
 
 impl PolicyState {
-    /// Decides before refitting: `Some(true)` rebuild without refitting, `Some(false)` refit
-    /// only, `None` refit then ask [`PolicyState::after_refit`].
+    /// Decides before refitting: [`Decision::Rebuild`] without refitting,
+    /// [`Decision::Refit`] only, `None` refit then ask [`PolicyState::after_refit`].
     #[must_use]
-    pub fn before_refit(&self, policy: Policy) -> Option<bool> {
+    pub fn before_refit(&self, policy: Policy) -> Option<Decision> {
+        let rebuild = |yes| {
+            Some(if yes {
+                Decision::Rebuild
+            } else {
+                Decision::Refit
+            })
+        };
         match policy {
-            Policy::Refit => Some(false),
-            Policy::Rebuild => Some(true),
-            Policy::Periodic(n) => Some(self.since_build + 1 >= n),
-            Policy::Threshold(_) | Policy::Amortized | Policy::AmortizedPlain => None,
+            Policy::Refit => rebuild(false),
+            Policy::Rebuild => rebuild(true),
+            Policy::Periodic(n) => rebuild(self.since_build + 1 >= n),
+            Policy::Threshold(_)
+            | Policy::Amortized
+            | Policy::AmortizedPlain
+            | Policy::Optimize(_)
+            | Policy::Partial(_)
+            | Policy::Ladder => None,
         }
     }
 
     /// True when the policy decides on the fresh ratio (so the engine must estimate it).
     #[must_use]
     pub fn needs_fresh_ratio(policy: Policy) -> bool {
-        matches!(policy, Policy::Amortized)
+        matches!(
+            policy,
+            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder
+        )
     }
 
     /// True when the policy keeps the tree a rebuild replaced and refits it alongside until
@@ -255,37 +395,73 @@ impl PolicyState {
     /// Decides after a refit that gave last-build SAH ratio `ratio` and fresh ratio `fresh`:
     /// true to rebuild. Updates the accumulated extra trace time of [`Policy::Amortized`] and
     /// [`Policy::AmortizedPlain`].
-    pub fn after_refit(&mut self, policy: Policy, ratio: f32, fresh: f32) -> bool {
+    pub fn after_refit(&mut self, policy: Policy, ratio: f32, fresh: f32) -> Decision {
         match policy {
-            Policy::Threshold(r) => ratio > r,
+            Policy::Threshold(r) => rebuild_if(ratio > r),
             Policy::AmortizedPlain => {
                 self.extra_ms += self.trace_share_ms * f64::from(ratio - 1.0).max(0.0);
-                self.extra_ms > self.rebuild_ms
+                rebuild_if(self.extra_ms > self.rebuild_ms)
             }
-            Policy::Amortized => {
+            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(fresh - 1.0).max(0.0);
                 self.extra_ms += fresh_ms * degradation;
-                self.extra_ms > self.rebuild_ms * self.rebuild_scale
+                self.choose(policy)
             }
-            _ => false,
+            _ => Decision::Refit,
         }
+    }
+
+    /// The amortized rule over the policy's actions: each action `a` wins back a share
+    /// `recovery(a)` of the extra trace time degradation costs (1 for a rebuild) at a cost
+    /// `cost(a)`; once `recovery(a) * extra > cost(a)` for some action, take the one with the
+    /// largest `recovery * extra - cost`.
+    fn choose(&self, policy: Policy) -> Decision {
+        let rebuild = (Decision::Rebuild, 1.0, self.rebuild_ms * self.rebuild_scale);
+        let rung = |d: Decision| {
+            let m = self.rungs[d.rung().unwrap_or(0)];
+            (d, f64::from(m.recovery), m.cost_ms)
+        };
+        let options: &[(Decision, f64, f64)] = match policy {
+            Policy::Optimize(b) => &[rung(Decision::Optimize(b))],
+            Policy::Partial(b) => &[rung(Decision::Partial(b))],
+            Policy::Ladder => &[
+                rung(Decision::Optimize(LADDER_OPTIMIZE)),
+                rung(Decision::Partial(LADDER_PARTIAL)),
+                rebuild,
+            ],
+            _ => &[rebuild],
+        };
+        let mut best = (Decision::Refit, 0.0);
+        for &(d, recovery, cost) in options {
+            let net = recovery * self.extra_ms - cost;
+            if net > best.1 {
+                best = (d, net);
+            }
+        }
+        best.0
     }
 
     /// [`PolicyState::after_refit`] under the ray-work measure, whose degradation `raw` is a
     /// sampled ratio with noise either side of the truth: `amortized` sums the extra trace time
     /// with its sign (kept at or above zero), so that noise cancels instead of adding up as if
     /// it were degradation. `judged` is what `threshold` compares.
-    pub fn after_refit_sampled(&mut self, policy: Policy, judged: f32, raw: f32) -> bool {
+    pub fn after_refit_sampled(&mut self, policy: Policy, judged: f32, raw: f32) -> Decision {
         match policy {
-            Policy::Amortized => {
+            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
                 self.extra_ms = (self.extra_ms + fresh_ms * degradation).max(0.0);
-                self.extra_ms > self.rebuild_ms * self.rebuild_scale
+                self.choose(policy)
             }
             _ => self.after_refit(policy, judged, raw),
         }
+    }
+
+    /// After an intermediate rung ran: the extra trace time counts afresh (from a tree that
+    /// is as degraded as the rung left it).
+    pub fn restructured(&mut self) {
+        self.extra_ms = 0.0;
     }
 
     /// Learns from a rebuild that followed a refit: the fresh ratio was estimated at
@@ -334,6 +510,14 @@ impl PolicyState {
         self.extra_ms = 0.0;
         self.rebuild_ms = ms;
         self.traced_ratio = 1.0;
+    }
+}
+
+fn rebuild_if(yes: bool) -> Decision {
+    if yes {
+        Decision::Rebuild
+    } else {
+        Decision::Refit
     }
 }
 
@@ -396,13 +580,13 @@ mod tests {
         s.traced_ratio = 1.0;
         // Ratio 1.5: 2 ms extra per frame, so the sixth frame passes 10 ms.
         let frames = (1..=10)
-            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5))
+            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5) == Decision::Rebuild)
             .unwrap();
         assert_eq!(frames, 6);
         // No rays, no reason to rebuild.
         s.rebuilt(1.0, 1.0, 10.0);
         s.trace_share_ms = 0.0;
-        assert!(!(0..100).any(|_| s.after_refit(Policy::Amortized, 5.0, 5.0)));
+        assert!(!(0..100).any(|_| s.after_refit(Policy::Amortized, 5.0, 5.0) == Decision::Rebuild));
     }
 
     /// Feeds `fresh(k)` (the fresh ratio `k` frames after the last build) to the amortized
@@ -424,7 +608,7 @@ mod tests {
             // The trace of the previous frame ran at the previous ratio.
             s.trace_share_ms = trace * f64::from(fresh(since - 1));
             s.traced_ratio = fresh(since - 1);
-            if s.after_refit(Policy::Amortized, r, r) {
+            if s.after_refit(Policy::Amortized, r, r) == Decision::Rebuild {
                 s.rebuilt(1.0, 1.0, rebuild);
                 since = 0;
                 out.push(f);
@@ -483,7 +667,7 @@ mod tests {
         s.failed_then(2);
         // Four times the rebuild cost: 2 ms extra a frame passes 40 ms at the 21st frame.
         let frames = (1..=40)
-            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5))
+            .find(|_| s.after_refit(Policy::Amortized, 1.0, 1.5) == Decision::Rebuild)
             .unwrap();
         assert_eq!(frames, 21);
         s.rebuild_paid();
@@ -524,7 +708,7 @@ mod tests {
             assert_eq!(s.before_refit(Policy::AmortizedPlain), None);
             since += 1;
             s.trace_share_ms = trace(f);
-            if s.after_refit(Policy::AmortizedPlain, ratio(since), 0.0) {
+            if s.after_refit(Policy::AmortizedPlain, ratio(since), 0.0) == Decision::Rebuild {
                 s.rebuilt(1.0, 0.0, rebuild);
                 since = 0;
                 out.push(f);
@@ -571,7 +755,7 @@ mod tests {
         s.rebuild_scale = 64.0;
         s.traced_ratio = 3.0;
         let frames = (1..=40)
-            .find(|_| s.after_refit(Policy::AmortizedPlain, 1.5, 9.0))
+            .find(|_| s.after_refit(Policy::AmortizedPlain, 1.5, 9.0) == Decision::Rebuild)
             .unwrap();
         assert_eq!(frames, 6);
         assert!(Policy::AmortizedPlain.refits_first());
@@ -582,7 +766,10 @@ mod tests {
         let mut d = PolicyState::default();
         d.rebuilt(1.0, 1.0, 10.0);
         d.trace_share_ms = 4.0;
-        assert!(d.after_refit(Policy::Amortized, 1.5, 9.0));
+        assert_eq!(
+            d.after_refit(Policy::Amortized, 1.5, 9.0),
+            Decision::Rebuild
+        );
     }
 
     #[test]

@@ -25,6 +25,21 @@ pub struct Prices {
     pub trace_ns_per_node: f64,
     /// A ray testing one triangle, ns.
     pub trace_ns_per_tri: f64,
+    /// Writing a restructured tree back (optimisation, partial rebuild), with the wide tree's
+    /// collapse, per triangle, ns.
+    #[serde(default = "default_restructure")]
+    pub restructure_ns_per_tri: f64,
+    /// One candidate position an optimisation's insertion search looks at, ns.
+    #[serde(default = "default_visit")]
+    pub optimize_ns_per_visit: f64,
+}
+
+fn default_restructure() -> f64 {
+    Prices::default().restructure_ns_per_tri
+}
+
+fn default_visit() -> f64 {
+    Prices::default().optimize_ns_per_visit
 }
 
 impl Default for Prices {
@@ -38,6 +53,8 @@ impl Default for Prices {
             estimate_ns_per_tri: 60.0,
             trace_ns_per_node: 12.0,
             trace_ns_per_tri: 4.0,
+            restructure_ns_per_tri: 40.0,
+            optimize_ns_per_visit: 30.0,
         }
     }
 }
@@ -60,6 +77,24 @@ impl Prices {
     #[must_use]
     pub fn rebuild_ms(&self, tris: usize) -> f64 {
         self.rebuild_ns_per_tri_log * rebuild_units(tris) * 1e-6
+    }
+
+    /// Modelled optimisation of a mesh of `tris` triangles whose searches looked at `visits`
+    /// candidate positions, ms.
+    #[must_use]
+    pub fn optimize_ms(&self, tris: usize, visits: u64) -> f64 {
+        (self.restructure_ns_per_tri * tris as f64 + self.optimize_ns_per_visit * visits as f64)
+            * 1e-6
+    }
+
+    /// Modelled partial rebuild of a mesh of `tris` triangles over a cut of `cut` subtrees,
+    /// `rebuilt` of its triangles rebuilt from scratch, ms.
+    #[must_use]
+    pub fn partial_ms(&self, tris: usize, cut: usize, rebuilt: usize) -> f64 {
+        let per_subtree = (tris / cut.max(1)).max(2) as f64;
+        self.restructure_ns_per_tri * tris as f64 * 1e-6
+            + self.rebuild_ms(cut)
+            + self.rebuild_ns_per_tri_log * rebuilt as f64 * per_subtree.log2() * 1e-6
     }
 
     /// Modelled fresh-build estimate over a subsample of `tris` triangles, ms.
@@ -95,6 +130,8 @@ impl Prices {
             p.estimate_ns_per_tri,
             p.trace_ns_per_node,
             p.trace_ns_per_tri,
+            p.restructure_ns_per_tri,
+            p.optimize_ns_per_visit,
         ];
         if all.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(crate::Error::malformed(
@@ -158,6 +195,31 @@ impl Prices {
             let ms = median_cpu_ms(passes, || trace_all(&w, &rays));
             (work, ms)
         };
+        // The write-back of a restructured tree (a partial rebuild of the top only), and an
+        // optimisation's searches beyond it.
+        let mut rws = crate::bvh::topology::RestructureWorkspace::default();
+        let mut ps = crate::bvh::partial::PartialScratch::default();
+        let mut cut = crate::bvh::partial::PartialCut::default();
+        bvh.rebuild_indexed(pos, idx, &build, &mut ws);
+        cut.reset(&bvh, &mut ps);
+        let restructure = median_cpu_ms(passes, || {
+            bvh.partial_rebuild(&mut cut, 0.0, &build, &mut rws, &mut ps);
+            wide.collapse_from(&bvh);
+        });
+        let restructure_ns = (restructure * 1e6 / n as f64).max(1e-3);
+        let mut os = crate::bvh::optimize::OptimizeScratch::default();
+        let visits = std::cell::Cell::new(0u64);
+        let optimize = median_cpu_ms(passes, || {
+            let st = bvh.optimize(
+                crate::bvh::optimize::OptimizeBudget::default(),
+                &mut rws,
+                &mut os,
+            );
+            visits.set(st.visits);
+            wide.collapse_from(&bvh);
+        });
+        let visit_ns =
+            ((optimize * 1e6 - restructure_ns * n as f64) / visits.get().max(1) as f64).max(1e-3);
         let (w1, t1) = trace_with(2);
         let (w2, t2) = trace_with(16);
         let (node, tri) = solve_trace_prices(w1, t1, w2, t2);
@@ -167,6 +229,8 @@ impl Prices {
             estimate_ns_per_tri: estimate * 1e6 / fresh.sample_len().max(1) as f64,
             trace_ns_per_node: node,
             trace_ns_per_tri: tri,
+            restructure_ns_per_tri: restructure_ns,
+            optimize_ns_per_visit: visit_ns,
         }
     }
 }

@@ -53,8 +53,11 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod mesh_update;
 mod packet;
 mod sample;
+
+use mesh_update::{FrameContext, PartialCut, Restructure};
 
 /// A mesh of an [`Engine`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -281,6 +284,9 @@ struct MeshEntry {
     ray_base: f64,
     /// The same frame by frame since, over `ray_base`, smoothed over frames; 0 without.
     ray_observed: f64,
+    /// The subtrees a partial rebuild keeps or rebuilds (taken at each full build when the
+    /// policy may rebuild partly).
+    cut: PartialCut,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -368,6 +374,8 @@ pub struct Engine {
     sample_work: Vec<TraversalStats>,
     /// Its entries per mesh.
     sample_entries: Vec<u32>,
+    /// Scratch of optimisations and partial rebuilds.
+    restructure: Restructure,
 }
 
 impl Engine {
@@ -392,6 +400,7 @@ impl Engine {
             entries: Vec::new(),
             sample_work: Vec::new(),
             sample_entries: Vec::new(),
+            restructure: Restructure::default(),
         }
     }
 
@@ -414,6 +423,17 @@ impl Engine {
     /// that the frame loop still allocates nothing.
     pub fn set_policy(&mut self, policy: Policy) {
         self.config.policy = policy;
+        if MeshEntry::wants_cut(policy) {
+            for m in &mut self.meshes {
+                m.cut.reset(&m.bvh, &mut self.restructure.partial);
+                m.bvh.reserve_any_shape();
+            }
+        }
+        if policy.uses_rungs() {
+            for m in &self.meshes {
+                self.restructure.warm_up(&m.bvh, &self.config.build);
+            }
+        }
         if self.probes() {
             for m in &mut self.meshes {
                 m.prev.reserve_like(&m.bvh);
@@ -462,6 +482,14 @@ impl Engine {
         if self.probes() {
             prev.reserve_like(&bvh);
         }
+        let mut cut = PartialCut::default();
+        if MeshEntry::wants_cut(self.config.policy) {
+            cut.reset(&bvh, &mut self.restructure.partial);
+            bvh.reserve_any_shape();
+        }
+        if self.config.policy.uses_rungs() {
+            self.restructure.warm_up(&bvh, &self.config.build);
+        }
         self.meshes.push(MeshEntry {
             positions,
             indices,
@@ -489,6 +517,7 @@ impl Engine {
             world_area: 0.0,
             ray_base: 0.0,
             ray_observed: 0.0,
+            cut,
         });
         self.sample_work.push(TraversalStats::default());
         self.sample_entries.push(0);
@@ -617,22 +646,22 @@ impl Engine {
     /// update, and returns the frame's statistics so far (trace figures come with
     /// [`Engine::record_trace`]).
     pub fn update(&mut self) -> &FrameStats {
-        let policy = self.config.policy;
-        let build = self.config.build;
-        let rays_cost = self.config.cost == CostMeasure::Rays;
-        // The SAH measure estimates a fresh build's cost by a quick build; the ray-work measure
-        // compares the sampled work with the fresh tree's instead (for the threshold policy
-        // too: both against a fresh tree).
-        let estimate = PolicyState::needs_fresh_ratio(policy) && !rays_cost;
-        let ray_judged = rays_cost
-            && (PolicyState::needs_fresh_ratio(policy) || matches!(policy, Policy::Threshold(_)));
-        let probes = self.probes();
-        let timing = self.config.timing;
-        let prices = self.config.prices;
         self.apply_sample();
-        // The previous frame's sampled rays, replayed on both trees at a rebuild.
-        let replay = rays_cost && self.sample.frame == self.frame && self.sample.sampled > 0;
-        let mut stats = FrameStats {
+        let mut stats = self.begin_frame();
+        self.update_meshes(&mut stats);
+        self.update_tlas(&mut stats);
+        self.scene_cost(&mut stats);
+        stats.update_ms = stats.pose_ms + stats.refit_ms + stats.rebuild_ms + stats.tlas_ms;
+        self.stats = stats;
+        self.frame += 1;
+        &self.stats
+    }
+
+    /// The frame's statistics before any work.
+    fn begin_frame(&mut self) -> FrameStats {
+        let estimate = PolicyState::needs_fresh_ratio(self.config.policy)
+            && self.config.cost == CostMeasure::Sah;
+        FrameStats {
             frame: self.frame,
             pose_ms: std::mem::take(&mut self.pending_pose_ms),
             sah_ratio: 1.0,
@@ -640,209 +669,73 @@ impl Engine {
             max_fresh_ratio: if estimate { 1.0 } else { 0.0 },
             tlas_sah_ratio: 1.0,
             ..FrameStats::default()
+        }
+    }
+
+    /// Every mesh whose vertices moved goes through its pipeline ([`MeshEntry::update`]).
+    fn update_meshes(&mut self, stats: &mut FrameStats) {
+        let policy = self.config.policy;
+        let rays_cost = self.config.cost == CostMeasure::Rays;
+        // The SAH measure estimates a fresh build's cost by a quick build; the ray-work measure
+        // compares the sampled work with the fresh tree's instead (for the threshold policy
+        // too: both against a fresh tree).
+        let estimate = PolicyState::needs_fresh_ratio(policy) && !rays_cost;
+        let ray_judged = rays_cost
+            && (PolicyState::needs_fresh_ratio(policy) || matches!(policy, Policy::Threshold(_)));
+        // The previous frame's sampled rays, replayed on both trees at a rebuild.
+        let replay = rays_cost && self.sample.frame == self.frame && self.sample.sampled > 0;
+        let mut cx = FrameContext {
+            policy,
+            build: self.config.build,
+            timing: self.config.timing,
+            prices: self.config.prices,
+            estimate,
+            ray_judged,
+            probes: self.probes(),
+            entries: if replay { &self.entries } else { &[] },
+            workspace: &mut self.workspace,
+            restructure: &mut self.restructure,
         };
+        let mut restructured = Action::None;
         for (id, m) in self.meshes.iter_mut().enumerate() {
-            let id = MeshId(id as u32);
             m.moved = std::mem::take(&mut m.dirty);
-            m.stats.model_ms = 0.0;
-            m.stats.measured_work_ratio = 0.0;
             if !m.moved {
+                m.stats.model_ms = 0.0;
+                m.stats.measured_work_ratio = 0.0;
                 m.stats.action = Action::None;
                 m.stats.refit_ms = 0.0;
                 m.stats.rebuild_ms = 0.0;
                 continue;
             }
-            let tris = m.indices.len();
-            // The ray-work degradation before calibration (what a rebuild's replay checks).
-            let mut raw_work_ratio = 0.0f32;
-            let decided = m.state.before_refit(policy);
-            let mut refit_ms = 0.0;
-            // The binary tree changed under the wide one (a revert to the replaced tree).
-            let mut recollapse = false;
-            let rebuild = if decided == Some(true) {
-                true
-            } else {
-                let t = Instant::now();
-                m.bvh.refit_indexed(&m.positions, &m.indices);
-                m.sah = tree_sah(m.bvh.bvh());
-                m.state.since_build += 1;
-                m.stats.model_ms += prices.refit_ms(tris);
-                if let Some(p) = m.probe.take()
-                    && probe_step(m, p, timing, &prices)
-                {
-                    stats.reverts += 1;
-                    recollapse = true;
+            let out = m.update(MeshId(id as u32), &mut cx);
+            stats.reverts += u32::from(out.reverted);
+            match m.stats.action {
+                Action::Rebuild => stats.rebuilds += 1,
+                a @ (Action::Optimize | Action::Partial) => {
+                    stats.restructures += 1;
+                    restructured = a;
                 }
-                let ratio = ratio(m.sah, m.state.build_sah);
-                m.stats.sah_ratio = ratio;
-                // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the
-                // latest estimate when this frame has not earned a new one.
-                m.stats.fresh_ratio = if estimate && m.state.build_estimate > 0.0 {
-                    m.estimate_budget += ESTIMATE_SHARE
-                        * (m.state.trace_share_ms + timing.refit_ms(ms_since(t), tris, &prices));
-                    if m.estimate_budget >= m.estimate_ms {
-                        let te = Instant::now();
-                        m.last_estimate = m.fresh.estimate(&m.positions, &m.indices);
-                        let n = m.fresh.sample_len();
-                        m.estimate_ms = timing.estimate_ms(ms_since(te), n, &prices);
-                        m.estimate_budget = (m.estimate_budget - m.estimate_ms).max(0.0);
-                        m.stats.model_ms += prices.estimate_ms(n);
-                    }
-                    if m.last_estimate > 0.0 {
-                        ratio * m.state.build_estimate / m.last_estimate
-                    } else {
-                        ratio
-                    }
-                } else if estimate {
-                    ratio
-                } else {
-                    0.0
-                };
-                // The ray-work measure: the sampled work per entry into the mesh over the fresh
-                // tree's (the first frame after the last build), as far as the last rebuilds'
-                // replays showed it right; the policy weighs it as it weighs the SAH's fresh
-                // ratio.
-                let (fresh, judged) = if ray_judged {
-                    // Without a sample (the caller traces without `trace_frame` or
-                    // `sample_rays`), the SAH's ratio to the last build stands in.
-                    raw_work_ratio = if m.ray_observed > 0.0 {
-                        m.ray_observed as f32
-                    } else {
-                        ratio
-                    };
-                    m.stats.work_ratio =
-                        1.0 + m.state.estimate_gain * (raw_work_ratio - 1.0).max(0.0);
-                    (raw_work_ratio, m.stats.work_ratio)
-                } else {
-                    m.stats.work_ratio = 0.0;
-                    (m.stats.fresh_ratio, ratio)
-                };
-                refit_ms = ms_since(t);
-                decided.unwrap_or_else(|| {
-                    if ray_judged {
-                        m.state.after_refit_sampled(policy, judged, fresh)
-                    } else {
-                        m.state.after_refit(policy, judged, fresh)
-                    }
-                })
-            };
-            let mut rebuild_ms = 0.0;
-            if rebuild {
-                let refitted = (decided != Some(true)).then_some(m.sah);
-                let probe = probes && refitted.is_some();
-                let t = Instant::now();
-                // The replaced tree's work on the previous frame's rays (its wide tree refitted
-                // first, as the rays would have walked it).
-                let old_work = (replay && refitted.is_some()).then(|| {
-                    if let Some(w) = &mut m.wide {
-                        w.refit_indexed(&m.positions, &m.indices);
-                    }
-                    sample::tree_work(&m.bvh, m.wide.as_ref(), id, &self.entries)
-                });
-                if probe {
-                    // Keep the refitted tree: rebuild into the spare.
-                    std::mem::swap(&mut m.bvh, &mut m.prev);
-                }
-                m.bvh
-                    .rebuild_indexed(&m.positions, &m.indices, &build, &mut self.workspace);
-                if let Some(w) = &mut m.wide {
-                    w.collapse_from(&m.bvh);
-                }
-                m.sah = tree_sah(m.bvh.bvh());
-                let est = if estimate {
-                    m.fresh.estimate(&m.positions, &m.indices)
-                } else {
-                    0.0
-                };
-                m.last_estimate = est;
-                m.estimate_budget = 0.0;
-                m.stats.model_ms += prices.rebuild_ms(tris);
-                if estimate {
-                    m.stats.model_ms += prices.estimate_ms(m.fresh.sample_len());
-                }
-                if let Some(old) = old_work {
-                    let new = sample::tree_work(&m.bvh, m.wide.as_ref(), id, &self.entries);
-                    m.stats.model_ms += prices.trace_ms(old) + prices.trace_ms(new);
-                    let (old, new) = (prices.trace_ms(old), prices.trace_ms(new));
-                    if new > 0.0 {
-                        m.stats.measured_work_ratio = (old / new) as f32;
-                    }
-                }
-                rebuild_ms = ms_since(t);
-                if let Some(refit_sah) = refitted {
-                    if ray_judged && m.stats.measured_work_ratio > 0.0 {
-                        m.state
-                            .calibrate_rays(raw_work_ratio, m.stats.measured_work_ratio);
-                    } else if estimate {
-                        m.state
-                            .calibrate(m.stats.fresh_ratio, ratio(refit_sah, m.sah));
-                    }
-                }
-                let replaced = m.state;
-                // What the policy weighs; the statistics keep the measured time.
-                let rebuild_cost = timing.build_ms(rebuild_ms, tris, &prices);
-                m.state.rebuilt(m.sah, est, rebuild_cost);
-                m.probe = None;
-                if let (true, Some(refit_sah)) = (probe, refitted) {
-                    // This frame's trace already gains from the new tree.
-                    let saved = m.state.trace_share_ms * f64::from(ratio(refit_sah, m.sah) - 1.0);
-                    if saved >= rebuild_cost {
-                        m.state.rebuild_paid();
-                    } else {
-                        m.probe = Some(Probe {
-                            state: replaced,
-                            saved_ms: saved,
-                            cost_ms: 0.0,
-                            rebuild_ms: rebuild_cost,
-                            frames: 0,
-                        });
-                    }
-                }
-                m.stats.sah_ratio = 1.0;
-                m.stats.fresh_ratio = if estimate { 1.0 } else { 0.0 };
-                m.stats.work_ratio = if ray_judged { 1.0 } else { 0.0 };
-                m.ray_base = 0.0;
-                m.ray_observed = 0.0;
-                stats.rebuilds += 1;
-            } else {
-                // The wide tree follows the refitted (or reverted-to) binary tree; its time is
-                // part of the refit's.
-                if let Some(w) = &mut m.wide {
-                    let t = Instant::now();
-                    if recollapse {
-                        w.collapse_from(&m.bvh);
-                    } else {
-                        w.refit_indexed(&m.positions, &m.indices);
-                    }
-                    let ms = ms_since(t);
-                    refit_ms += ms;
-                    m.estimate_budget += ESTIMATE_SHARE * timing.refit_ms(ms, tris, &prices);
-                }
-                stats.refits += 1;
+                _ => stats.refits += 1,
             }
-            m.stats.action = if rebuild {
-                Action::Rebuild
-            } else {
-                Action::Refit
-            };
-            m.stats.refit_ms = refit_ms;
-            m.stats.rebuild_ms = rebuild_ms;
-            m.stats.sah = m.sah;
-            stats.refit_ms += refit_ms;
-            stats.rebuild_ms += rebuild_ms;
+            stats.refit_ms += m.stats.refit_ms;
+            stats.rebuild_ms += m.stats.rebuild_ms;
             stats.model_update_ms += m.stats.model_ms;
             stats.max_sah_ratio = stats.max_sah_ratio.max(m.stats.sah_ratio);
             stats.max_fresh_ratio = stats.max_fresh_ratio.max(m.stats.fresh_ratio);
         }
         stats.action = if stats.rebuilds > 0 {
             Action::Rebuild
+        } else if stats.restructures > 0 {
+            restructured
         } else if stats.refits > 0 {
             Action::Refit
         } else {
             Action::None
         };
+    }
 
-        // Instance boxes and the top-level tree.
+    /// Instance boxes and the top-level tree.
+    fn update_tlas(&mut self, stats: &mut FrameStats) {
         let t = Instant::now();
         let mut moved = false;
         for inst in &mut self.instances {
@@ -876,8 +769,10 @@ impl Engine {
             }
         }
         stats.tlas_ms = ms_since(t);
+    }
 
-        // Scene cost: top-level nodes, plus each instance's tree weighted by its box's area.
+    /// Scene cost: top-level nodes, plus each instance's tree weighted by its box's area.
+    fn scene_cost(&mut self, stats: &mut FrameStats) {
         for m in &mut self.meshes {
             m.weight = 0.0;
             m.world_area = 0.0;
@@ -906,10 +801,6 @@ impl Engine {
         if total > 0.0 {
             stats.sah_ratio = (weighted / total) as f32;
         }
-        stats.update_ms = stats.pose_ms + stats.refit_ms + stats.rebuild_ms + stats.tlas_ms;
-        self.stats = stats;
-        self.frame += 1;
-        &self.stats
     }
 
     /// Gives each mesh's policy state its share of the last frame's trace cost from the

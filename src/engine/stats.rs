@@ -60,6 +60,8 @@ pub struct FrameStats {
     pub refits: u32,
     /// Meshes rebuilt.
     pub rebuilds: u32,
+    /// Meshes optimised or partly rebuilt.
+    pub restructures: u32,
     /// Meshes that went back to the tree their last rebuild replaced (it had become better
     /// again before the rebuild paid for itself).
     pub reverts: u32,

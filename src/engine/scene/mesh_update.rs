@@ -1,0 +1,400 @@
+//! One deforming mesh's part of [`Engine::update`](super::Engine::update): refit, measure,
+//! let the policy decide, act (rebuild, optimise, partial rebuild), and bring the wide tree
+//! along. What the policy weighs is in [`crate::engine::policy`]; this file only runs it.
+
+use super::{ESTIMATE_SHARE, MeshEntry, Probe, Timing, ms_since, probe_step, ratio, sample};
+use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
+pub(super) use crate::bvh::partial::PartialCut;
+use crate::bvh::partial::PartialScratch;
+use crate::bvh::topology::RestructureWorkspace;
+use crate::bvh::{BuildParams, BuildWorkspace, TraversalStats};
+use crate::engine::MeshId;
+use crate::engine::policy::{Action, Decision, LADDER_OPTIMIZE, LADDER_PARTIAL, Policy};
+use crate::engine::prices::Prices;
+use crate::engine::ray_work::SampleEntry;
+use std::time::Instant;
+
+/// Scratch of the intermediate rungs, shared by every mesh.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Restructure {
+    pub ws: RestructureWorkspace,
+    pub optimize: OptimizeScratch,
+    pub partial: PartialScratch,
+}
+
+impl Restructure {
+    /// Grows every buffer to what optimising and partly rebuilding `tree` can need (by
+    /// running both once on a copy, and reserving what depends on the search), so that the
+    /// frame loop allocates nothing for them.
+    pub fn warm_up(&mut self, tree: &crate::bvh::MeshBvh, build: &BuildParams) {
+        let mut t = tree.clone();
+        let budget = OptimizeBudget {
+            share: 1.0,
+            ..OptimizeBudget::default()
+        };
+        self.optimize.reserve(budget);
+        t.optimize(budget, &mut self.ws, &mut self.optimize);
+        let mut t = tree.clone();
+        let mut cut = PartialCut::default();
+        cut.reset(&t, &mut self.partial);
+        cut.mark_all_degraded();
+        t.partial_rebuild(&mut cut, 1.0, build, &mut self.ws, &mut self.partial);
+        self.ws.reserve(tree.bvh().prim_count());
+    }
+}
+
+/// What a frame's update of every mesh shares.
+pub(super) struct FrameContext<'a> {
+    pub policy: Policy,
+    pub build: BuildParams,
+    pub timing: Timing,
+    pub prices: Prices,
+    /// The SAH measure's fresh-build estimate is wanted.
+    pub estimate: bool,
+    /// The policy weighs the ray-work ratio.
+    pub ray_judged: bool,
+    /// Rebuilds are probed (the replaced tree kept and refitted alongside).
+    pub probes: bool,
+    /// The previous frame's sampled entries, replayed on the trees an action replaces and
+    /// makes; empty when there is no sample of the previous frame or the SAH measures.
+    pub entries: &'a [SampleEntry],
+    pub workspace: &'a mut BuildWorkspace,
+    pub restructure: &'a mut Restructure,
+}
+
+/// What one mesh's update did, for the frame's statistics.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct MeshOutcome {
+    pub reverted: bool,
+}
+
+impl MeshEntry {
+    /// True when the mesh's policy will want a partial rebuild's cut.
+    pub(super) fn wants_cut(policy: Policy) -> bool {
+        matches!(policy, Policy::Partial(_) | Policy::Ladder)
+    }
+
+    /// The pipeline for a mesh whose vertices moved.
+    pub(super) fn update(&mut self, id: MeshId, cx: &mut FrameContext<'_>) -> MeshOutcome {
+        let mut out = MeshOutcome::default();
+        self.stats.model_ms = 0.0;
+        self.stats.measured_work_ratio = 0.0;
+        self.stats.refit_ms = 0.0;
+        self.stats.rebuild_ms = 0.0;
+        let early = self.state.before_refit(cx.policy);
+        let (decision, raw_work_ratio) = match early {
+            Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
+            _ => {
+                let t = Instant::now();
+                out.reverted = self.refit(cx);
+                let (decision, raw) = self.observe_and_decide(cx, early, ms_since(t));
+                self.stats.refit_ms = ms_since(t);
+                (decision, raw)
+            }
+        };
+        let refitted = early != Some(Decision::Rebuild);
+        match decision {
+            Decision::Refit => self.follow_wide(out.reverted, cx),
+            Decision::Rebuild => self.rebuild(id, refitted, raw_work_ratio, cx),
+            Decision::Optimize(_) | Decision::Partial(_) => self.restructure(id, decision, cx),
+        }
+        self.stats.action = Action::from(decision);
+        self.stats.sah = self.sah;
+        out
+    }
+
+    /// Refits the tree (and a replaced tree on probation); true when the probation went back
+    /// to the replaced tree.
+    fn refit(&mut self, cx: &FrameContext<'_>) -> bool {
+        let tris = self.indices.len();
+        self.bvh.refit_indexed(&self.positions, &self.indices);
+        self.sah = super::tree_sah(self.bvh.bvh());
+        self.state.since_build += 1;
+        self.stats.model_ms += cx.prices.refit_ms(tris);
+        match self.probe.take() {
+            Some(p) => probe_step(self, p, cx.timing, &cx.prices),
+            None => false,
+        }
+    }
+
+    /// Measures the refitted tree's degradation (SAH ratio, fresh-build estimate, ray-work
+    /// ratio) and asks the policy (unless it decided before the refit). Returns the decision
+    /// and the ray-work ratio before calibration (what a rebuild's replay checks).
+    fn observe_and_decide(
+        &mut self,
+        cx: &FrameContext<'_>,
+        early: Option<Decision>,
+        refit_ms: f64,
+    ) -> (Decision, f32) {
+        let tris = self.indices.len();
+        let (timing, prices) = (cx.timing, &cx.prices);
+        let ratio = ratio(self.sah, self.state.build_sah);
+        self.stats.sah_ratio = ratio;
+        // The fresh ratio: against `build_sah * est(now) / est(last build)`, with the latest
+        // estimate when this frame has not earned a new one.
+        self.stats.fresh_ratio = if cx.estimate && self.state.build_estimate > 0.0 {
+            self.estimate_budget += ESTIMATE_SHARE
+                * (self.state.trace_share_ms + timing.refit_ms(refit_ms, tris, prices));
+            if self.estimate_budget >= self.estimate_ms {
+                let te = Instant::now();
+                self.last_estimate = self.fresh.estimate(&self.positions, &self.indices);
+                let n = self.fresh.sample_len();
+                self.estimate_ms = timing.estimate_ms(ms_since(te), n, prices);
+                self.estimate_budget = (self.estimate_budget - self.estimate_ms).max(0.0);
+                self.stats.model_ms += prices.estimate_ms(n);
+            }
+            if self.last_estimate > 0.0 {
+                ratio * self.state.build_estimate / self.last_estimate
+            } else {
+                ratio
+            }
+        } else if cx.estimate {
+            ratio
+        } else {
+            0.0
+        };
+        // The ray-work measure: the sampled work per entry into the mesh over the fresh tree's
+        // (the first frame after the last build), as far as the last rebuilds' replays showed
+        // it right; the policy weighs it as it weighs the SAH's fresh ratio.
+        let mut raw = 0.0;
+        let (fresh, judged) = if cx.ray_judged {
+            // Without a sample (the caller traces without `trace_frame` or `sample_rays`),
+            // the SAH's ratio to the last build stands in.
+            raw = if self.ray_observed > 0.0 {
+                self.ray_observed as f32
+            } else {
+                ratio
+            };
+            self.stats.work_ratio = 1.0 + self.state.estimate_gain * (raw - 1.0).max(0.0);
+            (raw, self.stats.work_ratio)
+        } else {
+            self.stats.work_ratio = 0.0;
+            (self.stats.fresh_ratio, ratio)
+        };
+        if let Some(d) = early {
+            return (d, raw);
+        }
+        self.set_rung_priors(cx);
+        let d = if cx.ray_judged {
+            self.state.after_refit_sampled(cx.policy, judged, fresh)
+        } else {
+            self.state.after_refit(cx.policy, judged, fresh)
+        };
+        (d, raw)
+    }
+
+    /// Before a rung has run on this mesh, its predicted cost is the priced model's.
+    fn set_rung_priors(&mut self, cx: &FrameContext<'_>) {
+        let n = self.indices.len();
+        let (opt, part) = match cx.policy {
+            Policy::Optimize(b) => (b, LADDER_PARTIAL),
+            Policy::Partial(b) => (LADDER_OPTIMIZE, b),
+            _ => (LADDER_OPTIMIZE, LADDER_PARTIAL),
+        };
+        let [o, p] = &mut self.state.rungs;
+        if o.cost_ms.is_infinite() {
+            // About `share * n / 4` searches (leaves of about four triangles) of a few dozen
+            // visits each.
+            let visits = (f64::from(opt) * n as f64 / 4.0 * 32.0) as u64;
+            o.cost_ms = cx.prices.optimize_ms(n, visits);
+        }
+        if p.cost_ms.is_infinite() {
+            let cut = crate::bvh::partial::CUT_TARGET.min(n.max(1));
+            p.cost_ms = cx
+                .prices
+                .partial_ms(n, cut, (f64::from(part) * n as f64) as usize);
+        }
+    }
+
+    /// The wide tree follows the refitted (or reverted-to) binary tree; its time is part of
+    /// the refit's.
+    fn follow_wide(&mut self, reverted: bool, cx: &FrameContext<'_>) {
+        if let Some(w) = &mut self.wide {
+            let t = Instant::now();
+            if reverted {
+                w.collapse_from(&self.bvh);
+            } else {
+                w.refit_indexed(&self.positions, &self.indices);
+            }
+            let ms = ms_since(t);
+            self.stats.refit_ms += ms;
+            self.estimate_budget +=
+                ESTIMATE_SHARE * cx.timing.refit_ms(ms, self.indices.len(), &cx.prices);
+        }
+    }
+
+    /// The replaced tree's work on the previous frame's sampled rays, its wide tree refitted
+    /// first (as the rays would have walked it); `None` without a sample.
+    fn replay_before(&mut self, id: MeshId, cx: &FrameContext<'_>) -> Option<TraversalStats> {
+        if cx.entries.is_empty() {
+            return None;
+        }
+        if let Some(w) = &mut self.wide {
+            w.refit_indexed(&self.positions, &self.indices);
+        }
+        Some(sample::tree_work(
+            &self.bvh,
+            self.wide.as_ref(),
+            id,
+            cx.entries,
+        ))
+    }
+
+    /// The replayed work of the tree an action made against the one it replaced: the old tree's
+    /// cost over the new one's (0 without a sample).
+    fn replay_after(&mut self, id: MeshId, old: Option<TraversalStats>, cx: &FrameContext<'_>) {
+        if let Some(old) = old {
+            let new = sample::tree_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
+            let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
+            self.stats.model_ms += old + new;
+            if new > 0.0 {
+                self.stats.measured_work_ratio = (old / new) as f32;
+            }
+        }
+    }
+
+    /// A full rebuild, after a refit (`refitted`) or instead of one.
+    fn rebuild(
+        &mut self,
+        id: MeshId,
+        refitted: bool,
+        raw_work_ratio: f32,
+        cx: &mut FrameContext<'_>,
+    ) {
+        let tris = self.indices.len();
+        let refit_sah = refitted.then_some(self.sah);
+        let probe = cx.probes && refitted;
+        let t = Instant::now();
+        let old_work = if refitted {
+            self.replay_before(id, cx)
+        } else {
+            None
+        };
+        if probe {
+            // Keep the refitted tree: rebuild into the spare.
+            std::mem::swap(&mut self.bvh, &mut self.prev);
+        }
+        self.bvh
+            .rebuild_indexed(&self.positions, &self.indices, &cx.build, cx.workspace);
+        if let Some(w) = &mut self.wide {
+            w.collapse_from(&self.bvh);
+        }
+        self.sah = super::tree_sah(self.bvh.bvh());
+        let est = if cx.estimate {
+            self.fresh.estimate(&self.positions, &self.indices)
+        } else {
+            0.0
+        };
+        self.last_estimate = est;
+        self.estimate_budget = 0.0;
+        self.stats.model_ms += cx.prices.rebuild_ms(tris);
+        if cx.estimate {
+            self.stats.model_ms += cx.prices.estimate_ms(self.fresh.sample_len());
+        }
+        self.replay_after(id, old_work, cx);
+        if Self::wants_cut(cx.policy) {
+            self.cut.reset(&self.bvh, &mut cx.restructure.partial);
+        }
+        let rebuild_ms = ms_since(t);
+        if let Some(refit_sah) = refit_sah {
+            if cx.ray_judged && self.stats.measured_work_ratio > 0.0 {
+                self.state
+                    .calibrate_rays(raw_work_ratio, self.stats.measured_work_ratio);
+            } else if cx.estimate {
+                self.state
+                    .calibrate(self.stats.fresh_ratio, ratio(refit_sah, self.sah));
+            }
+        }
+        let replaced = self.state;
+        // What the policy weighs; the statistics keep the measured time.
+        let rebuild_cost = cx.timing.build_ms(rebuild_ms, tris, &cx.prices);
+        self.state.rebuilt(self.sah, est, rebuild_cost);
+        self.probe = None;
+        if let (true, Some(refit_sah)) = (probe, refit_sah) {
+            // This frame's trace already gains from the new tree.
+            let saved = self.state.trace_share_ms * f64::from(ratio(refit_sah, self.sah) - 1.0);
+            if saved >= rebuild_cost {
+                self.state.rebuild_paid();
+            } else {
+                self.probe = Some(Probe {
+                    state: replaced,
+                    saved_ms: saved,
+                    cost_ms: 0.0,
+                    rebuild_ms: rebuild_cost,
+                    frames: 0,
+                });
+            }
+        }
+        self.stats.sah_ratio = 1.0;
+        self.stats.fresh_ratio = if cx.estimate { 1.0 } else { 0.0 };
+        self.stats.work_ratio = if cx.ray_judged { 1.0 } else { 0.0 };
+        self.ray_base = 0.0;
+        self.ray_observed = 0.0;
+        self.stats.rebuild_ms = rebuild_ms;
+    }
+
+    /// An intermediate rung after the refit: optimise or partly rebuild the tree, collapse the
+    /// wide tree again, and teach the policy what it cost and won back (by the replayed rays
+    /// under the ray-work measure, else by the SAH).
+    fn restructure(&mut self, id: MeshId, decision: Decision, cx: &mut FrameContext<'_>) {
+        let tris = self.indices.len();
+        // A probation ends: the kept tree no longer matches this one.
+        self.probe = None;
+        let t = Instant::now();
+        let old_work = self.replay_before(id, cx);
+        let sah_before = self.sah;
+        let r = &mut *cx.restructure;
+        let modelled = match decision {
+            Decision::Optimize(share) => {
+                let budget = OptimizeBudget {
+                    share,
+                    ..OptimizeBudget::default()
+                };
+                let st = self.bvh.optimize(budget, &mut r.ws, &mut r.optimize);
+                // The cut's subtrees moved: the next partial rebuild takes a new one.
+                self.cut.clear();
+                cx.prices.optimize_ms(tris, st.visits)
+            }
+            Decision::Partial(share) => {
+                let st = self.bvh.partial_rebuild(
+                    &mut self.cut,
+                    share,
+                    &cx.build,
+                    &mut r.ws,
+                    &mut r.partial,
+                );
+                cx.prices
+                    .partial_ms(tris, st.cut as usize, st.rebuilt_tris as usize)
+            }
+            Decision::Refit | Decision::Rebuild => 0.0,
+        };
+        if let Some(w) = &mut self.wide {
+            w.collapse_from(&self.bvh);
+        }
+        self.sah = super::tree_sah(self.bvh.bvh());
+        self.stats.model_ms += modelled;
+        self.replay_after(id, old_work, cx);
+        let ms = ms_since(t);
+        let cost = match cx.timing {
+            Timing::Measured => ms,
+            _ => modelled,
+        };
+        // What the degradation was and what is left of it.
+        let (before, after) = if cx.ray_judged && self.stats.measured_work_ratio > 0.0 {
+            let before = self.stats.work_ratio.max(1.0);
+            (before, before / self.stats.measured_work_ratio)
+        } else {
+            let before = self.stats.sah_ratio;
+            (
+                before,
+                before * self.sah / sah_before.max(f32::MIN_POSITIVE),
+            )
+        };
+        if let Some(k) = decision.rung() {
+            self.state.rungs[k].learn(cost, before, after);
+        }
+        self.state.restructured();
+        self.stats.sah_ratio = ratio(self.sah, self.state.build_sah);
+        self.stats.rebuild_ms = ms;
+    }
+}
