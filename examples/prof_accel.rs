@@ -1,7 +1,8 @@
 //! Build time (CPU), size and traversal work per ray of the other structures beside the binned
 //! BVH, single-threaded: `cargo run --release --example prof_accel MESH.tri RAYS.rays [NAMES]`
-//! (NAMES comma-separated, default all; `bvh` is binned16).
-use dynbvh::accel::{Accel, AccelKind};
+//! (NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`: the kd-tree's
+//! intersection cost, traversal cost 1).
+use dynbvh::accel::{Accel, AccelKind, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 
 #[path = "common/cpu.rs"]
@@ -17,8 +18,17 @@ fn main() {
         .unwrap_or_else(|| "bvh,kdtree,kdtree-naive,bih,grid,octree".into());
     for name in names.split(',') {
         let c = cpu_s();
+        let ci = std::env::var("KD_CI")
+            .ok()
+            .map(|v| v.parse::<f32>().unwrap());
         let s: Box<dyn Accel> = if name == "bvh" {
             Box::new(MeshBvh::build(&mesh, &BuildParams::BINNED))
+        } else if let (Some(ci), "kdtree") = (ci, name) {
+            let params = KdParams {
+                intersection_cost: ci,
+                ..KdParams::default()
+            };
+            Box::new(KdTree::build(&mesh, &params))
         } else {
             name.parse::<AccelKind>().unwrap().build(&mesh)
         };

@@ -46,7 +46,7 @@ impl Triangles {
 }
 
 /// Bitwise equality (so that NaN corners compare equal to themselves).
-fn same_triangle(a: &[Vec3; 3], b: &[Vec3; 3]) -> bool {
+pub(super) fn same_triangle(a: &[Vec3; 3], b: &[Vec3; 3]) -> bool {
     a.iter()
         .zip(b)
         .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits))

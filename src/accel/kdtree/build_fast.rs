@@ -171,19 +171,18 @@ impl<'a> Builder<'a> {
 
 /// Merges two sorted event sequences into one sorted list.
 fn merge(a: impl Iterator<Item = Event>, b: &[Event]) -> Vec<Event> {
-    let mut out = Vec::with_capacity(b.len() + a.size_hint().0);
-    let mut b = b.iter().peekable();
+    if b.is_empty() {
+        return a.collect();
+    }
+    let mut out = Vec::with_capacity(b.len() + a.size_hint().1.unwrap_or(0));
+    let mut j = 0;
     for e in a {
-        while let Some(&&x) = b.peek() {
-            if x.precedes(&e) {
-                out.push(x);
-                b.next();
-            } else {
-                break;
-            }
+        while j < b.len() && b[j].precedes(&e) {
+            out.push(b[j]);
+            j += 1;
         }
         out.push(e);
     }
-    out.extend(b);
+    out.extend_from_slice(&b[j..]);
     out
 }

@@ -15,6 +15,7 @@ use super::Accel;
 use super::triangles::Triangles;
 use crate::bvh::TraversalStats;
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
+use glam::Vec3;
 
 /// The deepest a kd-tree may be; traversal stacks have this many entries.
 pub const MAX_KD_DEPTH: usize = 64;
@@ -47,7 +48,7 @@ impl Default for KdParams {
     fn default() -> Self {
         Self {
             traversal_cost: 1.0,
-            intersection_cost: 1.5,
+            intersection_cost: 1.0,
             empty_bonus: 0.2,
             max_depth: None,
             build: KdBuild::Sorted,
@@ -59,7 +60,7 @@ impl KdParams {
     /// The naive builder with the default costs.
     pub const NAIVE: KdParams = KdParams {
         traversal_cost: 1.0,
-        intersection_cost: 1.5,
+        intersection_cost: 1.0,
         empty_bonus: 0.2,
         max_depth: None,
         build: KdBuild::Naive,
@@ -140,6 +141,9 @@ pub struct KdTree {
     nodes: Vec<KdNode>,
     /// Triangle ids of the leaves, leaf by leaf.
     refs: Vec<u32>,
+    /// `leaf_tris[i]`: the corners of triangle `refs[i]`, so that a leaf's triangles are read
+    /// in order.
+    leaf_tris: Vec<[Vec3; 3]>,
     tris: Triangles,
     /// The root cell: the box of every triangle that has one.
     bounds: Aabb,
@@ -173,8 +177,10 @@ impl KdTree {
             KdBuild::Sorted => build_fast::build(&boxes, &bounds, params),
             KdBuild::Naive => build_naive::build(&boxes, &bounds, params),
         };
+        let leaf_tris = built.refs.iter().map(|&r| tris.tris[r as usize]).collect();
         Self {
             nodes: built.nodes,
+            leaf_tris,
             refs: built.refs,
             tris,
             bounds,
@@ -228,6 +234,7 @@ impl Accel for KdTree {
     fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
             + std::mem::size_of_val(self.refs.as_slice())
+            + std::mem::size_of_val(self.leaf_tris.as_slice())
             + self.tris.memory_bytes()
     }
 

@@ -76,9 +76,10 @@ impl KdTree {
         let mut next = Pending { node: 0, tn, tf };
         loop {
             let leaf = self.nodes[self.descend(ray, next, &mut stack, &mut sp, c)];
-            for &prim in &self.refs[leaf.index()..leaf.index() + leaf.count()] {
+            let range = leaf.index()..leaf.index() + leaf.count();
+            for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
                 if !mailbox.seen(prim) {
-                    q.test(&self.tris.tris[prim as usize], prim, c);
+                    q.test(tri, prim, c);
                 }
             }
             loop {
@@ -109,8 +110,9 @@ impl KdTree {
         let mut next = Pending { node: 0, tn, tf };
         loop {
             let leaf = self.nodes[self.descend(ray, next, &mut stack, &mut sp, c)];
-            for &prim in &self.refs[leaf.index()..leaf.index() + leaf.count()] {
-                if !mailbox.seen(prim) && q.test(&self.tris.tris[prim as usize], c) {
+            let range = leaf.index()..leaf.index() + leaf.count();
+            for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
+                if !mailbox.seen(prim) && q.test(tri, c) {
                     return true;
                 }
             }

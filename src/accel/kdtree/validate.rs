@@ -5,11 +5,23 @@
 
 use super::events::clip_box;
 use super::{KdNode, KdTree, MAX_KD_DEPTH};
+use crate::accel::triangles::same_triangle;
 use crate::geom::{Aabb, TriMesh};
 
 impl KdTree {
     pub(super) fn check(&self, mesh: &TriMesh) -> Result<(), String> {
         self.tris.check(mesh)?;
+        if self.leaf_tris.len() != self.refs.len()
+            || self.refs.iter().zip(&self.leaf_tris).any(|(&r, t)| {
+                !self
+                    .tris
+                    .tris
+                    .get(r as usize)
+                    .is_some_and(|u| same_triangle(u, t))
+            })
+        {
+            return Err("leaf-order triangle copies differ from the triangles".into());
+        }
         let boxes = self.tris.boxes();
         let with_box = boxes.iter().filter(|b| !b.is_empty()).count();
         if self.nodes.is_empty() {
