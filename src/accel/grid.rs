@@ -243,9 +243,10 @@ impl Grid {
                 2
             };
             let t_exit = t_next[a];
-            // NaN exits (a ray along a cell face) compare false above and end the walk here
-            // only when every axis is NaN or infinite.
-            if !(lower(t_exit) <= beyond(best())) || step[a] == 0 {
+            // The walk ends once the next cell starts beyond the best hit, or the ray does not
+            // move at all.
+            let next_may_help = lower(t_exit) <= beyond(best());
+            if !next_may_help || step[a] == 0 {
                 return;
             }
             if step[a] > 0 {
