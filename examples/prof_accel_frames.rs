@@ -64,7 +64,10 @@ fn main() {
         mesh.len(),
         side * side
     );
-    println!("{:<10} {:>9} {:>9} {:>9} {:>10}", "structure", "update", "trace", "total", "hits");
+    println!(
+        "{:<10} {:>9} {:>9} {:>9} {:>10}",
+        "structure", "update", "trace", "total", "hits"
+    );
     for k in 0..names.len() {
         let n = frames as f64;
         println!(
