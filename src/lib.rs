@@ -27,6 +27,7 @@
 //! assert_eq!(bvh.closest_hit(&ray).unwrap().t, 0.0);
 //! ```
 
+pub mod accel;
 pub mod anim;
 pub mod bvh;
 pub mod cputime;

@@ -3,8 +3,10 @@
 use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use dynbvh::accel::AccelKind;
 use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
+use dynbvh::report::accel_bench;
 use dynbvh::report::build_bench::{self, Options, Row};
 use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
 use dynbvh::report::wide_bench::{self, WideRow};
@@ -26,7 +28,9 @@ pub struct BuildBenchArgs {
     /// Worker threads (default: all cores; more than the cores are capped).
     #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
-    /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all).
+    /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all), and
+    /// the other structures: kdtree, kdtree-naive, bih, grid (gridL: L cells per triangle),
+    /// octree.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Builds per method; the median is reported.
@@ -53,7 +57,10 @@ fn parse_method(s: &str) -> Result<BuildParams> {
         "sweep" => BuildParams::SWEEP,
         _ => {
             let rest = s.strip_prefix("binned").with_context(|| {
-                format!("unknown method {s:?}: median, sweep, binnedK, binnedK-widest")
+                format!(
+                    "unknown method {s:?}: median, sweep, binnedK, binnedK-widest, kdtree, \
+                     kdtree-naive, bih, grid, gridL, octree"
+                )
             })?;
             let (k, widest) = match rest.strip_suffix("-widest") {
                 Some(k) => (k, true),
@@ -117,13 +124,18 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         (mesh.len() as u64).saturating_mul(args::BUILD_BYTES_PER_TRIANGLE),
     )?;
     mesh.check().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-    let methods = if args.methods.is_empty() {
-        build_bench::default_methods()
+    let (methods, structures) = if args.methods.is_empty() {
+        (build_bench::default_methods(), Vec::new())
     } else {
-        args.methods
-            .iter()
-            .map(|m| parse_method(m))
-            .collect::<Result<_>>()?
+        let mut methods = Vec::new();
+        let mut structures = Vec::new();
+        for m in &args.methods {
+            match m.parse::<AccelKind>() {
+                Ok(k) => structures.push(k),
+                Err(_) => methods.push(parse_method(m)?),
+            }
+        }
+        (methods, structures)
     };
     let sets = if args.rays.is_empty() {
         let b = mesh.bounds();
@@ -156,7 +168,19 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         build_runs: args.runs as usize,
         ..Options::default()
     };
-    let rows = build_bench::run(&mesh, &methods, &sets, opts, |m| eprintln!("  {m} ..."));
+    let samples = build_bench::brute_force_samples(&mesh, &sets, opts.check_rays);
+    let mut rows = build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| {
+        eprintln!("  {m} ...");
+    });
+    rows.extend(accel_bench::run(
+        &mesh,
+        &structures,
+        &sets,
+        &samples,
+        opts.build_runs,
+        opts.trace_runs,
+        |m| eprintln!("  {m} ..."),
+    ));
     let wide_rows = if args.no_wide {
         Vec::new()
     } else {
@@ -179,10 +203,18 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", json.display()))?;
         let stem = dir.join("build_bench");
-        build_bench::chart(&rows, &name)
+        let with_sah: Vec<Row> = rows.iter().filter(|r| r.sah.is_finite()).cloned().collect();
+        build_bench::chart(&with_sah, &name)
             .save(&stem, 900, 600)
             .with_context(|| format!("writing {}.svg/.png", stem.display()))?;
         eprintln!("wrote {} and {}.svg/.png", json.display(), stem.display());
+        for set in &sets {
+            let stem = dir.join(format!("build_bench_trace_{}", set.name));
+            accel_bench::trace_chart(&rows, &set.name, &name)
+                .save(&stem, 900, 600)
+                .with_context(|| format!("writing {}.svg/.png", stem.display()))?;
+            eprintln!("wrote {}.svg/.png", stem.display());
+        }
         if !wide_rows.is_empty() {
             let json = dir.join("build_bench_wide.json");
             std::fs::write(&json, serde_json::to_string_pretty(&wide_rows)?)

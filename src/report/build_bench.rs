@@ -80,19 +80,20 @@ pub fn default_methods() -> Vec<BuildParams> {
 }
 
 /// Median of a non-empty list.
-fn median(mut v: Vec<f64>) -> f64 {
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
 
-fn time_ms(f: impl FnOnce()) -> f64 {
+/// Wall-clock milliseconds `f` takes.
+pub(super) fn time_ms(f: impl FnOnce()) -> f64 {
     let t = Instant::now();
     f();
     t.elapsed().as_secs_f64() * 1e3
 }
 
 /// Traces every ray in parallel (on the current rayon pool) and returns Mrays/s.
-fn trace_mrays(rays: &RaySet, f: impl Fn(&crate::geom::Ray) -> bool + Sync) -> f64 {
+pub(super) fn trace_mrays(rays: &RaySet, f: impl Fn(&crate::geom::Ray) -> bool + Sync) -> f64 {
     let hits = std::sync::atomic::AtomicUsize::new(0);
     let ms = time_ms(|| {
         let n = rays
@@ -163,29 +164,48 @@ fn packet_mrays(set: &RaySet, bvh: &MeshBvh, any: bool) -> f64 {
     set.rays.len() as f64 / (ms * 1e3)
 }
 
+/// Brute force's closest hits for a sample of one ray set: `(ray index, hit)`.
+pub type Samples = Vec<(usize, Option<Hit>)>;
+
+/// Brute-force answers for `check_rays` rays evenly spread through each set, computed once for
+/// all methods.
+#[must_use]
+pub fn brute_force_samples(mesh: &TriMesh, sets: &[RaySet], check_rays: usize) -> Vec<Samples> {
+    sets.iter()
+        .map(|s| {
+            let step = (s.rays.len() / check_rays.max(1)).max(1);
+            (0..s.rays.len())
+                .step_by(step)
+                .take(check_rays)
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|i| (i, brute_force_closest(mesh, &s.rays[i])))
+                .collect()
+        })
+        .collect()
+}
+
 /// Runs the whole comparison; `progress` is told each method as it starts.
 pub fn run(
     mesh: &TriMesh,
     methods: &[BuildParams],
     sets: &[RaySet],
     opts: Options,
+    progress: impl FnMut(&str),
+) -> Vec<Row> {
+    let samples = brute_force_samples(mesh, sets, opts.check_rays);
+    run_with_samples(mesh, methods, sets, opts, &samples, progress)
+}
+
+/// [`run`] with brute force's answers already computed ([`brute_force_samples`]).
+pub fn run_with_samples(
+    mesh: &TriMesh,
+    methods: &[BuildParams],
+    sets: &[RaySet],
+    opts: Options,
+    samples: &[Samples],
     mut progress: impl FnMut(&str),
 ) -> Vec<Row> {
-    // Brute-force answers for a sample of each set, computed once for all methods.
-    let samples: Vec<Vec<(usize, Option<Hit>)>> = sets
-        .iter()
-        .map(|s| {
-            let step = (s.rays.len() / opts.check_rays.max(1)).max(1);
-            (0..s.rays.len())
-                .step_by(step)
-                .take(opts.check_rays)
-                .collect::<Vec<_>>()
-                .into_par_iter()
-                .map(|i| (i, brute_force_closest(mesh, &s.rays[i])))
-                .collect()
-        })
-        .collect();
-
     let mut rows = Vec::new();
     for params in methods {
         let name = params.name();
@@ -199,7 +219,7 @@ pub fn run(
             .map(|_| time_ms(|| bvh.refit(mesh)))
             .collect();
         let (build_ms, refit_ms) = (median(builds), median(refits));
-        for (set, sample) in sets.iter().zip(&samples) {
+        for (set, sample) in sets.iter().zip(samples) {
             let closest = (0..opts.trace_runs.max(1))
                 .map(|_| trace_mrays(set, |r| bvh.closest_hit(r).is_some()))
                 .collect();
@@ -246,7 +266,7 @@ pub fn run(
 
 /// True when two closest-hit answers agree: both miss, or both hit at the same distance
 /// (which triangle wins a tie at exactly the same distance may differ).
-fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
+pub(super) fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
     match (a, b) {
         (None, None) => true,
         (Some(a), Some(b)) => a.t == b.t,

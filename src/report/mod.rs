@@ -1,5 +1,6 @@
 //! Measurements and reports: what the CLI's benchmark commands compute and print.
 
+pub mod accel_bench;
 pub mod all_pairs;
 pub mod build_bench;
 pub mod charts;

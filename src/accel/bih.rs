@@ -1,0 +1,510 @@
+//! The bounding interval hierarchy (Wächter & Keller, "Instant Ray Tracing: The Bounding
+//! Interval Hierarchy", EGSR 2006): an object partition like the BVH, but each node stores only
+//! two planes on one axis, the left child's largest and the right child's smallest coordinate.
+//! The build splits the node's candidate box (not its triangles' bounds) in the middle of its
+//! longest side, sorting triangles by their box centre, and halves the candidate box again
+//! when one side would be empty (the global heuristic). Traversal clips the ray's interval by
+//! both planes; the children may overlap, so both are visited, nearer first. A refit keeps the
+//! tree and recomputes the planes from the moved triangles.
+
+use super::Accel;
+use super::interval::{beyond, box_interval, lower, lower_is_near, plane_distance, upper};
+use super::triangles::{AnyHit, Closest};
+use crate::bvh::{Counters, TraversalStats};
+use crate::geom::{Aabb, Hit, Ray, TriMesh};
+use glam::Vec3;
+
+/// The deepest a BIH may be; traversal stacks have this many entries.
+pub const MAX_BIH_DEPTH: usize = 64;
+
+/// How a BIH is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BihParams {
+    /// Most triangles in a leaf (a leaf may hold more at the depth limit or when no candidate
+    /// plane separates its triangles' centres).
+    pub max_leaf_size: usize,
+}
+
+impl Default for BihParams {
+    fn default() -> Self {
+        Self { max_leaf_size: 4 }
+    }
+}
+
+/// Candidate-box halvings tried at one node before giving up and making a leaf.
+const MAX_EMPTY_SPLITS: usize = 32;
+
+/// A node: an interior node's two planes and axis (children adjacent, stored after it), or a
+/// leaf's range of triangle slots.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct BihNode {
+    /// Interior: the left child's upper and the right child's lower plane. Leaf: the first
+    /// slot and the count, as bits.
+    planes: [f32; 2],
+    /// `index << 2 | tag`: tag 0-2 the axis (index: first child), 3 a leaf.
+    data: u32,
+}
+
+impl BihNode {
+    fn leaf(first: usize, count: usize) -> Self {
+        Self {
+            planes: [f32::from_bits(first as u32), f32::from_bits(count as u32)],
+            data: 3,
+        }
+    }
+
+    fn interior(axis: usize, planes: [f32; 2], first: usize) -> Self {
+        Self {
+            planes,
+            data: (first as u32) << 2 | axis as u32,
+        }
+    }
+
+    #[inline(always)]
+    fn is_leaf(&self) -> bool {
+        self.data & 3 == 3
+    }
+
+    #[inline(always)]
+    fn axis(&self) -> usize {
+        (self.data & 3) as usize
+    }
+
+    #[inline(always)]
+    fn first_child(&self) -> usize {
+        (self.data >> 2) as usize
+    }
+
+    #[inline(always)]
+    fn slots(&self) -> std::ops::Range<usize> {
+        let first = self.planes[0].to_bits() as usize;
+        first..first + self.planes[1].to_bits() as usize
+    }
+}
+
+/// A bounding interval hierarchy over a mesh's triangles, the triangles copied in leaf order.
+#[derive(Clone, Debug, Default)]
+pub struct Bih {
+    nodes: Vec<BihNode>,
+    /// `prims[slot]`: the mesh's index of the triangle in that slot.
+    prims: Vec<u32>,
+    /// The triangles in slot order.
+    tris: Vec<[Vec3; 3]>,
+    bounds: Aabb,
+    depth: usize,
+    /// Per-node boxes, kept for refits.
+    scratch: Vec<Aabb>,
+}
+
+/// A triangle being sorted into the tree: its box and index.
+#[derive(Clone, Copy)]
+struct Item {
+    bounds: Aabb,
+    prim: u32,
+}
+
+struct Builder {
+    items: Vec<Item>,
+    nodes: Vec<BihNode>,
+    max_leaf: usize,
+    depth: usize,
+}
+
+impl Builder {
+    /// Builds node `index` over `items[begin..end]` with candidate box `cand`.
+    fn node(&mut self, index: usize, begin: usize, end: usize, mut cand: Aabb, depth: usize) {
+        self.depth = self.depth.max(depth);
+        let n = end - begin;
+        if n <= self.max_leaf || depth + 1 >= MAX_BIH_DEPTH {
+            self.nodes[index] = BihNode::leaf(begin, n);
+            return;
+        }
+        for _ in 0..MAX_EMPTY_SPLITS {
+            let axis = cand.largest_axis();
+            let mid = cand.center()[axis];
+            if !(cand.min[axis] < mid && mid < cand.max[axis]) {
+                break;
+            }
+            let split = begin + partition(&mut self.items[begin..end], axis, mid);
+            let (mut left_cand, mut right_cand) = (cand, cand);
+            left_cand.max[axis] = mid;
+            right_cand.min[axis] = mid;
+            if split == begin {
+                cand = right_cand;
+                continue;
+            }
+            if split == end {
+                cand = left_cand;
+                continue;
+            }
+            let planes = [
+                self.items[begin..split]
+                    .iter()
+                    .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis])),
+                self.items[split..end]
+                    .iter()
+                    .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis])),
+            ];
+            let first = self.nodes.len();
+            self.nodes.push(BihNode::leaf(0, 0));
+            self.nodes.push(BihNode::leaf(0, 0));
+            self.nodes[index] = BihNode::interior(axis, planes, first);
+            self.node(first, begin, split, left_cand, depth + 1);
+            self.node(first + 1, split, end, right_cand, depth + 1);
+            return;
+        }
+        self.nodes[index] = BihNode::leaf(begin, n);
+    }
+}
+
+/// Moves the items whose box centre lies below `mid` on `axis` to the front; returns how many.
+fn partition(items: &mut [Item], axis: usize, mid: f32) -> usize {
+    let below = |it: &Item| (it.bounds.min[axis] + it.bounds.max[axis]) * 0.5 < mid;
+    let (mut i, mut j) = (0, items.len());
+    while i < j {
+        if below(&items[i]) {
+            i += 1;
+        } else {
+            j -= 1;
+            items.swap(i, j);
+        }
+    }
+    i
+}
+
+impl Bih {
+    /// Builds a BIH over `mesh`'s triangles.
+    ///
+    /// # Panics
+    /// When a vertex index is out of range, or the mesh has 2^30 triangles or more.
+    #[must_use]
+    pub fn build(mesh: &TriMesh, params: &BihParams) -> Self {
+        assert!(mesh.len() < 1 << 30, "too many triangles for a BIH");
+        let items: Vec<Item> = (0..mesh.len())
+            .map(|i| Item {
+                bounds: mesh.triangle_bounds(i),
+                prim: i as u32,
+            })
+            .collect();
+        let bounds =
+            super::triangles::bounds_of(&items.iter().map(|it| it.bounds).collect::<Vec<_>>());
+        let mut b = Builder {
+            items,
+            nodes: Vec::new(),
+            max_leaf: params.max_leaf_size.max(1),
+            depth: 0,
+        };
+        if !b.items.is_empty() {
+            b.nodes.push(BihNode::leaf(0, 0));
+            let n = b.items.len();
+            b.node(0, 0, n, bounds, 0);
+        }
+        let prims: Vec<u32> = b.items.iter().map(|it| it.prim).collect();
+        let tris = prims.iter().map(|&p| mesh.triangle(p as usize)).collect();
+        Self {
+            nodes: b.nodes,
+            prims,
+            tris,
+            bounds,
+            depth: b.depth,
+            scratch: Vec::new(),
+        }
+    }
+
+    /// Refits for new vertex positions of the same triangles: the tree is kept, each node's
+    /// planes are recomputed from its children's triangles. Allocates only on the first refit.
+    ///
+    /// # Panics
+    /// When `mesh` has another triangle count than the one the tree was built for, or a vertex
+    /// index is out of range.
+    pub fn refit_to(&mut self, mesh: &TriMesh) {
+        assert_eq!(
+            mesh.len(),
+            self.prims.len(),
+            "refit needs the same triangles"
+        );
+        for (t, &p) in self.tris.iter_mut().zip(&self.prims) {
+            *t = mesh.triangle(p as usize);
+        }
+        self.scratch.resize(self.nodes.len(), Aabb::EMPTY);
+        for i in (0..self.nodes.len()).rev() {
+            let n = self.nodes[i];
+            self.scratch[i] = if n.is_leaf() {
+                self.tris[n.slots()]
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
+            } else {
+                let (l, r) = (
+                    self.scratch[n.first_child()],
+                    self.scratch[n.first_child() + 1],
+                );
+                let axis = n.axis();
+                self.nodes[i].planes = [l.max[axis], r.min[axis]];
+                l.union(r)
+            };
+        }
+        self.bounds = self.scratch.first().copied().unwrap_or(Aabb::EMPTY);
+    }
+
+    /// Each node's box as traversal sees it: its parent's, cut by its plane.
+    fn implied_boxes(&self) -> Vec<Aabb> {
+        let mut boxes = vec![self.bounds; self.nodes.len()];
+        for (i, n) in self.nodes.iter().enumerate() {
+            if !n.is_leaf() {
+                let (axis, f) = (n.axis(), n.first_child());
+                let (mut l, mut r) = (boxes[i], boxes[i]);
+                l.max[axis] = l.max[axis].min(n.planes[0]);
+                r.min[axis] = r.min[axis].max(n.planes[1]);
+                boxes[f] = l;
+                boxes[f + 1] = r;
+            }
+        }
+        boxes
+    }
+
+    #[inline(always)]
+    fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        c: &mut C,
+        mut leaf: impl FnMut(std::ops::Range<usize>, &mut C) -> bool,
+        best: impl Fn() -> f32,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let Some((tn, tf)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
+            return;
+        };
+        let mut stack = [(0u32, 0f32, 0f32); MAX_BIH_DEPTH];
+        let mut sp = 0;
+        let (mut node, mut tn, mut tf) = (0usize, tn, tf);
+        loop {
+            c.node();
+            let n = self.nodes[node];
+            if n.is_leaf() {
+                if leaf(n.slots(), c) {
+                    return;
+                }
+            } else {
+                let axis = n.axis();
+                let first = n.first_child();
+                let (near, far, near_plane, far_plane) = if lower_is_near(ray, axis) {
+                    (first, first + 1, n.planes[0], n.planes[1])
+                } else {
+                    (first + 1, first, n.planes[1], n.planes[0])
+                };
+                let dn = plane_distance(ray, axis, near_plane);
+                let df = plane_distance(ray, axis, far_plane);
+                let near_end = if dn.is_nan() { tf } else { upper(dn).min(tf) };
+                let far_start = if df.is_nan() { tn } else { lower(df).max(tn) };
+                let (go_near, go_far) = (tn <= near_end, far_start <= tf);
+                if go_near {
+                    if go_far {
+                        stack[sp] = (far as u32, far_start, tf);
+                        sp += 1;
+                    }
+                    node = near;
+                    tf = near_end;
+                    continue;
+                }
+                if go_far {
+                    node = far;
+                    tn = far_start;
+                    continue;
+                }
+            }
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let (n, a, b) = stack[sp];
+                if a <= beyond(best()) {
+                    (node, tn, tf) = (n as usize, a, b);
+                    break;
+                }
+            }
+        }
+    }
+
+    fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
+        let q = std::cell::RefCell::new(Closest::new(ray));
+        self.walk(
+            ray,
+            c,
+            |slots, c| {
+                let mut q = q.borrow_mut();
+                for s in slots {
+                    q.test(&self.tris[s], s as u32, c);
+                }
+                false
+            },
+            || q.borrow().tmax,
+        );
+        let hit = q.into_inner().hit;
+        hit.map(|h| Hit {
+            prim: self.prims[h.prim as usize],
+            ..h
+        })
+    }
+
+    fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
+        let q = AnyHit::new(ray);
+        let mut found = false;
+        self.walk(
+            ray,
+            c,
+            |slots, c| {
+                found = slots.into_iter().any(|s| q.test(&self.tris[s], c));
+                found
+            },
+            || ray.tmax,
+        );
+        found
+    }
+
+    fn check(&self, mesh: &TriMesh) -> Result<(), String> {
+        let n = self.prims.len();
+        if n != mesh.len() {
+            return Err(format!("{n} triangles stored, the mesh has {}", mesh.len()));
+        }
+        if self.nodes.is_empty() {
+            return if n == 0 {
+                Ok(())
+            } else {
+                Err(format!("no node over {n} triangles"))
+            };
+        }
+        let mut seen = vec![false; n];
+        for (slot, &p) in self.prims.iter().enumerate() {
+            let p = p as usize;
+            if p >= n || std::mem::replace(&mut seen[p], true) {
+                return Err(format!(
+                    "slot {slot}: triangle {p} repeated or out of range"
+                ));
+            }
+            let t = mesh.triangle(p);
+            let same = t
+                .iter()
+                .zip(&self.tris[slot])
+                .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
+            if !same {
+                return Err(format!("slot {slot}: triangle {p} differs from the mesh's"));
+            }
+        }
+        // Every subtree's triangles within its planes; leaves cover the slots in order.
+        let mut next_slot = 0;
+        self.check_node(0, self.bounds, &mut next_slot, 0)?;
+        if next_slot != n {
+            return Err(format!("leaves cover {next_slot} of {n} slots"));
+        }
+        Ok(())
+    }
+
+    fn check_node(
+        &self,
+        i: usize,
+        limit: Aabb,
+        next_slot: &mut usize,
+        depth: usize,
+    ) -> Result<(), String> {
+        if depth > self.depth || depth >= MAX_BIH_DEPTH {
+            return Err(format!("node {i} at depth {depth}"));
+        }
+        let n = self.nodes[i];
+        if n.is_leaf() {
+            let slots = n.slots();
+            if slots.start != *next_slot || slots.end > self.prims.len() || slots.is_empty() {
+                return Err(format!(
+                    "leaf {i}: slots {slots:?}, expected from {next_slot}"
+                ));
+            }
+            *next_slot = slots.end;
+            for s in slots {
+                let b = Aabb::of_triangle(&self.tris[s]);
+                if !b.is_empty() && !limit.contains(&b) {
+                    return Err(format!("leaf {i}: slot {s} outside the planes {limit:?}"));
+                }
+            }
+            return Ok(());
+        }
+        let (axis, f) = (n.axis(), n.first_child());
+        if f <= i || f + 1 >= self.nodes.len() {
+            return Err(format!("node {i}: children at {f}"));
+        }
+        let (mut l, mut r) = (limit, limit);
+        l.max[axis] = l.max[axis].min(n.planes[0]);
+        r.min[axis] = r.min[axis].max(n.planes[1]);
+        self.check_node(f, l, next_slot, depth + 1)?;
+        self.check_node(f + 1, r, next_slot, depth + 1)
+    }
+}
+
+impl Accel for Bih {
+    fn name(&self) -> String {
+        "bih".into()
+    }
+
+    fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
+        self.closest(ray, &mut ())
+    }
+
+    fn any_hit(&self, ray: &Ray) -> bool {
+        self.any(ray, &mut ())
+    }
+
+    fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
+        self.closest(ray, stats)
+    }
+
+    fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
+        self.any(ray, stats)
+    }
+
+    fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
+        self.check(mesh)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of_val(self.nodes.as_slice())
+            + std::mem::size_of_val(self.prims.as_slice())
+            + std::mem::size_of_val(self.tris.as_slice())
+            + std::mem::size_of_val(self.scratch.as_slice())
+    }
+
+    fn nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    fn depth(&self) -> usize {
+        self.depth
+    }
+
+    fn sah(&self) -> Option<f32> {
+        let root = self.bounds.half_area_f64();
+        if self.nodes.is_empty() || root <= 0.0 {
+            return None;
+        }
+        let boxes = self.implied_boxes();
+        let sum: f64 = self
+            .nodes
+            .iter()
+            .zip(&boxes)
+            .map(|(n, b)| {
+                let weight = if n.is_leaf() {
+                    n.slots().len() as f64
+                } else {
+                    1.0
+                };
+                b.half_area_f64() * weight
+            })
+            .sum();
+        Some((sum / root) as f32)
+    }
+
+    fn refit(&mut self, mesh: &TriMesh) -> bool {
+        self.refit_to(mesh);
+        true
+    }
+}

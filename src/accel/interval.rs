@@ -1,0 +1,138 @@
+//! Conservative ray intervals for the space partitions (kd-tree, octree, grid) and the BIH.
+//!
+//! A node's interval `[tn, tf]` always contains the distances over which the exact ray lies in
+//! the node's cell: distances to planes are widened by [`PLANE_SLACK`] (more than the three
+//! roundings of `(plane - origin) * inv_dir`), so a cell the ray touches is never skipped. A
+//! traversal that keeps every hit it finds (never only those inside the current cell) may then
+//! stop once the best hit lies before every cell still to visit; since two triangles through
+//! one point compute slightly different `t`, that test allows [`HIT_SLACK`] more.
+
+use crate::geom::{FAR_SCALE, Ray};
+use glam::Vec3;
+
+/// Relative widening of a plane distance: `2^-20`, about five times the rounding of
+/// `(plane - origin) * inv_dir` (three operations of `2^-24` each).
+pub(super) const PLANE_SLACK: f32 = 1.0 / (1u32 << 20) as f32;
+
+/// Relative margin between a hit's computed distance and the cells it may lie in: a node is
+/// skipped only when it starts beyond the best hit by more than this (`2^-16`).
+pub(super) const HIT_SLACK: f32 = 1.0 / (1u32 << 16) as f32;
+
+/// `x` moved down by [`PLANE_SLACK`] of itself (infinities stay).
+#[inline(always)]
+pub(super) fn lower(x: f32) -> f32 {
+    if x > 0.0 {
+        x * (1.0 - PLANE_SLACK)
+    } else {
+        x * (1.0 + PLANE_SLACK)
+    }
+}
+
+/// `x` moved up by [`PLANE_SLACK`] of itself (infinities stay).
+#[inline(always)]
+pub(super) fn upper(x: f32) -> f32 {
+    if x > 0.0 {
+        x * (1.0 + PLANE_SLACK)
+    } else {
+        x * (1.0 - PLANE_SLACK)
+    }
+}
+
+/// The distance beyond which a node cannot hold a hit closer than `best`.
+#[inline(always)]
+pub(super) fn beyond(best: f32) -> f32 {
+    if best > 0.0 {
+        best * (1.0 + HIT_SLACK)
+    } else {
+        best * (1.0 - HIT_SLACK)
+    }
+}
+
+/// The ray's distance to the plane `x[axis] = plane` (`±inf` or NaN when it runs parallel).
+#[inline(always)]
+pub(super) fn plane_distance(ray: &Ray, axis: usize, plane: f32) -> f32 {
+    (plane - ray.origin[axis]) * ray.inv_dir[axis]
+}
+
+/// Conservative entry and exit distances of the ray through the box `[lo, hi]` within
+/// `[ray.tmin, tmax]`, or `None` when it misses (the slab test of [`Ray::hit_box`], with the
+/// entry lowered as the exit is raised).
+#[inline]
+pub(super) fn box_interval(ray: &Ray, lo: Vec3, hi: Vec3, tmax: f32) -> Option<(f32, f32)> {
+    let t0 = (lo - ray.slab_lo) * ray.inv_dir;
+    let t1 = (hi - ray.slab_hi) * ray.inv_dir;
+    let near = t0.min(t1);
+    let far = t0.max(t1);
+    let tn = lower(near.max_element()).max(ray.tmin);
+    let tf = (far.min_element() * FAR_SCALE).min(tmax);
+    let tf = upper(tf).min(tmax);
+    (tn <= tf).then_some((tn, tf))
+}
+
+/// How the ray's interval `[tn, tf]` splits at a plane, the children named by the side the ray
+/// reaches first (`near`: the lower side when it moves up the axis, or does not move along it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Crossing {
+    /// Only the near side, over the same interval.
+    Near,
+    /// Only the far side, over the same interval.
+    Far,
+    /// Both: the near side up to the first distance, the far side from the second.
+    Both(f32, f32),
+}
+
+/// The [`Crossing`] at distance `d` to the plane (the course's rule, widened: `d > tf` near
+/// only, `d < tn` far only, else both). A NaN distance (the ray lies in the plane) is both.
+#[inline(always)]
+pub(super) fn cross(d: f32, tn: f32, tf: f32) -> Crossing {
+    if d.is_nan() {
+        return Crossing::Both(tf, tn);
+    }
+    let (lo, hi) = (lower(d), upper(d));
+    if tn > hi {
+        Crossing::Far
+    } else if lo > tf {
+        Crossing::Near
+    } else {
+        Crossing::Both(hi.min(tf), lo.max(tn))
+    }
+}
+
+/// True when the ray moves towards the upper side of `axis` (or does not move along it): the
+/// lower side is then the near one.
+#[inline(always)]
+pub(super) fn lower_is_near(ray: &Ray, axis: usize) -> bool {
+    ray.inv_dir[axis] > 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crossing_follows_the_course_rule() {
+        assert_eq!(cross(5.0, 1.0, 2.0), Crossing::Near);
+        assert_eq!(cross(0.5, 1.0, 2.0), Crossing::Far);
+        assert_eq!(cross(-3.0, 0.0, 2.0), Crossing::Far);
+        let Crossing::Both(a, b) = cross(1.5, 1.0, 2.0) else {
+            panic!("both")
+        };
+        assert!(a >= 1.5 && b <= 1.5 && a < 1.6 && b > 1.4);
+        assert!(matches!(
+            cross(f32::NAN, 1.0, 2.0),
+            Crossing::Both(2.0, 1.0)
+        ));
+        assert_eq!(cross(f32::INFINITY, 1.0, 2.0), Crossing::Near);
+        assert_eq!(cross(f32::NEG_INFINITY, 1.0, 2.0), Crossing::Far);
+        assert!(lower(3.0) < 3.0 && upper(3.0) > 3.0 && lower(-3.0) < -3.0);
+        assert_eq!(lower(f32::INFINITY), f32::INFINITY);
+    }
+
+    #[test]
+    fn box_interval_contains_the_slab_test() {
+        let r = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X);
+        let (tn, tf) = box_interval(&r, Vec3::ZERO, Vec3::ONE, f32::INFINITY).unwrap();
+        assert!(tn <= 1.0 && tf >= 2.0 && tn > 0.99 && tf < 2.01);
+        assert!(box_interval(&r, Vec3::ZERO, Vec3::ONE, 0.5).is_none());
+    }
+}
