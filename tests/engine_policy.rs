@@ -318,7 +318,9 @@ fn simulator_api_matches_brute_force_every_frame() {
             // The same rays cut short: any hit over a finite range.
             let short: Vec<Ray> = rays
                 .iter()
-                .map(|r| Ray::with_range(r.origin, r.dir, r.tmin, 0.6 * diag / r.dir.length()))
+                .map(|r| {
+                    Ray::with_range(r.origin(), r.dir(), r.tmin, 0.6 * diag / r.dir().length())
+                })
                 .collect();
             let mut short_any = vec![false; rays.len()];
             e.trace_any(&short, &mut short_any);
@@ -330,7 +332,7 @@ fn simulator_api_matches_brute_force_every_frame() {
                 assert_eq!(batch_any[k], e.any_hit(r), "{}: batch any hit", what(k));
                 assert_eq!(short_any[k], e.any_hit(&short[k]), "{}: short any", what(k));
                 let want = brute_force_closest(&world, r);
-                let tol = 1e-4 * diag / r.dir.length();
+                let tol = 1e-4 * diag / r.dir().length();
                 let graze = |u: f32, v: f32, t: f32| barycentric_min(u, v) < 1e-3 || t <= tol;
                 match (want, got) {
                     (None, None) => {}
@@ -353,7 +355,7 @@ fn simulator_api_matches_brute_force_every_frame() {
                                 .position(|&o| o == (g.instance, g.prim))
                                 .unwrap();
                             let [p, q, s] = world.triangle(flat);
-                            let pre = RayTriPrecomp::new(r.dir);
+                            let pre = RayTriPrecomp::new(r.dir());
                             let there = intersect_triangle(r, &pre, p, q, s, f32::INFINITY)
                                 .is_some_and(|h| (h.0 - g.t).abs() <= tol);
                             assert!(
