@@ -9,10 +9,13 @@
 //!
 //! A refit never changes the topology; a rebuild may.
 
+mod all_hits;
 pub mod build;
+mod closest_point;
 mod cost;
 mod mesh;
 mod node;
+mod overlap;
 mod packet;
 pub(crate) use packet::with_packet;
 mod refit;
@@ -20,10 +23,16 @@ mod traverse;
 mod validate;
 pub mod wide;
 
+pub use all_hits::brute_force_all_hits;
+pub(crate) use all_hits::keep_nearest;
 pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
+pub(crate) use closest_point::squared_bound;
+pub use closest_point::{PointHit, brute_force_closest_point};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
+pub(crate) use overlap::boxes_touch;
+pub use overlap::{brute_force_overlap_box, brute_force_overlap_sphere};
 pub use packet::{
     COHERENT_COS, MAX_PACKET, MIN_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H,
     TILE_W, image_tiles, is_coherent,
