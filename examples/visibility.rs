@@ -58,7 +58,7 @@ pub fn run(args: &Args) -> Result<Summary> {
     let step = (n / args.agents.max(1)).max(1);
     let agents: Vec<InstanceId> = (0..n as u32).step_by(step).map(InstanceId).collect();
     for k in 0..n as u32 {
-        let mask = if k as usize % step == 0 {
+        let mask = if (k as usize).is_multiple_of(step) {
             AGENT
         } else {
             OBSTACLE

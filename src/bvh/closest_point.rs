@@ -34,7 +34,7 @@ impl Bvh {
         let root = nodes.first()?;
         let mut best_d2 = bound;
         let d = lower(root);
-        if !(d < best_d2) {
+        if d.partial_cmp(&best_d2) != Some(std::cmp::Ordering::Less) {
             return None;
         }
         let mut best = None;

@@ -115,7 +115,7 @@ impl MeshBvh {
         place: Option<&Affine3A>,
         mut found: impl FnMut(u32),
     ) {
-        if !(radius >= 0.0) {
+        if radius.is_nan() || radius < 0.0 {
             return;
         }
         let r2 = radius * radius;
@@ -160,7 +160,7 @@ pub fn brute_force_overlap_box(mesh: &TriMesh, query: Aabb) -> Vec<u32> {
 #[must_use]
 pub fn brute_force_overlap_sphere(mesh: &TriMesh, centre: Vec3, radius: f32) -> Vec<u32> {
     let r2 = radius * radius;
-    if !(radius >= 0.0) {
+    if radius.is_nan() || radius < 0.0 {
         return Vec::new();
     }
     (0..mesh.indices.len() as u32)

@@ -49,7 +49,7 @@ pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
         return b + (c - b) * w;
     }
     let denom = va + vb + vc;
-    if !(denom > 0.0) || !denom.is_finite() {
+    if denom.is_nan() || denom <= 0.0 || !denom.is_finite() {
         return closest_on_edges(p, a, b, c);
     }
     let v = vb / denom;

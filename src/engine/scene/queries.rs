@@ -89,7 +89,7 @@ impl Engine {
     /// first), sorted.
     pub fn overlap_sphere(&self, centre: Vec3, radius: f32, out: &mut Vec<(InstanceId, u32)>) {
         out.clear();
-        if !(radius >= 0.0) {
+        if radius.is_nan() || radius < 0.0 {
             return;
         }
         let r2 = radius * radius;
