@@ -6,7 +6,8 @@
 //! - all-hits and hit counting against the closest hit on camera rays (the shipped
 //!   `lidar_cloth.glb` through the engine, and a 100k-triangle bumpy sphere's binary tree).
 //!
-//! `cargo bench --bench queries` (figures in `docs/library.md`).
+//! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh]` (figures in
+//! `docs/library.md`).
 
 #[path = "common/timing.rs"]
 mod timing;
@@ -43,7 +44,7 @@ fn visibility() {
     let mesh = e.add_mesh(rock.positions.clone(), rock.indices.clone());
     let mut rng = Rng(1);
     let start: Vec<Vec3> = (0..INSTANCES)
-        .map(|_| Vec3::new(rng.f(), rng.f() * 0.2, rng.f()) * 100.0)
+        .map(|_| Vec3::new(rng.f(), rng.f() * 0.2, rng.f()) * 200.0)
         .collect();
     let ids: Vec<InstanceId> = start
         .iter()
@@ -231,9 +232,21 @@ fn main() {
         .num_threads(1)
         .build()
         .expect("a one-thread pool");
+    // `cargo bench` passes `--bench`; other words pick the parts to run.
+    let parts: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let wanted = |name: &str| parts.is_empty() || parts.iter().any(|p| name.contains(p.as_str()));
     pool.install(|| {
-        visibility();
-        all_hits_engine();
-        all_hits_mesh();
+        if wanted("visibility") {
+            visibility();
+        }
+        if wanted("all_hits_engine") {
+            all_hits_engine();
+        }
+        if wanted("all_hits_mesh") {
+            all_hits_mesh();
+        }
     });
 }

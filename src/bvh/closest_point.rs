@@ -110,19 +110,31 @@ impl MeshBvh {
         let tris = self.tris.as_slice();
         let mut point = Vec3::ZERO;
         let (slot, d2) = match place {
-            None => self.bvh.nearest_slot(
-                |n| box_distance_squared(p, n.bounds()),
-                bound,
-                |slot, best| {
-                    let [a, b, c] = tris[slot];
-                    let q = closest_point_on_triangle(p, a, b, c);
-                    let d2 = q.distance_squared(p);
-                    (d2 < best).then(|| {
-                        point = q;
-                        d2
-                    })
-                },
-            ),
+            None => {
+                // One margin for every node (they all lie inside the root): the same lower
+                // bound as `box_distance_squared` with the root's coordinates, which are at
+                // least every node's.
+                let r = self.bvh.bounds();
+                let pad = (r.min.abs().max(r.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+                let (above, below) = (p + pad, p - pad);
+                self.bvh.nearest_slot(
+                    |n| {
+                        let lo = Vec3::from(n.min) - above;
+                        let hi = below - Vec3::from(n.max);
+                        lo.max(hi).max(Vec3::ZERO).length_squared()
+                    },
+                    bound,
+                    |slot, best| {
+                        let [a, b, c] = tris[slot];
+                        let q = closest_point_on_triangle(p, a, b, c);
+                        let d2 = q.distance_squared(p);
+                        (d2 < best).then(|| {
+                            point = q;
+                            d2
+                        })
+                    },
+                )
+            }
             Some(m) => self.bvh.nearest_slot(
                 |n| box_distance_squared(p, n.bounds().transformed(m)),
                 bound,
