@@ -78,11 +78,13 @@ fn visibility() {
         }
         e.update();
         rays.clear();
+        // From just outside the viewer's sphere (radius 1) to just outside the target's: no
+        // query starts inside an instance, so the filters change no answer but the masked one.
         rays.extend(pairs.iter().map(|&(a, b)| {
-            Ray::segment(
-                e.transform(ids[a]).translation.into(),
-                e.transform(ids[b]).translation.into(),
-            )
+            let pa: Vec3 = e.transform(ids[a]).translation.into();
+            let pb: Vec3 = e.transform(ids[b]).translation.into();
+            let d = (pb - pa).normalize_or_zero();
+            Ray::segment(pa + d * 1.01, pb - d * 1.01)
         }));
         let (mut n0, mut n1, mut n2) = (0, 0, 0);
         let t = interleaved(
