@@ -336,7 +336,7 @@ mod ob {
     }
 
     pub fn ray(r: &Ray) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new_inf(Vec3A::from(r.origin), Vec3A::from(r.dir))
+        obvhs::ray::Ray::new_inf(Vec3A::from(r.origin()), Vec3A::from(r.dir()))
     }
 }
 
@@ -422,7 +422,7 @@ mod bv {
 
     pub fn ray(r: &Ray) -> R {
         (
-            bvh::ray::Ray::new(p(r.origin), Vector3::new(r.dir.x, r.dir.y, r.dir.z)),
+            bvh::ray::Ray::new(p(r.origin()), Vector3::new(r.dir().x, r.dir().y, r.dir().z)),
             *r,
         )
     }
@@ -437,7 +437,7 @@ mod bv {
         /// The triangle test is dynbvh's watertight one: the crate's own culls back faces, and
         /// the rays from inside the meshes need both sides.
         pub fn closest(&self, (bray, ray): &R) -> Option<(f32, u32)> {
-            let pre = RayTriPrecomp::new(ray.dir);
+            let pre = RayTriPrecomp::new(ray.dir());
             let mut best: Option<(f32, u32)> = None;
             for s in self.bvh.nearest_traverse_iterator(bray, &self.shapes) {
                 let tmax = best.map_or(f32::INFINITY, |b| b.0);
@@ -562,7 +562,7 @@ mod pa {
     }
 
     pub fn ray(r: &Ray) -> parry3d::query::Ray {
-        parry3d::query::Ray::new(v(r.origin), v(r.dir))
+        parry3d::query::Ray::new(v(r.origin()), v(r.dir()))
     }
 
     fn arr(x: Vector) -> [f32; 3] {

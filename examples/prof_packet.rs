@@ -193,7 +193,7 @@ fn load_only(rays: &[Ray]) {
     let (m, _) = mrays(rays.len(), || {
         let mut n = 0.0;
         for r in rays {
-            n += r.origin.x + r.tmax;
+            n += r.origin().x + r.tmax;
         }
         n as usize
     });

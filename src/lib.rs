@@ -26,6 +26,69 @@
 //! bvh.validate(&moved).unwrap();
 //! assert_eq!(bvh.closest_hit(&ray).unwrap().t, 0.0);
 //! ```
+//!
+//! # Using dynbvh from another crate
+//!
+//! The crate's public types are built on [`glam`] (vectors, affine transforms); it is re-exported
+//! as `dynbvh::glam`, so a dependent uses that one instead of matching its version by hand:
+//! `use dynbvh::glam::{Affine3A, Vec3};`. The two-level scene is [`engine::Engine`]; a glTF
+//! file is loaded by [`anim::Scene::load`] and posed into an engine by
+//! [`engine::gltf::GltfSource`] (see that module's quick start). A simulator's frame: pose,
+//! update, query.
+//!
+//! ```
+//! use dynbvh::engine::{Engine, EngineConfig, QueryFilter};
+//! use dynbvh::geom::{Aabb, Ray, shapes};
+//! use dynbvh::glam::{Affine3A, Vec3};
+//!
+//! let mut engine = Engine::new(EngineConfig::default());
+//! let ball = shapes::icosphere(3);
+//! let cloth = engine.add_mesh(ball.positions.clone(), ball.indices.clone()); // deforms
+//! let rock = engine.add_mesh(ball.positions.clone(), ball.indices.clone()); // rigid
+//! let me = engine.add_instance(rock, Affine3A::from_translation(Vec3::new(0.0, 0.0, 5.0)));
+//! engine.add_instance(cloth, Affine3A::IDENTITY);
+//! let rays: Vec<Ray> = (0..64)
+//!     .map(|k| Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::new(k as f32 * 0.01 - 0.3, 0.1, -1.0)))
+//!     .collect();
+//! let mut hits = vec![None; rays.len()];
+//! for frame in 0..3 {
+//!     for p in engine.positions_mut(cloth) {
+//!         *p *= 1.0 + 0.05 * frame as f32; // inflate the cloth
+//!     }
+//!     engine.set_transform(me, Affine3A::from_translation(Vec3::new(0.0, 0.1 * frame as f32, 5.0)));
+//!     engine.update(); // refit or rebuild, as the policy decides
+//!     engine.trace_closest(&rays, &mut hits); // a batch, timed for the policy
+//! }
+//! // From inside the rock, looking past it: exclude it.
+//! let ray = Ray::new(Vec3::new(0.0, 0.1, 5.0), -Vec3::Z);
+//! let hit = engine.closest_hit_filtered(&ray, &QueryFilter::ALL.excluding(me)).unwrap();
+//! let detail = engine.hit_detail(&hit);
+//! assert!(detail.position.z > 0.9 && detail.normal.z.abs() > 0.5);
+//! let near = engine.closest_point(Vec3::new(0.0, 3.0, 0.0), f32::INFINITY).unwrap();
+//! assert!(near.distance < 2.0);
+//! let mut touched = Vec::new();
+//! engine.overlap_box(Aabb::new(Vec3::splat(-0.2), Vec3::splat(0.2) + Vec3::Z * 2.0), &mut touched);
+//! assert!(!touched.is_empty());
+//! assert_eq!(engine.count_hits(&Ray::new(Vec3::new(0.0, 0.05, 0.0), Vec3::X)), 1); // inside
+//! ```
+//!
+//! **SIMD width.** The packet and wide-tree kernels use the `wide` crate, which picks AVX-512,
+//! AVX2 or SSE vectors *at compile time* from the enabled target features. This repository's
+//! `.cargo/config.toml` sets `-C target-cpu=native`, but Cargo reads configuration only from the
+//! directory it is run in (and its parents, and `~/.cargo`), never from a dependency: a
+//! dependent builds dynbvh for the baseline x86-64 target (SSE2) unless it asks for more. To get
+//! the machine's width, put the same in the dependent's own `.cargo/config.toml`:
+//!
+//! ```toml
+//! [build]
+//! rustflags = ["-C", "target-cpu=native"]
+//! ```
+//!
+//! or build with `RUSTFLAGS="-C target-cpu=native" cargo build --release` (for binaries shipped
+//! to other machines, name a target instead, e.g. `-C target-cpu=x86-64-v3` for AVX2). Results
+//! are the same at every width; only the speed differs.
+
+pub use glam;
 
 pub mod accel;
 pub mod anim;

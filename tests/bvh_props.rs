@@ -16,7 +16,7 @@ fn aimed(mesh: &TriMesh, from: Vec3) -> impl Iterator<Item = Ray> + '_ {
         .iter()
         .take(20)
         .map(move |&p| Ray::new(from, p - from))
-        .filter(|r| r.dir.length() > 0.0)
+        .filter(|r| r.dir().length() > 0.0)
 }
 
 fn check_all(mesh: &TriMesh, bvh: &MeshBvh, rays: &[Ray]) -> Result<(), TestCaseError> {

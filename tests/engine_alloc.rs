@@ -88,11 +88,11 @@ fn run_frames(config: EngineConfig, trace_ms: Option<f64>, frames: usize) -> Vec
                 e.trace_frame(&rays, &mut hits);
             }
             Some(ms) => {
-                e.trace_closest(&rays, &mut hits);
+                e.closest_hit_batch(&rays, &mut hits);
                 e.record_trace(ms, rays.len() as u64);
             }
         }
-        e.trace_any(&rays, &mut any);
+        e.any_hit_batch(&rays, &mut any);
         let _ = e.closest_hit(&rays[0]);
         let _ = e.predicted_work();
         let c = region.change();

@@ -82,7 +82,7 @@ fn barycentric_min(u: f32, v: f32) -> f32 {
 /// World-space test of one flattened triangle.
 fn world_hit(mesh: &TriMesh, tri: usize, ray: &Ray) -> Option<(f32, f32, f32)> {
     let [a, b, c] = mesh.triangle(tri);
-    intersect_triangle(ray, &RayTriPrecomp::new(ray.dir), a, b, c, f32::INFINITY)
+    intersect_triangle(ray, &RayTriPrecomp::new(ray.dir()), a, b, c, f32::INFINITY)
 }
 
 #[derive(Default)]
@@ -312,7 +312,7 @@ fn check_configs(
             e.any_hit_packet_mode(&rays, &mut packet_any, PacketMode::Always);
             // Rays shorter than the scene test any-hit with a finite range too.
             for (k, (ray, &(w, w_any))) in rays.iter().zip(&want).enumerate() {
-                let tol = 2e-4 * diag / ray.dir.length();
+                let tol = 2e-4 * diag / ray.dir().length();
                 let got = e.closest_hit(ray);
                 assert_eq!(
                     packet[k],

@@ -57,7 +57,7 @@ fn run_with(file: &str, policy: Policy, trace_ms: Option<f64>) -> ((f32, u32), f
                 e.trace_frame(&rays, &mut hits);
             }
             Some(ms) => {
-                e.trace_closest(&rays, &mut hits);
+                e.closest_hit_batch(&rays, &mut hits);
                 e.record_trace(ms, rays.len() as u64);
             }
         }
@@ -201,7 +201,7 @@ fn amortized_goes_back_to_the_replaced_tree_when_it_is_better_again() {
             assert_eq!(s.action, Action::Refit);
         }
         // Hits stay right whichever tree is in use.
-        e.trace_closest(&rays, &mut hits);
+        e.closest_hit_batch(&rays, &mut hits);
         for (r, h) in rays.iter().zip(&hits) {
             let want = refit.closest_hit(r);
             assert_eq!(h.map(|h| h.t), want.map(|h| h.t), "frame {f}");
@@ -241,10 +241,10 @@ fn barycentric_min(u: f32, v: f32) -> f32 {
 /// rigidly moving one (rotated, scaled, translated every frame) of the first, and the second
 /// deformed every frame through `set_positions` / `positions_mut`. Every frame, after
 /// `update()`: closest hit, any hit (unbounded and over a finite range), and the parallel
-/// batches (`trace_closest`, `trace_any`, `trace_frame`) against brute force over the world
-/// triangles. Instances are traced in their own space through the inverse transform, so
-/// distances are compared with a tolerance and a ray that only one side hits must graze an
-/// edge (rare). Runs the default configuration with costs that make it rebuild, and the binary
+/// batches (`closest_hit_batch`, `any_hit_batch`, `trace_closest`, `trace_any`, the packet
+/// batches) against brute force over the world triangles. Instances are traced in their own
+/// space through the inverse transform, so distances are compared with a tolerance and a ray
+/// that only one side hits must graze an edge (rare). Runs the default configuration with costs that make it rebuild, and the binary
 /// traversal refitting only.
 #[test]
 fn simulator_api_matches_brute_force_every_frame() {
@@ -310,15 +310,28 @@ fn simulator_api_matches_brute_force_every_frame() {
             ));
             let mut batch = vec![None; rays.len()];
             let mut batch_any = vec![false; rays.len()];
-            e.trace_closest(&rays, &mut batch);
-            e.trace_any(&rays, &mut batch_any);
+            e.closest_hit_batch(&rays, &mut batch);
+            e.any_hit_batch(&rays, &mut batch_any);
             let mut framed = vec![None; rays.len()];
-            e.trace_frame(&rays, &mut framed);
-            assert_eq!(framed, batch, "frame {f}: trace_frame and trace_closest");
+            e.trace_closest(&rays, &mut framed);
+            assert_eq!(
+                framed, batch,
+                "frame {f}: trace_closest and closest_hit_batch"
+            );
+            let mut packets = vec![None; rays.len()];
+            e.trace_closest_packets(&rays, &mut packets);
+            let mut packets_any = vec![false; rays.len()];
+            e.trace_any_packets(&rays, &mut packets_any);
+            assert_eq!(packets_any, batch_any, "frame {f}: trace_any_packets");
+            for (k, (p, b)) in packets.iter().zip(&batch).enumerate() {
+                assert_eq!(p.map(|h| h.t), b.map(|h| h.t), "frame {f} ray {k}: packets");
+            }
             // The same rays cut short: any hit over a finite range.
             let short: Vec<Ray> = rays
                 .iter()
-                .map(|r| Ray::with_range(r.origin, r.dir, r.tmin, 0.6 * diag / r.dir.length()))
+                .map(|r| {
+                    Ray::with_range(r.origin(), r.dir(), r.tmin, 0.6 * diag / r.dir().length())
+                })
                 .collect();
             let mut short_any = vec![false; rays.len()];
             e.trace_any(&short, &mut short_any);
@@ -330,7 +343,7 @@ fn simulator_api_matches_brute_force_every_frame() {
                 assert_eq!(batch_any[k], e.any_hit(r), "{}: batch any hit", what(k));
                 assert_eq!(short_any[k], e.any_hit(&short[k]), "{}: short any", what(k));
                 let want = brute_force_closest(&world, r);
-                let tol = 1e-4 * diag / r.dir.length();
+                let tol = 1e-4 * diag / r.dir().length();
                 let graze = |u: f32, v: f32, t: f32| barycentric_min(u, v) < 1e-3 || t <= tol;
                 match (want, got) {
                     (None, None) => {}
@@ -353,7 +366,7 @@ fn simulator_api_matches_brute_force_every_frame() {
                                 .position(|&o| o == (g.instance, g.prim))
                                 .unwrap();
                             let [p, q, s] = world.triangle(flat);
-                            let pre = RayTriPrecomp::new(r.dir);
+                            let pre = RayTriPrecomp::new(r.dir());
                             let there = intersect_triangle(r, &pre, p, q, s, f32::INFINITY)
                                 .is_some_and(|h| (h.0 - g.t).abs() <= tol);
                             assert!(

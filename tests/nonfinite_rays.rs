@@ -21,8 +21,8 @@ fn bad_rays() -> Vec<Ray> {
     for (i, r) in base.iter().enumerate() {
         let v = bad[i % 3];
         let a = i % 3;
-        let mut o = r.origin.to_array();
-        let mut d = r.dir.to_array();
+        let mut o = r.origin().to_array();
+        let mut d = r.dir().to_array();
         match (i / 3) % 5 {
             0 => o[a] = v,
             1 => d[a] = v,
@@ -33,8 +33,8 @@ fn bad_rays() -> Vec<Ray> {
                 d = [v; 3];
             }
             _ => {
-                rays.push(Ray::with_range(r.origin, r.dir, v, f32::INFINITY));
-                rays.push(Ray::with_range(r.origin, r.dir, 0.0, v));
+                rays.push(Ray::with_range(r.origin(), r.dir(), v, f32::INFINITY));
+                rays.push(Ray::with_range(r.origin(), r.dir(), 0.0, v));
                 continue;
             }
         }
@@ -43,7 +43,7 @@ fn bad_rays() -> Vec<Ray> {
     // Also whole packets of one kind, so that no finite ray leads them.
     for v in bad {
         for r in base.iter().take(20) {
-            rays.push(Ray::new(Vec3::new(v, r.origin.y, r.origin.z), r.dir));
+            rays.push(Ray::new(Vec3::new(v, r.origin().y, r.origin().z), r.dir()));
         }
     }
     rays

@@ -47,7 +47,7 @@ fn check_ray<const K: usize>(
             }
             if a.prim != g.prim {
                 let [p, q, r] = mesh.triangle(g.prim as usize);
-                let pre = RayTriPrecomp::new(ray.dir);
+                let pre = RayTriPrecomp::new(ray.dir());
                 let t = intersect_triangle(ray, &pre, p, q, r, f32::INFINITY).map(|h| h.0);
                 if t != Some(g.t) {
                     return Err(format!(
@@ -100,7 +100,7 @@ fn with_aimed(mesh: &TriMesh, rays: &[Ray]) -> Vec<Ray> {
                 .iter()
                 .take(20)
                 .map(|&p| Ray::new(from, p - from))
-                .filter(|r| r.dir.length() > 0.0),
+                .filter(|r| r.dir().length() > 0.0),
         )
         .collect()
 }

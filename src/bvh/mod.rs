@@ -7,13 +7,16 @@
 //! - every child's box lies inside its parent's; leaves hold `1 ..= max_leaf_size` primitives;
 //! - the depth is at most [`MAX_DEPTH`], so traversal runs on a fixed-size stack.
 //!
-//! A refit never changes the topology; a rebuild may.
+//! A refit never changes the topology; a rebuild, an optimisation or a partial rebuild may.
 
+mod all_hits;
 pub mod build;
+mod closest_point;
 mod cost;
 mod mesh;
 mod node;
 pub mod optimize;
+mod overlap;
 mod packet;
 pub mod partial;
 pub(crate) use packet::with_packet;
@@ -23,10 +26,16 @@ mod traverse;
 mod validate;
 pub mod wide;
 
+pub use all_hits::brute_force_all_hits;
+pub(crate) use all_hits::keep_nearest;
 pub use build::{BuildParams, BuildWorkspace, MAX_BINS, Method};
+pub(crate) use closest_point::squared_bound;
+pub use closest_point::{PointHit, brute_force_closest_point};
 pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
+pub(crate) use overlap::boxes_touch;
+pub use overlap::{brute_force_overlap_box, brute_force_overlap_sphere};
 pub use packet::{
     COHERENT_COS, MAX_PACKET, MIN_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H,
     TILE_W, image_tiles, is_coherent,

@@ -8,10 +8,43 @@
 //!   transform (updated every frame for rigid ones);
 //! - other static or rigid instances (skinned but unanimated, or morphed by fixed weights) get
 //!   a mesh of their own, built once.
+//!
+//! # Quick start
+//!
+//! Load a file, build an engine at the animation's start, then pose it at any time (a frame
+//! grid is not needed: [`GltfSource::set_time`] takes any `t`, looping beyond the animation's
+//! duration by default, or clamping with [`TimeMode::Clamp`]), update and cast rays:
+//!
+//! ```
+//! use dynbvh::anim::Scene;
+//! use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+//! use dynbvh::engine::EngineConfig;
+//! use dynbvh::geom::Ray;
+//! use dynbvh::glam::Vec3;
+//!
+//! let (scene, _warnings) = Scene::load("animations/tube.glb")?;
+//! let mut source = GltfSource::new(&scene, Some(0), FrameTimes::Count(1))?;
+//! let mut engine = source.engine(EngineConfig::default());
+//! let centre = engine.bounds().center();
+//! let rays: Vec<Ray> = (0..64)
+//!     .map(|k| {
+//!         let a = k as f32 * std::f32::consts::TAU / 64.0;
+//!         Ray::new(centre + Vec3::new(a.cos(), 0.0, a.sin()) * 10.0, -Vec3::new(a.cos(), 0.0, a.sin()))
+//!     })
+//!     .collect();
+//! let mut hits = vec![None; rays.len()];
+//! for step in 0..5 {
+//!     source.set_time(&mut engine, 0.37 * step as f32)?; // any time, in seconds
+//!     engine.update(); // refit or rebuild the bent tube's tree, as the policy decides
+//!     engine.trace_closest(&rays, &mut hits); // also feeds the policy its trace time
+//! }
+//! assert!(hits.iter().any(Option::is_some));
+//! # Ok::<(), dynbvh::Error>(())
+//! ```
 
 use super::source::FrameSource;
 use super::{Engine, EngineConfig, InstanceId, MeshId, SceneHit};
-use crate::anim::{InstanceClass, Poser, Scene};
+use crate::anim::{InstanceClass, Poser, Scene, TimeMode};
 use crate::error::Result;
 use crate::geom::TriMesh;
 use glam::Affine3A;
@@ -123,6 +156,71 @@ impl<'s> GltfSource<'s> {
     pub fn poser(&self) -> &Poser<'s> {
         &self.poser
     }
+
+    /// How [`GltfSource::set_time`] maps a time beyond the animation (the default,
+    /// [`TimeMode::Loop`], wraps it modulo the duration; [`TimeMode::Clamp`] holds the first and
+    /// last keys).
+    #[must_use]
+    pub fn with_time_mode(mut self, mode: TimeMode) -> Self {
+        self.poser = self.poser.with_time_mode(mode);
+        self
+    }
+
+    /// A new engine holding the scene posed at frame 0 (the animation's start), its trees
+    /// built: [`FrameSource::build`] at frame 0.
+    #[must_use]
+    pub fn engine(&mut self, config: EngineConfig) -> Engine {
+        self.build(0, config)
+    }
+
+    /// Poses `engine` (built by this source) at animation time `t` seconds: deforming meshes'
+    /// positions and rigid instances' transforms are written, to be taken in by the next
+    /// [`Engine::update`]. Any finite `t` is allowed; beyond `[0, duration]` it loops or is
+    /// clamped as the time mode says ([`GltfSource::with_time_mode`]). The posing time is
+    /// recorded ([`Engine::record_pose`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`](crate::Error::InvalidArgument) when `t` is not finite, or
+    /// when this source has not built an engine yet or `engine` has fewer instances than it
+    /// placed (pose an engine built by [`GltfSource::engine`] or [`FrameSource::build`] of this
+    /// source; instances added to it afterwards are left alone).
+    pub fn set_time(&mut self, engine: &mut Engine, t: f32) -> Result<()> {
+        if !t.is_finite() {
+            return Err(crate::Error::InvalidArgument(format!(
+                "{}: animation time {t} is not finite",
+                self.name
+            )));
+        }
+        if self.plan.len() != self.poser.scene().instances.len()
+            || self.plan.len() > engine.instance_count()
+        {
+            return Err(crate::Error::InvalidArgument(format!(
+                "{}: the engine has {} instances, the source placed {}: pose an engine this \
+                 source built",
+                self.name,
+                engine.instance_count(),
+                self.plan.len()
+            )));
+        }
+        self.write_pose(engine, t);
+        Ok(())
+    }
+
+    /// Poses the scene at `t` and writes what moves into `engine`.
+    fn write_pose(&mut self, engine: &mut Engine, t: f32) {
+        let start = Instant::now();
+        self.poser.pose(t);
+        for (i, p) in self.plan.iter().enumerate() {
+            match *p {
+                Plan::Deforming(m) => engine.set_positions(m, self.poser.positions(i)),
+                Plan::Rigid(id) => {
+                    engine.set_transform(id, Affine3A::from_mat4(self.poser.transform(i)));
+                }
+                Plan::Static => {}
+            }
+        }
+        engine.record_pose(start.elapsed().as_secs_f64() * 1e3);
+    }
 }
 
 impl FrameSource for GltfSource<'_> {
@@ -168,18 +266,7 @@ impl FrameSource for GltfSource<'_> {
     }
 
     fn advance(&mut self, engine: &mut Engine, frame: usize) {
-        let t = Instant::now();
-        self.poser.pose(self.times[frame]);
-        for (i, p) in self.plan.iter().enumerate() {
-            match *p {
-                Plan::Deforming(m) => engine.set_positions(m, self.poser.positions(i)),
-                Plan::Rigid(id) => {
-                    engine.set_transform(id, Affine3A::from_mat4(self.poser.transform(i)));
-                }
-                Plan::Static => {}
-            }
-        }
-        engine.record_pose(t.elapsed().as_secs_f64() * 1e3);
+        self.write_pose(engine, self.times[frame]);
     }
 
     fn deforming(&self) -> &[MeshId] {

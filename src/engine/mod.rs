@@ -17,7 +17,8 @@ pub use policy::{Action, ParsePolicyError, Policy};
 pub use prices::Prices;
 pub use ray_work::{CostMeasure, Query, SampleEntry, WorkEstimate};
 pub use scene::{
-    Engine, EngineConfig, InstanceId, MeshId, SceneHit, Timing, TlasPolicy, Traversal,
-    expected_work, expected_work_wide, tree_sah,
+    Engine, EngineConfig, HitDetail, InstanceId, MeshId, QueryFilter, SceneHit, ScenePoint, Timing,
+    TlasPolicy, Traversal, expected_work, expected_work_wide, tree_sah,
 };
+pub use source::FrameSource;
 pub use stats::{FrameStats, MeshStats};

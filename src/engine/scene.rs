@@ -42,7 +42,7 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::prices::Prices;
-use super::ray_work::{CostMeasure, Query, RaySample, SampleEntry};
+use super::ray_work::{CostMeasure, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
@@ -53,11 +53,17 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod batch;
+mod edit;
+mod filter;
 mod mesh_update;
 mod packet;
+mod queries;
 mod sample;
 
+pub use filter::{HitDetail, QueryFilter};
 use mesh_update::{FrameContext, PartialCut, Restructure};
+pub use queries::ScenePoint;
 
 /// A mesh of an [`Engine`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -287,6 +293,8 @@ struct MeshEntry {
     /// The subtrees a partial rebuild keeps or rebuilds (taken at each full build when the
     /// policy may rebuild partly).
     cut: PartialCut,
+    /// Removed ([`Engine::remove_mesh`]): empty, never placed again.
+    removed: bool,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -317,6 +325,10 @@ struct InstanceEntry {
     dirty: bool,
     /// Index among the top-level tree's primitives, if its mesh has triangles.
     tlas_prim: Option<u32>,
+    /// Visibility mask, ANDed with a query's ([`QueryFilter::mask`]).
+    mask: u32,
+    /// Removed ([`Engine::remove_instance`]): never seen by queries again.
+    removed: bool,
 }
 
 /// The dynamic scene: add meshes and instances, write vertex positions or transforms, call
@@ -447,6 +459,18 @@ impl Engine {
     /// # Panics
     /// When a vertex index is out of range.
     pub fn add_mesh(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshId {
+        let entry = self.new_mesh_entry(positions, indices);
+        self.meshes.push(entry);
+        self.sample_work.push(TraversalStats::default());
+        self.sample_entries.push(0);
+        MeshId(self.meshes.len() as u32 - 1)
+    }
+
+    /// A mesh's entry with its trees built and its policy state seeded.
+    ///
+    /// # Panics
+    /// When a vertex index is out of range.
+    fn new_mesh_entry(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshEntry {
         let n = positions.len();
         assert!(
             indices.iter().flatten().all(|&i| (i as usize) < n),
@@ -490,7 +514,7 @@ impl Engine {
         if self.config.policy.uses_rungs() {
             self.restructure.warm_up(&bvh, &self.config.build);
         }
-        self.meshes.push(MeshEntry {
+        MeshEntry {
             positions,
             indices,
             bvh,
@@ -518,18 +542,16 @@ impl Engine {
             ray_base: 0.0,
             ray_observed: 0.0,
             cut,
-        });
-        self.sample_work.push(TraversalStats::default());
-        self.sample_entries.push(0);
-        MeshId(self.meshes.len() as u32 - 1)
+            removed: false,
+        }
     }
 
     /// Places `mesh` with `transform` (mesh space to world space).
     ///
     /// # Panics
-    /// When `mesh` is not a mesh of this engine.
+    /// When `mesh` is not a live mesh of this engine.
     pub fn add_instance(&mut self, mesh: MeshId, transform: Affine3A) -> InstanceId {
-        assert!((mesh.0 as usize) < self.meshes.len(), "no mesh {mesh:?}");
+        assert!(self.is_live_mesh(mesh), "no live mesh {mesh:?}");
         let mut inst = InstanceEntry {
             mesh: mesh.0,
             transform: Affine3A::IDENTITY,
@@ -538,6 +560,8 @@ impl Engine {
             visible: true,
             dirty: true,
             tlas_prim: None,
+            mask: u32::MAX,
+            removed: false,
         };
         set_transform(&mut inst, transform);
         if !self.meshes[mesh.0 as usize].indices.is_empty() {
@@ -580,7 +604,7 @@ impl Engine {
     /// The vertex positions of `mesh`, to write in place; its tree follows at the next update.
     pub fn positions_mut(&mut self, mesh: MeshId) -> &mut [Vec3] {
         let m = &mut self.meshes[mesh.0 as usize];
-        m.dirty = true;
+        m.dirty = !m.removed;
         &mut m.positions
     }
 
@@ -597,8 +621,12 @@ impl Engine {
     }
 
     /// Moves an instance. A transform that cannot be inverted (a zero scale) hides it.
+    ///
+    /// # Panics
+    /// When the instance was removed ([`Engine::remove_instance`]).
     pub fn set_transform(&mut self, i: InstanceId, transform: Affine3A) {
         let inst = &mut self.instances[i.0 as usize];
+        assert!(!inst.removed, "instance {i:?} was removed");
         if inst.transform != transform {
             set_transform(inst, transform);
         }
@@ -618,8 +646,10 @@ impl Engine {
     }
 
     /// Tells the engine how long this frame's rays took: the amortized policy predicts each
-    /// mesh's share of it from the SAH. [`Engine::trace_closest`] and [`Engine::trace_any`] do
-    /// not record themselves (they take `&self`); [`Engine::trace_frame`] does.
+    /// mesh's share of it from the SAH. The batch queries ([`Engine::trace_closest`],
+    /// [`Engine::trace_any`], [`Engine::trace_closest_packets`], [`Engine::trace_any_packets`])
+    /// and [`Engine::trace_scope`] call it; call it yourself only for rays cast through the
+    /// `&self` queries outside a scope.
     pub fn record_trace(&mut self, ms: f64, rays: u64) {
         let s = &mut self.stats;
         s.trace_ms += ms;
@@ -920,14 +950,14 @@ impl Engine {
     #[must_use]
     #[inline]
     pub fn closest_hit(&self, ray: &Ray) -> Option<SceneHit> {
-        self.closest_impl(ray, &mut (), &mut ())
+        self.closest_impl(ray, &QueryFilter::ALL, &mut (), &mut ())
     }
 
     /// [`Engine::closest_hit`], adding nodes visited (both levels) and triangles tested to
     /// `stats`.
     pub fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<SceneHit> {
         let mut top = TraversalStats::default();
-        let hit = self.closest_impl(ray, stats, &mut top);
+        let hit = self.closest_impl(ray, &QueryFilter::ALL, stats, &mut top);
         stats.nodes += top.nodes;
         hit
     }
@@ -936,6 +966,7 @@ impl Engine {
     fn closest_impl(
         &self,
         ray: &Ray,
+        filter: &QueryFilter,
         c: &mut impl Counters,
         top: &mut impl Counters,
     ) -> Option<SceneHit> {
@@ -946,7 +977,7 @@ impl Engine {
             |slot, tmax| {
                 let k = self.tlas_instances[prims[slot] as usize];
                 let inst = &self.instances[k as usize];
-                if !inst.visible {
+                if !inst.visible || !filter.admits(k, inst.mask) {
                     return None;
                 }
                 let local = local_ray(inst, ray, tmax);
@@ -973,19 +1004,25 @@ impl Engine {
     #[must_use]
     #[inline]
     pub fn any_hit(&self, ray: &Ray) -> bool {
-        self.any_impl(ray, &mut (), &mut ())
+        self.any_impl(ray, &QueryFilter::ALL, &mut (), &mut ())
     }
 
     /// [`Engine::any_hit`], adding nodes visited and triangles tested to `stats`.
     pub fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
         let mut top = TraversalStats::default();
-        let hit = self.any_impl(ray, stats, &mut top);
+        let hit = self.any_impl(ray, &QueryFilter::ALL, stats, &mut top);
         stats.nodes += top.nodes;
         hit
     }
 
     #[inline]
-    fn any_impl(&self, ray: &Ray, c: &mut impl Counters, top: &mut impl Counters) -> bool {
+    fn any_impl(
+        &self,
+        ray: &Ray,
+        filter: &QueryFilter,
+        c: &mut impl Counters,
+        top: &mut impl Counters,
+    ) -> bool {
         let prims = self.tlas.prim_indices();
         self.tlas
             .any_slot(
@@ -993,7 +1030,7 @@ impl Engine {
                 |slot, tmax| {
                     let k = self.tlas_instances[prims[slot] as usize];
                     let inst = &self.instances[k as usize];
-                    if !inst.visible {
+                    if !inst.visible || !filter.admits(k, inst.mask) {
                         return None;
                     }
                     let local = local_ray(inst, ray, tmax);
@@ -1007,65 +1044,6 @@ impl Engine {
                 top,
             )
             .is_some()
-    }
-
-    /// Closest hits of many rays, in parallel: `out[i]` for `rays[i]`.
-    ///
-    /// # Panics
-    /// When the lengths differ.
-    pub fn trace_closest(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        out.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
-            .for_each(|(o, r)| {
-                for (o, r) in o.iter_mut().zip(r) {
-                    *o = self.closest_hit(r);
-                }
-            });
-    }
-
-    /// Any-hit answers of many rays, in parallel.
-    ///
-    /// # Panics
-    /// When the lengths differ.
-    pub fn trace_any(&self, rays: &[Ray], out: &mut [bool]) {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        out.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
-            .for_each(|(o, r)| {
-                for (o, r) in o.iter_mut().zip(r) {
-                    *o = self.any_hit(r);
-                }
-            });
-    }
-
-    /// [`Engine::trace_closest`], timed and recorded with [`Engine::record_trace`]; returns the
-    /// time in ms.
-    pub fn trace_frame(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
-        let t = Instant::now();
-        self.trace_closest(rays, out);
-        let ms = ms_since(t);
-        self.record_trace(ms, rays.len() as u64);
-        self.sample_timed(rays, Query::Closest);
-        ms
-    }
-
-    /// [`Engine::trace_any`], timed and recorded with [`Engine::record_trace`] and sampled for
-    /// the ray-work measure; returns the time in ms.
-    pub fn trace_frame_any(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
-        let t = Instant::now();
-        self.trace_any(rays, out);
-        let ms = ms_since(t);
-        self.record_trace(ms, rays.len() as u64);
-        self.sample_timed(rays, Query::Any);
-        ms
-    }
-
-    /// [`Engine::sample_rays`], its wall-clock time added to the frame's `sample_ms`.
-    pub fn sample_timed(&mut self, rays: &[Ray], query: Query) {
-        let t = Instant::now();
-        self.sample_rays(rays, query);
-        self.stats.sample_ms += ms_since(t);
     }
 
     /// What the SAH predicts a ray that hits the scene's box costs without early termination:
@@ -1202,19 +1180,9 @@ fn local_ray(inst: &InstanceEntry, ray: &Ray, tmax: f32) -> Ray {
     }
 }
 
-/// The box of `b` transformed by `m` (Arvo's method: centre and absolute-matrix extent).
+/// The box of `b` transformed by `m` ([`Aabb::transformed`]).
 fn transform_box(m: &Affine3A, b: Aabb) -> Aabb {
-    if b.is_empty() {
-        return b;
-    }
-    let c = m.transform_point3(b.center());
-    let h = b.extent() * 0.5;
-    let a = m.matrix3;
-    let e = a.x_axis.abs() * h.x + a.y_axis.abs() * h.y + a.z_axis.abs() * h.z;
-    let e = Vec3::from(e);
-    // Widen by a few ulps so that rounding never leaves a transformed vertex outside.
-    let pad = (c.abs() + e) * (4.0 * f32::EPSILON);
-    Aabb::new(c - e - pad, c + e + pad)
+    b.transformed(m)
 }
 
 /// Expected nodes visited and triangles tested by a ray through the tree's root (no early

@@ -156,6 +156,22 @@ impl Aabb {
         )
     }
 
+    /// The box of this box transformed by `m` (Arvo's method: centre and absolute-matrix
+    /// extent), widened by a few ulps so that every transformed point of the box, rounded as
+    /// `m.transform_point3` rounds it, lies inside. The empty box stays empty.
+    #[must_use]
+    pub fn transformed(&self, m: &glam::Affine3A) -> Self {
+        if self.is_empty() {
+            return *self;
+        }
+        let c = m.transform_point3(self.center());
+        let h = self.extent() * 0.5;
+        let a = m.matrix3;
+        let e = Vec3::from(a.x_axis.abs() * h.x + a.y_axis.abs() * h.y + a.z_axis.abs() * h.z);
+        let pad = (c.abs() + e) * (4.0 * f32::EPSILON);
+        Self::new(c - e - pad, c + e + pad)
+    }
+
     /// True when both corners are finite numbers.
     #[must_use]
     pub fn is_finite(&self) -> bool {

@@ -474,7 +474,7 @@ fn run_lockstep(
     }
     // Warm-up: one untimed pass each.
     for e in &engines {
-        e.trace_closest(&frame_rays, &mut hits);
+        e.closest_hit_batch(&frame_rays, &mut hits);
     }
     let n = engines.len();
     let mut best = vec![f64::INFINITY; n];
@@ -495,7 +495,7 @@ fn run_lockstep(
             for k in 0..n {
                 let i = (k + rep + f) % n;
                 let c = CpuClock::now();
-                engines[i].trace_closest(rays, &mut hits);
+                engines[i].closest_hit_batch(rays, &mut hits);
                 let t = c.elapsed_ms();
                 if t.wall_ms < best[i] {
                     best[i] = t.wall_ms;

@@ -79,8 +79,8 @@ pub struct TriHits {
 pub type PermutedTri = [[F; 3]; 3];
 
 impl RayLanes {
-    /// The slab test of every lane against `[bmin, bmax]` within `[tmin, tmax]`: bit `i` is set
-    /// when lane `i` touches the box (conservative as [`Ray::hit_box`]).
+    /// The slab test of every lane against `[bmin, bmax]` from `tmin` to `tmax`, closed: bit
+    /// `i` is set when lane `i` touches the box (conservative as [`Ray::hit_box`]).
     #[inline(always)]
     #[must_use]
     pub fn hit_box(&self, bmin: [f32; 3], bmax: [f32; 3]) -> u32 {

@@ -24,7 +24,7 @@ pub fn check_ray(mesh: &TriMesh, bvh: &MeshBvh, ray: &Ray) -> Result<(), String>
             }
             if w.prim != g.prim {
                 let [a, b, c] = mesh.triangle(g.prim as usize);
-                let pre = RayTriPrecomp::new(ray.dir);
+                let pre = RayTriPrecomp::new(ray.dir());
                 let t = intersect_triangle(ray, &pre, a, b, c, f32::INFINITY).map(|h| h.0);
                 if t != Some(g.t) {
                     return Err(format!(
@@ -147,7 +147,7 @@ pub fn aimed(mesh: &TriMesh, from: Vec3) -> Vec<Ray> {
         .iter()
         .take(MAX_PACKET)
         .map(|&p| Ray::new(from, p - from))
-        .filter(|r| r.dir.length() > 0.0)
+        .filter(|r| r.dir().length() > 0.0)
         .collect()
 }
 
@@ -164,7 +164,7 @@ pub fn same_closest(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hi
                 return w.u == g.u && w.v == g.v;
             }
             let [a, b, c] = mesh.triangle(g.prim as usize);
-            let pre = RayTriPrecomp::new(ray.dir);
+            let pre = RayTriPrecomp::new(ray.dir());
             intersect_triangle(ray, &pre, a, b, c, f32::INFINITY).map(|h| h.0) == Some(g.t)
         }
         _ => false,

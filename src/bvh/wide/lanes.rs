@@ -59,8 +59,8 @@ impl RayLanes {
 }
 
 /// Tests the ray against the `K` boxes `bounds` (rows min x, y, z, max x, y, z; one lane per
-/// child) within `[tmin, tmax]`. Returns the mask of hit lanes (bit `i` for lane `i`) and writes
-/// every lane's entry distance into `dist`. Lane by lane the same arithmetic as
+/// child) from `tmin` to `tmax`, closed. Returns the mask of hit lanes (bit `i` for lane `i`)
+/// and writes every lane's entry distance into `dist`. Lane by lane the same arithmetic as
 /// [`Ray::hit_box`], so just as conservative.
 #[inline(always)]
 pub(super) fn slab<const K: usize>(

@@ -1,0 +1,254 @@
+//! The library queries measured side by side on one thread (a one-thread rayon pool), each
+//! comparison as a ratio within one run (methods interleaved repeat by repeat):
+//! - masked visibility over 1,000 moving instances against unmasked any-hit on the same
+//!   segments (a filter that admits every instance but the viewer: the filter's overhead; and
+//!   one that masks half the instances out);
+//! - all-hits and hit counting against the closest hit on camera rays (the shipped
+//!   `lidar_cloth.glb` through the engine, and a 100k-triangle bumpy sphere's binary tree).
+//!
+//! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh]` (figures in
+//! `docs/library.md`).
+
+#[path = "common/timing.rs"]
+mod timing;
+
+use dynbvh::anim::Scene;
+use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::{Engine, EngineConfig, FrameSource, InstanceId, QueryFilter, SceneHit};
+use dynbvh::geom::{Ray, shapes};
+use dynbvh::glam::{Affine3A, Quat, Vec3};
+use dynbvh::report::rays::camera_rays;
+use std::hint::black_box;
+use timing::interleaved;
+
+const REPEATS: usize = 15;
+
+/// splitmix64 in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+fn visibility() {
+    const INSTANCES: usize = 1000;
+    const QUERIES: usize = 50_000;
+    let mut e = Engine::new(EngineConfig::default());
+    let rock = shapes::icosphere(2);
+    let mesh = e.add_mesh(rock.positions.clone(), rock.indices.clone());
+    let mut rng = Rng(1);
+    let start: Vec<Vec3> = (0..INSTANCES)
+        .map(|_| Vec3::new(rng.f(), rng.f() * 0.2, rng.f()) * 200.0)
+        .collect();
+    let ids: Vec<InstanceId> = start
+        .iter()
+        .map(|&p| e.add_instance(mesh, Affine3A::from_translation(p)))
+        .collect();
+    for (k, &i) in ids.iter().enumerate() {
+        e.set_instance_mask(i, if k % 2 == 0 { 1 } else { 2 });
+    }
+    let pairs: Vec<(usize, usize)> = (0..QUERIES)
+        .map(|_| {
+            let a = (rng.f() * INSTANCES as f32) as usize % INSTANCES;
+            let b = (rng.f() * INSTANCES as f32) as usize % INSTANCES;
+            (a, if a == b { (b + 1) % INSTANCES } else { b })
+        })
+        .collect();
+    let mut rays = Vec::with_capacity(QUERIES);
+    let mut per_frame = [[0.0f64; 2]; 3];
+    let mut hits = [0usize; 3];
+    let frames = 6;
+    for f in 0..frames {
+        let time = f as f32 * 0.1;
+        for (k, (&i, &p)) in ids.iter().zip(&start).enumerate() {
+            let wobble = Vec3::new((time + k as f32).sin(), 0.0, (time * 1.3 + k as f32).cos());
+            e.set_transform(
+                i,
+                Affine3A::from_rotation_translation(
+                    Quat::from_rotation_y(time + k as f32),
+                    p + wobble * 3.0,
+                ),
+            );
+        }
+        e.update();
+        rays.clear();
+        // From just outside the viewer's sphere (radius 1) to just outside the target's: no
+        // query starts inside an instance, so the filters change no answer but the masked one.
+        rays.extend(pairs.iter().map(|&(a, b)| {
+            let pa: Vec3 = e.transform(ids[a]).translation.into();
+            let pb: Vec3 = e.transform(ids[b]).translation.into();
+            let d = (pb - pa).normalize_or_zero();
+            Ray::segment(pa + d * 1.01, pb - d * 1.01)
+        }));
+        let (mut n0, mut n1, mut n2) = (0, 0, 0);
+        let t = interleaved(
+            REPEATS,
+            &mut [
+                &mut || n0 = rays.iter().filter(|r| e.any_hit(r)).count(),
+                &mut || {
+                    n1 = rays
+                        .iter()
+                        .zip(&pairs)
+                        .filter(|(r, (a, _))| {
+                            e.any_hit_filtered(r, &QueryFilter::ALL.excluding(ids[*a]))
+                        })
+                        .count();
+                },
+                &mut || {
+                    n2 = rays
+                        .iter()
+                        .zip(&pairs)
+                        .filter(|(r, (a, _))| {
+                            e.any_hit_filtered(r, &QueryFilter::mask(1).excluding(ids[*a]))
+                        })
+                        .count();
+                },
+            ],
+        );
+        for k in 0..3 {
+            per_frame[k][0] += t[k].wall_ms / frames as f64;
+            per_frame[k][1] += t[k].cpu_ms / frames as f64;
+        }
+        hits[0] += n0;
+        hits[1] += n1;
+        hits[2] += n2;
+    }
+    println!(
+        "\nvisibility: {INSTANCES} moving instances (icosphere, 320 triangles), {QUERIES} segments between random pairs, {frames} frames, 1 thread"
+    );
+    println!(
+        "{:<44} {:>10} {:>10} {:>8} {:>10}",
+        "query", "wall ms", "CPU ms", "ratio", "blocked"
+    );
+    let names = [
+        "any_hit (unmasked)",
+        "any_hit_filtered (all, viewer excluded)",
+        "any_hit_filtered (mask: half, viewer excl.)",
+    ];
+    for k in 0..3 {
+        println!(
+            "{:<44} {:>10.3} {:>10.3} {:>8.3} {:>10}",
+            names[k],
+            per_frame[k][0],
+            per_frame[k][1],
+            per_frame[k][1] / per_frame[0][1],
+            hits[k] / frames
+        );
+    }
+}
+
+fn all_hits_engine() {
+    let path = format!("{}/animations/lidar_cloth.glb", env!("CARGO_MANIFEST_DIR"));
+    let (scene, _) = Scene::load(&path).expect("the shipped lidar_cloth.glb");
+    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(4)).unwrap();
+    let mut e = src.engine(EngineConfig::default());
+    src.advance(&mut e, 2);
+    e.update();
+    let rays = camera_rays(&e.bounds(), 256, 256);
+    let mut buf: Vec<SceneHit> = Vec::new();
+    let (mut a, mut b, mut c) = (0usize, 0usize, 0usize);
+    let t = interleaved(
+        REPEATS,
+        &mut [
+            &mut || a = rays.iter().filter(|r| e.closest_hit(r).is_some()).count(),
+            &mut || {
+                b = 0;
+                for r in &rays {
+                    e.all_hits(r, usize::MAX, &mut buf);
+                    b += buf.len();
+                }
+            },
+            &mut || c = rays.iter().map(|r| e.count_hits(r) as usize).sum(),
+        ],
+    );
+    report(
+        "all-hits, engine: lidar_cloth.glb frame 2 of 4, 256x256 camera rays",
+        &rays,
+        &t,
+        &[a, b, c],
+    );
+}
+
+fn all_hits_mesh() {
+    let mesh = shapes::bumpy_sphere(100_000);
+    let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let rays = camera_rays(&dynbvh::geom::Aabb::from_points(&mesh.positions), 256, 256);
+    let mut buf = Vec::new();
+    let (mut a, mut b, mut c) = (0usize, 0usize, 0usize);
+    let t = interleaved(
+        REPEATS,
+        &mut [
+            &mut || a = rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count(),
+            &mut || {
+                b = 0;
+                for r in &rays {
+                    bvh.all_hits(r, usize::MAX, &mut buf);
+                    b += buf.len();
+                }
+            },
+            &mut || c = rays.iter().map(|r| bvh.count_hits(r) as usize).sum(),
+        ],
+    );
+    report(
+        &format!(
+            "all-hits, binary tree: bumpy sphere {} triangles, 256x256 camera rays",
+            mesh.indices.len()
+        ),
+        &rays,
+        &t,
+        &[a, b, c],
+    );
+}
+
+fn report(title: &str, rays: &[Ray], t: &[timing::Timed], counts: &[usize]) {
+    println!("\n{title}, 1 thread");
+    println!(
+        "{:<22} {:>10} {:>10} {:>12} {:>8} {:>10}",
+        "query", "wall ms", "CPU ms", "Mrays/s CPU", "ratio", "hits"
+    );
+    for (k, name) in ["closest_hit", "all_hits (unbounded)", "count_hits"]
+        .iter()
+        .enumerate()
+    {
+        let rate = rays.len() as f64 / (t[k].cpu_ms * 1e3);
+        let base = rays.len() as f64 / (t[0].cpu_ms * 1e3);
+        println!(
+            "{name:<22} {:>10.3} {:>10.3} {:>12.2} {:>8.3} {:>10}",
+            t[k].wall_ms,
+            t[k].cpu_ms,
+            rate,
+            rate / base,
+            black_box(counts[k])
+        );
+    }
+}
+
+fn main() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a one-thread pool");
+    // `cargo bench` passes `--bench`; other words pick the parts to run.
+    let parts: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let wanted = |name: &str| parts.is_empty() || parts.iter().any(|p| name.contains(p.as_str()));
+    pool.install(|| {
+        if wanted("visibility") {
+            visibility();
+        }
+        if wanted("all_hits_engine") {
+            all_hits_engine();
+        }
+        if wanted("all_hits_mesh") {
+            all_hits_mesh();
+        }
+    });
+}

@@ -1,0 +1,123 @@
+//! Every hit along a ray, not only the closest: for inside/outside tests and occupancy (count
+//! the crossings), transparency and multi-return sensors (the first few surfaces in order).
+//! The traversal is the closest-hit one with a distance limit that only shrinks once `max`
+//! hits are held (the farthest of them), so `all_hits(ray, 1)` walks about as the closest hit
+//! does and an unbounded one visits every leaf the ray's box test reaches.
+
+use super::MeshBvh;
+use crate::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
+
+impl MeshBvh {
+    /// The first `max` hits along `ray` in `[ray.tmin, ray.tmax)`, sorted by `t` (then by
+    /// triangle), into `out` (cleared first). With `max` at least the number of hits, exactly
+    /// [`brute_force_all_hits`]; a ray through a shared edge or vertex hits every triangle
+    /// there (the watertight test reports each). Of hits at the same `t` as the `max`-th, which
+    /// are kept is unspecified.
+    pub fn all_hits(&self, ray: &Ray, max: usize, out: &mut Vec<Hit>) {
+        out.clear();
+        if max == 0 {
+            return;
+        }
+        self.all_hits_within(ray, ray.tmax, max, out);
+        out.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.prim.cmp(&b.prim)));
+        out.truncate(max);
+    }
+
+    /// Hits along `ray` in `[ray.tmin, tmax)` appended to `out` (unsorted); once `out` holds
+    /// `max` of them or more, only hits nearer than the farthest of the nearest `max` are
+    /// searched for.
+    fn all_hits_within(&self, ray: &Ray, tmax: f32, max: usize, out: &mut Vec<Hit>) {
+        let start = out.len();
+        self.for_each_hit(ray, tmax, |h| {
+            out.push(h);
+            keep_nearest(out, start, max, |h| h.t)
+        });
+    }
+
+    /// Calls `on_hit` with every hit along `ray` in `[ray.tmin, limit)`, `limit` starting at
+    /// `tmax` and replaced by what `on_hit` returns when that is nearer (the rest of the walk
+    /// then looks only nearer than it).
+    pub(crate) fn for_each_hit(&self, ray: &Ray, tmax: f32, mut on_hit: impl FnMut(Hit) -> f32) {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let tris = self.tris.as_slice();
+        let prims = self.bvh.prim_indices();
+        let mut ray = *ray;
+        ray.tmax = tmax;
+        let mut limit = tmax;
+        self.bvh.closest_slot(
+            &ray,
+            |slot, _| {
+                let [a, b, c] = tris[slot];
+                let (t, u, v) = intersect_triangle(&ray, &pre, a, b, c, limit)?;
+                let next = on_hit(Hit {
+                    t,
+                    u,
+                    v,
+                    prim: prims[slot],
+                });
+                if next < limit {
+                    limit = next;
+                    return Some(limit);
+                }
+                None
+            },
+            &mut (),
+        );
+    }
+
+    /// How many triangles `ray` hits in `[ray.tmin, ray.tmax)`, each triangle once (a ray
+    /// through a shared edge counts every triangle there). Exactly the length of
+    /// [`brute_force_all_hits`].
+    #[must_use]
+    pub fn count_hits(&self, ray: &Ray) -> u32 {
+        let mut n = 0;
+        self.for_each_hit(ray, ray.tmax, |_| {
+            n += 1;
+            ray.tmax
+        });
+        n
+    }
+}
+
+/// Keeps the nearest `max` entries of `v[start..]` (by `t`) once there are `max` or more, and
+/// returns the limit the search may shrink to: the `t` of the farthest kept, else `+inf`.
+pub(crate) fn keep_nearest<T>(
+    v: &mut Vec<T>,
+    start: usize,
+    max: usize,
+    t: impl Fn(&T) -> f32,
+) -> f32 {
+    let held = v.len() - start;
+    if max == 0 || held < max {
+        return f32::INFINITY;
+    }
+    let mine = &mut v[start..];
+    mine.select_nth_unstable_by(max - 1, |a, b| t(a).total_cmp(&t(b)));
+    let limit = t(&mine[max - 1]);
+    v.truncate(start + max);
+    limit
+}
+
+/// The reference for [`MeshBvh::all_hits`]: every triangle tested, every hit in
+/// `[ray.tmin, ray.tmax)` sorted by `t`, then triangle.
+#[must_use]
+pub fn brute_force_all_hits(mesh: &TriMesh, ray: &Ray) -> Vec<Hit> {
+    let pre = RayTriPrecomp::new(ray.dir);
+    let mut hits: Vec<Hit> = mesh
+        .indices
+        .iter()
+        .enumerate()
+        .filter_map(|(k, t)| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            let (t, u, v) = intersect_triangle(ray, &pre, a, b, c, ray.tmax)?;
+            Some(Hit {
+                t,
+                u,
+                v,
+                prim: k as u32,
+            })
+        })
+        .collect();
+    hits.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.prim.cmp(&b.prim)));
+    hits
+}

@@ -1,0 +1,145 @@
+//! Batches of rays through the engine, each of which feeds the refit-or-rebuild policy: its
+//! wall-clock time is recorded as the frame's trace time ([`Engine::record_trace`]) and every
+//! 64th ray is taken into the ray-work sample ([`Engine::sample_rays`]), so that a caller who
+//! only casts batches gets the same decisions as the frame loop of the benchmarks. The `&self`
+//! forms (`*_batch`) trace the same rays without telling the policy, for callers that price
+//! their trace themselves or cast from several threads at once.
+
+use super::{Engine, RAY_CHUNK, SceneHit, ms_since};
+use crate::bvh::MAX_PACKET;
+use crate::engine::ray_work::Query;
+use crate::geom::Ray;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Rays per parallel task of the packet batches (whole packets).
+const PACKET_CHUNK: usize = 8 * MAX_PACKET;
+
+impl Engine {
+    /// Closest hits of many rays, in parallel (`out[i]` for `rays[i]`), recorded as this
+    /// frame's trace: timed into [`Engine::record_trace`] and sampled into the ray-work measure
+    /// ([`Engine::sample_rays`]). Call it any number of times between two updates; the times
+    /// add up. Returns the trace time in ms (sampling excluded).
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_closest(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        let t = Instant::now();
+        self.closest_hit_batch(rays, out);
+        self.traced(ms_since(t), rays, Query::Closest)
+    }
+
+    /// Any-hit answers of many rays, in parallel, recorded as this frame's trace as
+    /// [`Engine::trace_closest`] records. Returns the trace time in ms.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_any(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        let t = Instant::now();
+        self.any_hit_batch(rays, out);
+        self.traced(ms_since(t), rays, Query::Any)
+    }
+
+    /// The same as [`Engine::trace_closest`] (kept for the frame loops written against it).
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_frame(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        self.trace_closest(rays, out)
+    }
+
+    /// The same as [`Engine::trace_any`].
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_frame_any(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        self.trace_any(rays, out)
+    }
+
+    /// Closest hits as packets ([`Engine::closest_hit_packet`] on runs of consecutive rays, the
+    /// runs in parallel), recorded as this frame's trace as [`Engine::trace_closest`] records.
+    /// Give coherent rays next to each other. Returns the trace time in ms.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_closest_packets(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let t = Instant::now();
+        out.par_chunks_mut(PACKET_CHUNK)
+            .zip(rays.par_chunks(PACKET_CHUNK))
+            .for_each(|(o, r)| self.closest_hit_packet(r, o));
+        self.traced(ms_since(t), rays, Query::Closest)
+    }
+
+    /// Any-hit answers as packets, recorded as this frame's trace (see
+    /// [`Engine::trace_closest_packets`]). Returns the trace time in ms.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn trace_any_packets(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let t = Instant::now();
+        out.par_chunks_mut(PACKET_CHUNK)
+            .zip(rays.par_chunks(PACKET_CHUNK))
+            .for_each(|(o, r)| self.any_hit_packet(r, o));
+        self.traced(ms_since(t), rays, Query::Any)
+    }
+
+    /// A frame scope for the single-ray and packet queries (`&self`): runs `f` on the engine
+    /// and records its wall-clock time as this frame's trace time ([`Engine::record_trace`],
+    /// with no ray count and no ray-work sample: under the default ray-work measure the policy
+    /// then weighs the trees by their SAH ratio). Put all of a frame's casting in it, and
+    /// nothing else: whatever `f` spends counts as tracing.
+    pub fn trace_scope<R>(&mut self, f: impl FnOnce(&Engine) -> R) -> R {
+        let t = Instant::now();
+        let r = f(self);
+        self.record_trace(ms_since(t), 0);
+        r
+    }
+
+    /// Closest hits of many rays, in parallel: `out[i]` for `rays[i]`. Does not tell the
+    /// policy (see [`Engine::trace_closest`], which does).
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_batch(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        out.par_chunks_mut(RAY_CHUNK)
+            .zip(rays.par_chunks(RAY_CHUNK))
+            .for_each(|(o, r)| {
+                for (o, r) in o.iter_mut().zip(r) {
+                    *o = self.closest_hit(r);
+                }
+            });
+    }
+
+    /// Any-hit answers of many rays, in parallel. Does not tell the policy (see
+    /// [`Engine::trace_any`], which does).
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn any_hit_batch(&self, rays: &[Ray], out: &mut [bool]) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        out.par_chunks_mut(RAY_CHUNK)
+            .zip(rays.par_chunks(RAY_CHUNK))
+            .for_each(|(o, r)| {
+                for (o, r) in o.iter_mut().zip(r) {
+                    *o = self.any_hit(r);
+                }
+            });
+    }
+
+    /// [`Engine::sample_rays`], its wall-clock time added to the frame's `sample_ms`.
+    pub fn sample_timed(&mut self, rays: &[Ray], query: Query) {
+        let t = Instant::now();
+        self.sample_rays(rays, query);
+        self.stats.sample_ms += ms_since(t);
+    }
+
+    /// Records a batch traced in `ms` and samples it; returns `ms`.
+    fn traced(&mut self, ms: f64, rays: &[Ray], query: Query) -> f64 {
+        self.record_trace(ms, rays.len() as u64);
+        self.sample_timed(rays, query);
+        ms
+    }
+}
