@@ -14,8 +14,8 @@ use dynbvh::render::{
 };
 use image::RgbImage;
 use image::codecs::gif::{GifEncoder, Repeat};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::io::{BufWriter, IsTerminal};
+use indicatif::ProgressBar;
+use std::io::BufWriter;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -571,18 +571,10 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     };
     let delay = image::Delay::from_numer_denom_ms((frame_ms * 100.0).round() as u32, 100);
 
-    let bar = if std::io::stderr().is_terminal() && !a.bench && end - start > 1 {
-        let b = ProgressBar::new((end - start) as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{msg} {wide_bar} {pos}/{len} frames, {per_sec}, eta {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        b.set_message("rendering");
-        b
-    } else {
+    let bar = if a.bench {
         ProgressBar::hidden()
+    } else {
+        super::progress::bar((end - start) as u64, "frames", "rendering")
     };
     let mut pngs = Vec::new();
     let mut composed = RgbImage::new(1, 1);

@@ -3,6 +3,7 @@
 pub mod all_pairs;
 pub mod build_bench;
 pub mod charts;
+pub mod font;
 pub mod frame_bench;
 pub mod ray_sweep;
 pub mod rays;
