@@ -27,6 +27,11 @@
 //! assert_eq!(bvh.closest_hit(&ray).unwrap().t, 0.0);
 //! ```
 
+/// The README's library example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctest;
+
 pub mod anim;
 pub mod bvh;
 pub mod cputime;
