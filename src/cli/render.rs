@@ -432,11 +432,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         .memory
         .check_scene(&scene, args::RENDER_MEMORY, policies.len() as u64)?;
     let anim = match &a.animation {
-        Some(k) => Some(
-            scene
-                .find_animation(k)
-                .with_context(|| format!("{}: no animation {k:?}", a.file.display()))?,
-        ),
+        Some(k) => Some(args::choose_animation(&scene, &a.file, k)?),
         None if scene.animations.is_empty() => None,
         None => Some(0),
     };
