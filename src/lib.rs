@@ -90,6 +90,11 @@
 
 pub use glam;
 
+/// The README's library example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctest;
+
 pub mod accel;
 pub mod anim;
 pub mod bvh;

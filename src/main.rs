@@ -8,7 +8,11 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "dynbvh",
     version,
-    about = "Ray tracing animated scenes with BVHs that refit or rebuild as they must"
+    about = "Ray tracing animated scenes with BVHs that refit or rebuild as they must",
+    after_help = "With no command, dynbvh runs the default job: it renders animations/explode.glb \
+                  (frames, GIF, refit-against-rebuild heat maps), benchmarks every policy, \
+                  draws the charts and sweeps the lidar scene, all into out/. No subcommand \
+                  runs it."
 )]
 struct Cli {
     #[command(subcommand)]

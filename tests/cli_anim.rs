@@ -316,4 +316,21 @@ fn bad_files_fail_with_an_error_naming_the_file() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("nope") && err.contains("tube.glb"), "{err}");
+    // The error lists the animations there are.
+    assert!(err.contains("it has: 0"), "{err}");
+    // `-a` is `--animation` here as in render and bench.
+    let o = dynbvh(&[
+        "pose",
+        &s(&tube),
+        "-a",
+        "0",
+        "--out",
+        &s(&dir.join("a.obj")),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // gen writes GLB only, and says so for another extension.
+    let o = dynbvh(&["gen", "tube", "--out", &s(&dir.join("g.obj"))]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains(".glb"));
+    assert!(!dir.join("g.obj").exists());
 }

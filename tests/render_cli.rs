@@ -184,7 +184,8 @@ fn heat_map_comparison_writes_side_by_side_frames() {
         "{differing} pixels differ between refit and rebuild"
     );
     for (side, half) in [("refit", &left), ("rebuild", &right)] {
-        // The legend along the bottom: a colour bar (a row of many colours) and its light text.
+        // The legend along the bottom: a colour bar (a row of many colours) and its light grey
+        // (antialiased) text.
         let bar = (h - 40..h).any(|y| {
             let row: std::collections::HashSet<[u8; 3]> =
                 (0..w).map(|x| half.get_pixel(x, y).0).collect();
@@ -193,9 +194,12 @@ fn heat_map_comparison_writes_side_by_side_frames() {
         assert!(bar, "{side}: legend bar");
         let text = (h - 40..h)
             .flat_map(|y| (0..w).map(move |x| (x, y)))
-            .filter(|&(x, y)| half.get_pixel(x, y).0 == [230; 3])
+            .filter(|&(x, y)| {
+                let p = half.get_pixel(x, y).0;
+                p.iter().all(|&c| c >= 200) && p[0].abs_diff(p[2]) < 12
+            })
             .count();
-        assert!(text > 20, "{side}: legend text ({text} pixels)");
+        assert!(text > 10, "{side}: legend text ({text} pixels)");
     }
     let _ = std::fs::remove_dir_all(&d);
 }

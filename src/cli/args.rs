@@ -346,6 +346,31 @@ pub fn frame_rate(s: &str) -> std::result::Result<f32, String> {
     }
 }
 
+/// The animation `key` (a name or an index) of `scene`, or an error naming the file and
+/// listing the animations it has. The one place `-a/--animation` is resolved.
+pub fn choose_animation(scene: &Scene, file: &std::path::Path, key: &str) -> Result<usize> {
+    scene.find_animation(key).ok_or_else(|| {
+        let names: Vec<String> = scene
+            .animations
+            .iter()
+            .enumerate()
+            .map(|(i, a)| match &a.name {
+                Some(n) if !n.is_empty() => format!("{i} ({n:?})"),
+                _ => i.to_string(),
+            })
+            .collect();
+        let list = if names.is_empty() {
+            "it has none".to_string()
+        } else {
+            format!("it has: {}", names.join(", "))
+        };
+        anyhow::anyhow!(
+            "{}: no animation named or numbered {key:?}; {list}",
+            file.display()
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

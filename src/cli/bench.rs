@@ -204,11 +204,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             let scene = super::load_scene(path, None)?;
             a.limits.memory.check_scene(&scene, args::BENCH_MEMORY, 1)?;
             let anim = match &a.animation {
-                Some(k) => Some(
-                    scene
-                        .find_animation(k)
-                        .with_context(|| format!("{}: no animation {k:?}", path.display()))?,
-                ),
+                Some(k) => Some(args::choose_animation(&scene, path, k)?),
                 None if scene.animations.is_empty() => {
                     eprintln!(
                         "{}: no animation; every frame is the rest pose",

@@ -12,6 +12,10 @@ use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
 use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
 
+/// Rays per set by default: a 181x181 camera image and 32,768 random rays, so that the default
+/// run on a mesh of a few thousand triangles takes seconds.
+const DEFAULT_RAY_BUDGET: u64 = 1 << 15;
+
 /// Arguments of `build-bench`.
 #[derive(Args, Debug)]
 pub struct BuildBenchArgs {
@@ -21,10 +25,14 @@ pub struct BuildBenchArgs {
     /// Use a bumpy geodesic sphere of about N triangles instead of a file.
     #[arg(long, allow_negative_numbers = true, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
     synthetic: Option<u64>,
-    /// Ray file(s) in the shared `.rays` format; without any, a 1024x1024 camera and 2^20
+    /// Ray file(s) in the shared `.rays` format (repeatable); without any, a camera image and
     /// random rays of its own.
-    #[arg(long = "rays", value_name = "RAYFILE")]
-    rays: Vec<PathBuf>,
+    #[arg(long = "ray-file", value_name = "FILE")]
+    ray_files: Vec<PathBuf>,
+    /// Most rays per ray set: the built-in camera is the largest square image within it, the
+    /// random set this many rays, and a longer ray file is cut to its first N.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_RAY_BUDGET, value_parser = clap::value_parser!(u64).range(1..=1 << 32))]
+    ray_budget: u64,
     /// Worker threads (default: all cores; more than the cores are capped).
     #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
@@ -137,27 +145,31 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         }
         (methods, structures)
     };
-    let sets = if args.rays.is_empty() {
+    let budget = args.ray_budget as usize;
+    let sets = if args.ray_files.is_empty() {
         let b = mesh.bounds();
+        let side = (budget as f64).sqrt().floor().max(1.0) as usize;
         vec![
             RaySet {
                 name: "camera".into(),
-                rays: camera_rays(&b, 1024, 1024),
+                rays: camera_rays(&b, side, side),
             },
             RaySet {
                 name: "random".into(),
-                rays: random_rays(&b, 1 << 20, 0xC0FFEE),
+                rays: random_rays(&b, budget, 0xC0FFEE),
             },
         ]
     } else {
-        args.rays
+        args.ray_files
             .iter()
             .map(|p| {
+                let mut rays = dynbvh::io::read_rays(p)?;
+                rays.truncate(budget);
                 Ok(RaySet {
                     name: p
                         .file_stem()
                         .map_or("rays".into(), |s| s.to_string_lossy().into_owned()),
-                    rays: dynbvh::io::read_rays(p)?,
+                    rays,
                 })
             })
             .collect::<Result<_>>()?
@@ -169,9 +181,24 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         ..Options::default()
     };
     let samples = build_bench::brute_force_samples(&mesh, &sets, opts.check_rays);
-    let mut rows = build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| {
-        eprintln!("  {m} ...");
-    });
+    let bar = super::progress::bar(
+        (methods.len() + structures.len()) as u64,
+        "builders",
+        "building and tracing",
+    );
+    let mut started = false;
+    let mut step = |m: &str| {
+        if std::mem::replace(&mut started, true) {
+            bar.inc(1);
+        }
+        if bar.is_hidden() {
+            eprintln!("  {m} ...");
+        } else {
+            bar.set_message(m.to_string());
+        }
+    };
+    let mut rows =
+        build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| step(m));
     rows.extend(accel_bench::run(
         &mesh,
         &structures,
@@ -179,8 +206,9 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         &samples,
         opts.build_runs,
         opts.trace_runs,
-        |m| eprintln!("  {m} ..."),
+        |m| step(m),
     ));
+    bar.finish_and_clear();
     let wide_rows = if args.no_wide {
         Vec::new()
     } else {
@@ -203,8 +231,13 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
             .with_context(|| format!("writing {}", json.display()))?;
         let stem = dir.join("build_bench");
+        let title = args
+            .file
+            .as_ref()
+            .and_then(|f| f.file_name())
+            .map_or_else(|| name.clone(), |f| f.to_string_lossy().into_owned());
         let with_sah: Vec<Row> = rows.iter().filter(|r| r.sah.is_finite()).cloned().collect();
-        build_bench::chart(&with_sah, &name)
+        build_bench::chart(&with_sah, &title, args.runs as usize)
             .save(&stem, 900, 600)
             .with_context(|| format!("writing {}.svg/.png", stem.display()))?;
         eprintln!("wrote {} and {}.svg/.png", json.display(), stem.display());

@@ -55,6 +55,17 @@ pub fn run(a: GenArgs) -> Result<()> {
         &format!("--triangles {}", a.triangles),
         a.triangles.saturating_mul(bytes_per_triangle(kind)),
     )?;
+    let glb = a
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    if !glb {
+        anyhow::bail!(
+            "{}: gen writes binary glTF; give the file the .glb extension",
+            a.out.display()
+        );
+    }
     let triangles = a.triangles as usize;
     let g = match (kind, a.four_weights) {
         (Kind::Tube, Some(j)) => skinned_tube(triangles, j as usize, TubeWeights::Cubic),

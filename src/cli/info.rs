@@ -80,6 +80,9 @@ pub fn run(a: InfoArgs) -> Result<()> {
         );
     }
     out!(text, "animations: {}", scene.animations.len());
+    let classes: Vec<_> = (0..scene.animations.len())
+        .map(|a| scene.classify(Some(a)))
+        .collect::<dynbvh::Result<_>>()?;
     for (i, an) in scene.animations.iter().enumerate() {
         let mut modes: Vec<&str> = an
             .channels
@@ -93,9 +96,10 @@ pub fn run(a: InfoArgs) -> Result<()> {
         modes.sort_unstable();
         modes.dedup();
         let count = |p: Property| an.channels.iter().filter(|c| c.property == p).count();
+        let n = |k: InstanceClass| classes[i].iter().filter(|&&x| x == k).count();
         out!(
             text,
-            "  animation {i}{}: {:.3} s, {} channels (T {}, R {}, S {}, weights {}), {}",
+            "  animation {i}{}: {:.3} s, {} channels (T {}, R {}, S {}, weights {}), {}; {} static, {} rigid, {} deforming instances",
             label(&an.name),
             an.duration,
             an.channels.len(),
@@ -103,17 +107,7 @@ pub fn run(a: InfoArgs) -> Result<()> {
             count(Property::Rotation),
             count(Property::Scale),
             count(Property::Weights),
-            modes.join("/")
-        );
-    }
-    let classes: Vec<_> = (0..scene.animations.len())
-        .map(|a| scene.classify(Some(a)))
-        .collect::<dynbvh::Result<_>>()?;
-    for (a, c) in classes.iter().enumerate() {
-        let n = |k: InstanceClass| c.iter().filter(|&&x| x == k).count();
-        out!(
-            text,
-            "  animation {a}: {} static, {} rigid, {} deforming instances",
+            modes.join("/"),
             n(InstanceClass::Static),
             n(InstanceClass::Rigid),
             n(InstanceClass::Deforming)

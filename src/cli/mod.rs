@@ -7,6 +7,7 @@ pub mod default_job;
 pub mod r#gen;
 pub mod info;
 pub mod pose;
+pub mod progress;
 pub mod render;
 pub mod rungs;
 

@@ -1,7 +1,7 @@
 //! `dynbvh pose`: a scene's triangles at time `t`, written as OBJ or PLY.
 
 use super::args::{self, MemoryLimit};
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 use dynbvh::geom::TriMesh;
 use std::io::Write;
@@ -17,7 +17,7 @@ pub struct PoseArgs {
     pub time: f32,
     /// Animation name or index (default: the file's first animation; the rest pose when the
     /// file has none).
-    #[arg(long)]
+    #[arg(long, short)]
     pub animation: Option<String>,
     /// Write the rest pose (nodes at their own transforms, no animation) even when the file
     /// has animations.
@@ -58,13 +58,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
             );
             Some(0)
         }
-        Some(key) => Some(scene.find_animation(key).with_context(|| {
-            format!(
-                "{}: no animation named or numbered {key:?} ({} animations)",
-                a.file.display(),
-                scene.animations.len()
-            )
-        })?),
+        Some(key) => Some(args::choose_animation(&scene, &a.file, key)?),
     };
     let mesh = scene.flatten_at(anim, a.time)?;
     warn_nonfinite(&scene, &mesh);

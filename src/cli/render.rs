@@ -14,8 +14,8 @@ use dynbvh::render::{
 };
 use image::RgbImage;
 use image::codecs::gif::{GifEncoder, Repeat};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::io::{BufWriter, IsTerminal};
+use indicatif::ProgressBar;
+use std::io::BufWriter;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -53,14 +53,11 @@ pub struct RenderArgs {
     /// frames trace packets (--packets does not apply).
     #[arg(long)]
     pub heatmap: bool,
-    /// Top of the heat map's fixed scale, in nodes + triangles per pixel.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        default_value_t = 150,
-        value_name = "WORK"
-    )]
-    pub heat_max: u32,
+    /// Top of the heat map's scale, in nodes + triangles per pixel. Default: the 98th
+    /// percentile of the first frame's work (over the pixels that cost any, under every
+    /// compared policy), then kept for the whole run so that its frames compare.
+    #[arg(long, value_name = "WORK", value_parser = clap::value_parser!(u32).range(1..))]
+    pub heat_max: Option<u32>,
     /// Cast a shadow ray toward the key light from every lit point.
     #[arg(long)]
     pub shadows: bool,
@@ -435,11 +432,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         .memory
         .check_scene(&scene, args::RENDER_MEMORY, policies.len() as u64)?;
     let anim = match &a.animation {
-        Some(k) => Some(
-            scene
-                .find_animation(k)
-                .with_context(|| format!("{}: no animation {k:?}", a.file.display()))?,
-        ),
+        Some(k) => Some(args::choose_animation(&scene, &a.file, k)?),
         None if scene.animations.is_empty() => None,
         None => Some(0),
     };
@@ -482,7 +475,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         height: h,
         smooth: !a.flat,
         shadows: a.shadows,
-        heatmap: a.heatmap.then_some(a.heat_max),
+        heatmap: a.heatmap.then_some(a.heat_max.unwrap_or(1)),
     };
     let mut pipes: Vec<Pipeline<'_>> = policies
         .iter()
@@ -571,21 +564,14 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     };
     let delay = image::Delay::from_numer_denom_ms((frame_ms * 100.0).round() as u32, 100);
 
-    let bar = if std::io::stderr().is_terminal() && !a.bench && end - start > 1 {
-        let b = ProgressBar::new((end - start) as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{msg} {wide_bar} {pos}/{len} frames, {per_sec}, eta {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        b.set_message("rendering");
-        b
-    } else {
+    let bar = if a.bench {
         ProgressBar::hidden()
+    } else {
+        super::progress::bar((end - start) as u64, "frames", "rendering")
     };
     let mut pngs = Vec::new();
     let mut composed = RgbImage::new(1, 1);
+    let mut heat_max = a.heat_max;
     for f in start..end {
         let mut stepped = Vec::with_capacity(pipes.len());
         for p in &mut pipes {
@@ -601,6 +587,14 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         st.camera = camera;
         for (p, t) in pipes.iter_mut().zip(stepped) {
             p.render(st, t);
+        }
+        if a.heatmap && heat_max.is_none() {
+            let q = dynbvh::render::work_quantile(pipes.iter().map(|p| p.renderer.work()), 0.98);
+            for p in &mut pipes {
+                p.renderer.set_heat_max(q);
+                p.renderer.recolor(&mut p.img, q);
+            }
+            heat_max = Some(q);
         }
         if out.is_none() {
             bar.inc(1);
@@ -647,21 +641,27 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     })
 }
 
-/// Writes what a frame did into its top-left corner.
+/// Writes what a frame did into its top-left corner, in words: policy, frame (numbered as the
+/// PNG files are), what the policy did, the SAH ratio to the last build, and for heat maps the
+/// mean work per covered pixel.
 fn label(img: &mut RgbImage, policy: &Policy, t: &FrameTiming, heat: bool) {
-    let scale = (img.height() / 240).max(1);
+    let scale = (img.height() / 480).max(1);
     let m = i64::from(4 * scale);
-    let mut text = format!(
-        "{}  FRAME {}  {}  SAH X{:.2}",
-        policy,
+    let text = format!(
+        "{policy} \u{2014} frame {} \u{2014} {} \u{2014} SAH {:.2}x last build",
         t.frame,
         t.action.name(),
         t.sah_ratio
     );
-    if heat {
-        text.push_str(&format!("  WORK/PX {:.0}", t.counts.work_per_pixel()));
-    }
     font::draw_label(img, m, m, scale, &text, [255, 255, 255]);
+    if heat {
+        let text = format!(
+            "{:.0} nodes+triangles per covered pixel",
+            t.counts.work_per_pixel()
+        );
+        let y = m + i64::from(font::text_height(scale) + 2 * scale);
+        font::draw_label(img, m, y, scale, &text, [255, 255, 255]);
+    }
 }
 
 /// The pipelines' images side by side, labelled, separated by a dark gap.

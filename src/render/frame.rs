@@ -80,6 +80,10 @@ impl FrameCounts {
 pub struct Renderer {
     settings: Settings,
     tiles: Vec<[u8; 3]>,
+    /// Heat-map mode: each tile pixel's work, in the tiles' layout.
+    tile_work: Vec<u32>,
+    /// Heat-map mode: each pixel's work (nodes plus triangles), row by row.
+    work: Vec<u32>,
 }
 
 impl Renderer {
@@ -89,7 +93,31 @@ impl Renderer {
         Self {
             settings,
             tiles: Vec::new(),
+            tile_work: Vec::new(),
+            work: Vec::new(),
         }
+    }
+
+    /// Sets the top of the heat map's scale for the frames rendered from now on.
+    pub fn set_heat_max(&mut self, max: u32) {
+        if self.settings.heatmap.is_some() {
+            self.settings.heatmap = Some(max.max(1));
+        }
+    }
+
+    /// Heat-map mode: the work (nodes plus triangles) of the last frame's pixels, row by row.
+    #[must_use]
+    pub fn work(&self) -> &[u32] {
+        &self.work
+    }
+
+    /// Heat-map mode: colours `out` from the last frame's work on a scale from 0 to `max` and
+    /// draws the legend (what [`Renderer::render`] does with the settings' scale).
+    pub fn recolor(&self, out: &mut RgbImage, max: u32) {
+        for (p, &w) in out.pixels_mut().zip(&self.work) {
+            p.0 = heat_pixel(w, max);
+        }
+        draw_heat_legend(out, max);
     }
 
     /// The settings.
@@ -115,12 +143,14 @@ impl Renderer {
         let nty = h.div_ceil(TILE);
         let per_tile = (TILE * TILE) as usize;
         self.tiles.resize((ntx * nty) as usize * per_tile, [0; 3]);
+        self.tile_work.resize(self.tiles.len(), 0);
         let rays = stage.camera.rays(w, h);
         let counts = self
             .tiles
             .par_chunks_mut(per_tile)
+            .zip(self.tile_work.par_chunks_mut(per_tile))
             .enumerate()
-            .map(|(i, tile)| {
+            .map(|(i, (tile, tile_work))| {
                 let (x0, y0) = ((i as u32 % ntx) * TILE, (i as u32 / ntx) * TILE);
                 let mut c = FrameCounts::default();
                 let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
@@ -139,7 +169,8 @@ impl Renderer {
                 for py in 0..th {
                     for px in 0..tw {
                         let ray = rays.ray(x0 + px, y0 + py);
-                        tile[(py * TILE + px) as usize] = pixel(tracer, stage, &s, &ray, &mut c);
+                        let k = (py * TILE + px) as usize;
+                        tile_work[k] = heat_work(tracer, stage, &s, &ray, &mut c);
                     }
                 }
                 c
@@ -159,7 +190,18 @@ impl Renderer {
             }
         }
         if let Some(max) = s.heatmap {
-            draw_heat_legend(out, max);
+            self.work.resize((w * h) as usize, 0);
+            for (i, tile) in self.tile_work.chunks(per_tile).enumerate() {
+                let (x0, y0) = ((i as u32 % ntx) * TILE, (i as u32 / ntx) * TILE);
+                let tw = TILE.min(w - x0) as usize;
+                for py in 0..TILE.min(h - y0) {
+                    let at = (y0 + py) as usize * w as usize + x0 as usize;
+                    self.work[at..at + tw].copy_from_slice(&tile[(py * TILE) as usize..][..tw]);
+                }
+            }
+            self.recolor(out, max);
+        } else {
+            self.work.clear();
         }
         counts
     }
@@ -261,46 +303,60 @@ fn color(stage: &Stage, ray: &Ray, seen: &Seen, lit: f32) -> Vec3 {
     }
 }
 
-/// Traces and shades one pixel.
+/// A heat-map pixel: the work (nodes plus triangles) its primary ray and its shadow ray cost.
 #[inline]
-fn pixel<T: Tracer>(
+fn heat_work<T: Tracer>(
     tracer: &T,
     stage: &Stage,
     s: &Settings,
     ray: &Ray,
     c: &mut FrameCounts,
-) -> [u8; 3] {
+) -> u32 {
     c.primary += 1;
     let mut work = TraversalStats::default();
-    let counting = s.heatmap.is_some();
-    let hit = tracer.closest(ray, s.smooth, counting.then_some(&mut work));
+    let hit = tracer.closest(ray, s.smooth, Some(&mut work));
     let seen = see(stage, ray, hit);
     if matches!(seen, Seen::Surface { .. }) {
         c.hits += 1;
     }
-    let lit = match shadow_origin(stage, s, ray, &seen) {
-        (Some(from), _) => {
-            c.shadow += 1;
-            let r = Ray::new(from, stage.light);
-            if tracer.occluded(&r, counting.then_some(&mut work)) {
-                0.0
-            } else {
-                1.0
-            }
-        }
-        (None, lit) => lit,
-    };
-    let color = color(stage, ray, &seen, lit);
-    match s.heatmap {
-        Some(max) => {
-            c.work += work;
-            let w = work.nodes + work.prims;
-            c.worked += u64::from(w > 0);
-            c.max_work = c.max_work.max(w);
-            heat_color(w as f32, max as f32)
-        }
-        None => to_srgb(color),
+    if let (Some(from), _) = shadow_origin(stage, s, ray, &seen) {
+        c.shadow += 1;
+        tracer.occluded(&Ray::new(from, stage.light), Some(&mut work));
     }
+    c.work += work;
+    let w = work.nodes + work.prims;
+    c.worked += u64::from(w > 0);
+    c.max_work = c.max_work.max(w);
+    u32::try_from(w).unwrap_or(u32::MAX)
+}
+
+/// The colour of pixels that cost no work (their rays left the scene's box untouched):
+/// a neutral grey, apart from every colour of the scale.
+pub const HEAT_BACKGROUND: [u8; 3] = [118, 118, 118];
+
+/// A heat-map pixel's colour: [`HEAT_BACKGROUND`] without work, else its place on the scale.
+#[must_use]
+pub fn heat_pixel(work: u32, max: u32) -> [u8; 3] {
+    if work == 0 {
+        HEAT_BACKGROUND
+    } else {
+        heat_color(work as f32, max as f32)
+    }
+}
+
+/// The `q`-quantile (0..=1) of the work over the pixels that cost any, of one or more frames;
+/// 1 without such pixels. The heat map's automatic scale.
+#[must_use]
+pub fn work_quantile<'a>(frames: impl IntoIterator<Item = &'a [u32]>, q: f64) -> u32 {
+    let mut v: Vec<u32> = frames
+        .into_iter()
+        .flat_map(|f| f.iter().copied().filter(|&w| w > 0))
+        .collect();
+    if v.is_empty() {
+        return 1;
+    }
+    let k = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    *v.select_nth_unstable(k).1
 }
 
 /// Pixels of a tile.
@@ -375,7 +431,7 @@ fn tile_batched<T: Tracer>(
 /// ticks and numbers, and what it measures.
 pub fn draw_heat_legend(img: &mut RgbImage, max: u32) {
     let (w, h) = img.dimensions();
-    let scale = (h / 240).max(1);
+    let scale = (h / 480).max(1);
     let bar_h = 4 * scale + 2;
     let margin = 4 * scale;
     let text_h = text_height(scale);
@@ -391,7 +447,7 @@ pub fn draw_heat_legend(img: &mut RgbImage, max: u32) {
             p.0 = p.0.map(|v| v / 4);
         }
     }
-    let title = "WORK PER PIXEL: NODES + TRIANGLES";
+    let title = "nodes + triangles per pixel (primary + shadow ray); grey: none";
     let x0 = margin * 2;
     let x1 = w - margin * 2;
     draw_label(

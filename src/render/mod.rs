@@ -42,7 +42,10 @@ mod trace;
 pub use camera::{
     AUTO_VIEW_DIR, AUTO_YFOV_DEGREES, Camera, GltfCamera, Projection, RayGen, gltf_cameras,
 };
-pub use frame::{FrameCounts, Renderer, Settings, TILE, draw_heat_legend};
+pub use frame::{
+    FrameCounts, HEAT_BACKGROUND, Renderer, Settings, TILE, draw_heat_legend, heat_pixel,
+    work_quantile,
+};
 pub use shade::{Ground, Stage, heat_color, srgb_to_linear, to_srgb};
 pub use trace::{
     BruteForce, EngineShading, EngineTracer, PacketUse, Surface, Tracer, vertex_normals,

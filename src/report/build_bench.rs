@@ -277,7 +277,7 @@ pub(super) fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
 /// Speed against quality: build time (x, log scale) against SAH cost (y), one point per
 /// builder, so that every bin count and method can be read off as a trade-off.
 #[must_use]
-pub fn chart(rows: &[Row], title: &str) -> super::charts::Chart {
+pub fn chart(rows: &[Row], title: &str, runs: usize) -> super::charts::Chart {
     let mut series: Vec<super::charts::Series> = Vec::new();
     for r in rows {
         if series.iter().any(|s| s.name == r.method) {
@@ -291,11 +291,19 @@ pub fn chart(rows: &[Row], title: &str) -> super::charts::Chart {
     }
     super::charts::Chart {
         title: format!("build time against SAH cost: {title}"),
-        x_label: "build time (ms, median)".into(),
-        y_label: "SAH cost (Ct = Ci = 1)".into(),
+        x_label: format!(
+            "build time (ms, {})",
+            if runs > 1 {
+                format!("median of {runs} runs")
+            } else {
+                "one run".into()
+            }
+        ),
+        y_label: "SAH cost (traversal = intersection = 1)".into(),
         series,
         log_x: true,
-        note: "lower left is better".into(),
+        min_rel_span: 0.1,
+        note: "one marker per builder;  lower left is better".into(),
         ..Default::default()
     }
 }

@@ -1,8 +1,18 @@
-//! Line and scatter charts written as SVG and as PNG, with no fonts from the system: the SVG
-//! names a generic monospace family, and the PNG draws its text with a built-in 5x7 bitmap font.
+//! Line and scatter charts drawn with plotters, written as SVG and PNG with the embedded font
+//! ([`super::font`]).
+//!
+//! Made to be read at a glance: every axis has numbered ticks (logarithmic axes get 2 and 5
+//! between the powers of ten, or every integer multiple when the data spans less than a decade),
+//! every series has its own colour, marker shape and dash, markers of coinciding series are
+//! staggered along the line and moved aside where they would cover each other, and the legend
+//! under the plot explains every symbol.
 
-use image::{Rgb, RgbImage};
-use std::fmt::Write as _;
+use image::RgbImage;
+use plotters::coord::Shift;
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::ranged1d::{KeyPointHint, KeyPointWeight, NoDefaultFormatting, Ranged};
+use plotters::prelude::*;
+use std::ops::Range;
 
 /// One data series.
 #[derive(Clone, Debug, Default)]
@@ -11,9 +21,10 @@ pub struct Series {
     pub name: String,
     /// Points in data coordinates.
     pub points: Vec<(f64, f64)>,
-    /// Join the points with a line (else draw them as dots).
+    /// Join the points with a line (else draw them as markers only).
     pub line: bool,
-    /// Points to highlight with a ring (e.g. rebuilds).
+    /// Points drawn as the series' marker filled (e.g. rebuilds); [`Chart::note`] says what
+    /// they are.
     pub marks: Vec<(f64, f64)>,
 }
 
@@ -22,9 +33,9 @@ pub struct Series {
 pub struct Chart {
     /// Title above the plot.
     pub title: String,
-    /// X axis label.
+    /// X axis label, with its unit.
     pub x_label: String,
-    /// Y axis label.
+    /// Y axis label, with its unit.
     pub y_label: String,
     /// The series.
     pub series: Vec<Series>,
@@ -34,70 +45,169 @@ pub struct Chart {
     pub log_x: bool,
     /// Draw the line y = x (for predicted against measured).
     pub diagonal: bool,
-    /// A note under the legend (e.g. what the rings mean).
+    /// A line under the legend: what the filled markers (and anything else) mean.
     pub note: String,
+    /// The y axis spans at least this fraction of its largest value (0: fit the data), so
+    /// that a spread of a few per mille does not fill the plot.
+    pub min_rel_span: f64,
 }
 
-const PALETTE: [[u8; 3]; 8] = [
-    [31, 119, 180],
-    [214, 39, 40],
-    [44, 160, 44],
-    [255, 127, 14],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [23, 190, 207],
+/// Colours told apart on white and from each other (no two alike in hue and lightness).
+const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(60, 60, 60),
 ];
-const GREY: [u8; 3] = [200, 200, 200];
-const DARK: [u8; 3] = [40, 40, 40];
+const GRID: RGBColor = RGBColor(225, 225, 225);
+const DIAGONAL: RGBColor = RGBColor(150, 150, 150);
 
-/// Where text is anchored horizontally.
-#[derive(Clone, Copy, PartialEq)]
-enum Anchor {
-    Start,
-    Middle,
-    End,
+/// Marker shapes, each a closed outline (so a test can find them in the SVG).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Shape {
+    Circle,
+    Square,
+    TriangleUp,
+    Diamond,
+    TriangleDown,
+    Pentagon,
+    Star,
+    Hexagon,
 }
 
-/// What both outputs can draw.
-trait Painter {
-    fn line(&mut self, a: (f64, f64), b: (f64, f64), c: [u8; 3], w: f64);
-    fn dot(&mut self, p: (f64, f64), r: f64, c: [u8; 3], filled: bool);
-    fn text(&mut self, p: (f64, f64), s: &str, c: [u8; 3], anchor: Anchor, vertical: bool);
+const SHAPES: [Shape; 8] = [
+    Shape::Circle,
+    Shape::Square,
+    Shape::TriangleUp,
+    Shape::Diamond,
+    Shape::TriangleDown,
+    Shape::Pentagon,
+    Shape::Star,
+    Shape::Hexagon,
+];
+
+/// Dash patterns (dash, gap in pixels; 0 for a solid line).
+const DASHES: [(i32, i32); 4] = [(0, 0), (9, 4), (3, 3), (14, 4)];
+
+/// How series `k` is drawn.
+#[derive(Clone, Copy, Debug)]
+struct Style {
+    color: RGBColor,
+    shape: Shape,
+    /// Marker radius in pixels.
+    size: i32,
+    dash: (i32, i32),
+    width: u32,
 }
 
-/// Maps data to pixels.
-struct Frame {
-    x0: f64,
-    x1: f64,
-    y0: f64,
-    y1: f64,
-    left: f64,
-    right: f64,
-    top: f64,
-    bottom: f64,
-    log_x: bool,
-    log_y: bool,
-}
-
-impl Frame {
-    fn tx(&self, v: f64) -> f64 {
-        self.left + (self.fx(v) - self.x0) / (self.x1 - self.x0) * (self.right - self.left)
-    }
-    fn ty(&self, v: f64) -> f64 {
-        self.bottom - (self.fy(v) - self.y0) / (self.y1 - self.y0) * (self.bottom - self.top)
-    }
-    fn fx(&self, v: f64) -> f64 {
-        if self.log_x { v.max(1e-12).log10() } else { v }
-    }
-    fn fy(&self, v: f64) -> f64 {
-        if self.log_y { v.max(1e-12).log10() } else { v }
+fn style(k: usize) -> Style {
+    Style {
+        color: PALETTE[k % PALETTE.len()],
+        shape: SHAPES[k % SHAPES.len()],
+        // The same shape comes back larger, so no two series share shape and size.
+        size: 5 + 2 * (k / SHAPES.len()) as i32,
+        dash: DASHES[k % DASHES.len()],
+        // Earlier lines are wider, so a later line on top of one leaves its edges showing.
+        width: 3u32.saturating_sub(k as u32 / 2).max(1),
     }
 }
 
-/// About five round tick values covering `[lo, hi]`.
-fn ticks(lo: f64, hi: f64) -> Vec<f64> {
-    let span = (hi - lo).max(1e-12);
+/// The outline of `shape` of radius `r` around `(x, y)`, closed.
+fn outline(shape: Shape, (x, y): (i32, i32), r: i32) -> Vec<(i32, i32)> {
+    let polygon = |n: usize, phase: f64, radii: &[f64]| -> Vec<(i32, i32)> {
+        let mut pts: Vec<(i32, i32)> = (0..n)
+            .map(|i| {
+                let a = phase + std::f64::consts::TAU * i as f64 / n as f64;
+                let rr = f64::from(r) * radii[i % radii.len()];
+                (
+                    x + (rr * a.cos()).round() as i32,
+                    y - (rr * a.sin()).round() as i32,
+                )
+            })
+            .collect();
+        pts.push(pts[0]);
+        pts
+    };
+    use std::f64::consts::FRAC_PI_2;
+    match shape {
+        Shape::Circle => polygon(16, 0.0, &[1.0]),
+        Shape::Square => polygon(4, FRAC_PI_2 / 2.0, &[1.2]),
+        Shape::TriangleUp => polygon(3, FRAC_PI_2, &[1.25]),
+        Shape::Diamond => polygon(4, 0.0, &[1.25]),
+        Shape::TriangleDown => polygon(3, -FRAC_PI_2, &[1.25]),
+        Shape::Pentagon => polygon(5, FRAC_PI_2, &[1.15]),
+        Shape::Star => polygon(10, FRAC_PI_2, &[1.35, 0.55]),
+        Shape::Hexagon => polygon(6, 0.0, &[1.1]),
+    }
+}
+
+/// One axis: its range in data units, linear or logarithmic, with the ticks chosen here
+/// (plotters' logarithmic key points leave a range within one decade without any).
+#[derive(Clone, Debug)]
+struct Axis {
+    lo: f64,
+    hi: f64,
+    log: bool,
+    ticks: Vec<f64>,
+}
+
+impl Axis {
+    fn new(lo: f64, hi: f64, log: bool) -> Self {
+        let ticks = if log {
+            log_ticks(lo, hi)
+        } else {
+            linear_ticks(lo, hi)
+        };
+        Self { lo, hi, log, ticks }
+    }
+
+    fn unit(&self, v: f64) -> f64 {
+        if self.log {
+            (v.max(f64::MIN_POSITIVE).log10() - self.lo.log10())
+                / (self.hi.log10() - self.lo.log10())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        }
+    }
+}
+
+impl Ranged for Axis {
+    type FormatOption = NoDefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let u = self.unit(*value).clamp(-10.0, 10.0);
+        limit.0 + (u * f64::from(limit.1 - limit.0)).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        match hint.weight() {
+            KeyPointWeight::Bold => self.ticks.clone(),
+            // No light grid lines: the bold ones carry the numbers.
+            KeyPointWeight::Any => Vec::new(),
+        }
+    }
+
+    fn range(&self) -> Range<f64> {
+        self.lo..self.hi
+    }
+}
+
+impl ValueFormatter<f64> for Axis {
+    fn format_ext(&self, value: &f64) -> String {
+        tick_label(*value, &self.ticks)
+    }
+}
+
+/// About five round values covering `[lo, hi]`: steps of 1, 2 or 5 times a power of ten.
+fn linear_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
     let raw = span / 5.0;
     let mag = 10f64.powf(raw.log10().floor());
     let step = [1.0, 2.0, 2.5, 5.0, 10.0]
@@ -107,402 +217,405 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
         .unwrap_or(10.0 * mag);
     let first = (lo / step).ceil() * step;
     (0..)
-        .map(|k| first + k as f64 * step)
+        .map(|k| first + f64::from(k) * step)
         .take_while(|v| *v <= hi + step * 1e-9)
         .take(20)
+        .map(|v| if v.abs() < step * 1e-9 { 0.0 } else { v })
         .collect()
 }
 
-fn label(v: f64) -> String {
+/// Ticks of a logarithmic axis: powers of ten, with 2 and 5 between them, or every integer
+/// multiple when that leaves fewer than three, or linear ticks inside a narrow range.
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let (e0, e1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let within = |mults: &[f64]| -> Vec<f64> {
+        (e0..=e1)
+            .flat_map(|e| mults.iter().map(move |m| m * 10f64.powi(e)))
+            .filter(|v| *v >= lo * (1.0 - 1e-9) && *v <= hi * (1.0 + 1e-9))
+            .collect()
+    };
+    let all = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0];
+    for mults in [&[1.0][..], &[1.0, 2.0, 5.0], &all] {
+        let t = within(mults);
+        if t.len() >= 4 || (t.len() == 3 && mults.len() == 9) {
+            // Wide ranges: keep at most about a dozen, the powers of ten always.
+            if t.len() > 12 && mults.len() > 1 {
+                continue;
+            }
+            return t;
+        }
+    }
+    linear_ticks(lo, hi)
+        .into_iter()
+        .filter(|v| *v > 0.0)
+        .collect()
+}
+
+/// A tick's number, with as many decimals as its neighbours need to differ.
+fn tick_label(v: f64, ticks: &[f64]) -> String {
     let a = v.abs();
     if a == 0.0 {
-        "0".into()
-    } else if !(1e-3..1e5).contains(&a) {
-        format!("{v:.0e}")
-    } else if a >= 100.0 {
-        format!("{v:.0}")
-    } else if a >= 1.0 {
-        let s = format!("{v:.2}");
+        return "0".into();
+    }
+    if a >= 1e4 {
+        let (d, suffix) = if a >= 1e6 { (1e6, "M") } else { (1e3, "k") };
+        return format!("{}{suffix}", trim(format!("{:.2}", v / d)));
+    }
+    // The smallest gap between ticks decides the decimals.
+    let gap = ticks
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|g| *g > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let scale = if gap.is_finite() { gap.min(a) } else { a };
+    let decimals = (-scale.log10().floor()).clamp(0.0, 6.0) as usize;
+    trim(format!("{v:.decimals$}"))
+}
+
+fn trim(s: String) -> String {
+    if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
-        let s = format!("{v:.4}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
+        s
     }
 }
 
+/// Legend entries per row and the legend's height for `n` series in `w` pixels.
+fn legend_layout(n: usize, w: u32, note: bool) -> (usize, u32) {
+    let per_row = ((w.saturating_sub(40)) / 230).max(1) as usize;
+    let rows = n.div_ceil(per_row) as u32 + u32::from(note);
+    (per_row, 14 + 20 * rows)
+}
+
+type DrawResult<E> = Result<(), DrawingAreaErrorKind<E>>;
+
 impl Chart {
-    fn range(&self) -> (f64, f64, f64, f64) {
-        let pts = self
+    fn usable(&self, p: &(f64, f64)) -> bool {
+        p.0.is_finite()
+            && p.1.is_finite()
+            && (!self.log_x || p.0 > 0.0)
+            && (!self.log_y || p.1 > 0.0)
+    }
+
+    /// The axes: the data's range padded by 5%, the y axis from 0 when the data is positive
+    /// and reaches below half its maximum, never below 0 for data that is not.
+    fn axes(&self) -> (Axis, Axis) {
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for &(x, y) in self
             .series
             .iter()
             .flat_map(|s| s.points.iter().chain(&s.marks))
-            .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .filter(|p| (!self.log_x || p.0 > 0.0) && (!self.log_y || p.1 > 0.0));
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-        for &(x, y) in pts {
-            let x = if self.log_x { x.log10() } else { x };
-            let y = if self.log_y { y.log10() } else { y };
+            .filter(|p| self.usable(p))
+        {
             x0 = x0.min(x);
             x1 = x1.max(x);
             y0 = y0.min(y);
             y1 = y1.max(y);
         }
         if x0 > x1 {
-            (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+            (x0, x1, y0, y1) = if self.log_x || self.log_y {
+                (1.0, 10.0, 1.0, 10.0)
+            } else {
+                (0.0, 1.0, 0.0, 1.0)
+            };
         }
         if self.diagonal {
-            let lo = x0.min(y0);
-            let hi = x1.max(y1);
+            let (lo, hi) = (x0.min(y0), x1.max(y1));
             (x0, x1, y0, y1) = (lo, hi, lo, hi);
         }
+        let data_nonnegative = y0 >= 0.0;
         if !self.log_y && y0 > 0.0 && y0 < 0.5 * y1 {
             y0 = 0.0;
+            if self.diagonal {
+                x0 = 0.0;
+            }
         }
-        let pad = |a: f64, b: f64| {
-            let d = if b > a {
-                (b - a) * 0.05
-            } else {
-                a.abs().max(1.0) * 0.1
-            };
-            (a - d, b + d)
-        };
-        let (x0, x1) = pad(x0, x1);
-        let (y0, y1) = pad(y0, y1);
-        (x0, x1, y0, y1)
-    }
-
-    fn draw(&self, p: &mut impl Painter, w: f64, h: f64) {
-        let (x0, x1, y0, y1) = self.range();
-        let f = Frame {
-            x0,
-            x1,
-            y0,
-            y1,
-            left: 80.0,
-            right: w - 190.0,
-            top: 40.0,
-            bottom: h - 50.0,
-            log_x: self.log_x,
-            log_y: self.log_y,
-        };
-        // Grid and tick labels.
-        let tick_values = |lo: f64, hi: f64, log: bool| -> Vec<(f64, f64)> {
+        if self.min_rel_span > 0.0 && y1 - y0 < self.min_rel_span * y1.abs() {
+            let mid = 0.5 * (y0 + y1);
+            let half = 0.5 * self.min_rel_span * y1.abs();
+            (y0, y1) = (mid - half, mid + half);
+        }
+        let pad = |a: f64, b: f64, log: bool, floor_zero: bool| -> (f64, f64) {
             if log {
-                ticks(lo.floor(), hi.ceil())
-                    .into_iter()
-                    .filter(|v| v.fract() == 0.0 && *v >= lo && *v <= hi)
-                    .map(|v| (v, 10f64.powf(v)))
-                    .collect()
+                let (la, lb) = (a.log10(), b.log10());
+                let d = if lb > la { (lb - la) * 0.05 } else { 0.3 };
+                (10f64.powf(la - d), 10f64.powf(lb + d))
             } else {
-                ticks(lo, hi).into_iter().map(|v| (v, v)).collect()
+                let d = if b > a {
+                    (b - a) * 0.05
+                } else {
+                    a.abs().max(1.0) * 0.1
+                };
+                let lo = if floor_zero && a - d < 0.0 && a >= 0.0 {
+                    0.0
+                } else {
+                    a - d
+                };
+                (lo, b + d)
             }
         };
-        for (pos, v) in tick_values(x0, x1, self.log_x) {
-            let x = f.left + (pos - x0) / (x1 - x0) * (f.right - f.left);
-            p.line((x, f.top), (x, f.bottom), GREY, 1.0);
-            p.text((x, f.bottom + 18.0), &label(v), DARK, Anchor::Middle, false);
-        }
-        for (pos, v) in tick_values(y0, y1, self.log_y) {
-            let y = f.bottom - (pos - y0) / (y1 - y0) * (f.bottom - f.top);
-            p.line((f.left, y), (f.right, y), GREY, 1.0);
-            p.text((f.left - 6.0, y + 4.0), &label(v), DARK, Anchor::End, false);
-        }
-        p.line((f.left, f.bottom), (f.right, f.bottom), DARK, 1.5);
-        p.line((f.left, f.top), (f.left, f.bottom), DARK, 1.5);
-        p.text((w / 2.0, 24.0), &self.title, DARK, Anchor::Middle, false);
-        p.text(
-            ((f.left + f.right) / 2.0, h - 12.0),
-            &self.x_label,
-            DARK,
-            Anchor::Middle,
-            false,
-        );
-        p.text(
-            (18.0, (f.top + f.bottom) / 2.0),
-            &self.y_label,
-            DARK,
-            Anchor::Middle,
-            true,
-        );
+        let (x0, x1) = pad(x0, x1, self.log_x, self.diagonal && data_nonnegative);
+        let (y0, y1) = pad(y0, y1, self.log_y, data_nonnegative);
+        (Axis::new(x0, x1, self.log_x), Axis::new(y0, y1, self.log_y))
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<DB::ErrorType> {
+        let font = super::font::family();
+        let (w, h) = root.dim_in_pixel();
+        root.fill(&WHITE)?;
+        let (per_row, legend_h) = legend_layout(self.series.len(), w, !self.note.is_empty());
+        let (upper, lower) = root.split_vertically(h.saturating_sub(legend_h));
+        let (xa, ya) = self.axes();
+        let mut chart = ChartBuilder::on(&upper)
+            .caption(&self.title, (font, 20))
+            .margin_top(8)
+            .margin_left(8)
+            .margin_right(24)
+            .x_label_area_size(46)
+            .y_label_area_size(72)
+            .build_cartesian_2d(xa, ya)?;
+        chart
+            .configure_mesh()
+            .bold_line_style(GRID)
+            .axis_style(BLACK.stroke_width(1))
+            .label_style((font, 14))
+            .axis_desc_style((font, 15))
+            .x_desc(self.x_label.as_str())
+            .y_desc(self.y_label.as_str())
+            .draw()?;
         if self.diagonal {
-            let lo = x0.max(y0);
-            let hi = x1.min(y1);
-            let (lo, hi) = if self.log_x {
-                (10f64.powf(lo), 10f64.powf(hi))
-            } else {
-                (lo, hi)
-            };
-            p.line((f.tx(lo), f.ty(lo)), (f.tx(hi), f.ty(hi)), GREY, 2.0);
+            let r = chart.x_range();
+            chart.draw_series(DashedLineSeries::new(
+                [(r.start, r.start), (r.end, r.end)],
+                6,
+                4,
+                DIAGONAL.stroke_width(2),
+            ))?;
         }
-        let ok = |q: &(f64, f64)| {
-            q.0.is_finite()
-                && q.1.is_finite()
-                && (!self.log_x || q.0 > 0.0)
-                && (!self.log_y || q.1 > 0.0)
-        };
-        for (k, s) in self.series.iter().enumerate() {
-            let c = PALETTE[k % PALETTE.len()];
+        // Lines first (all of them), then markers, so no line runs over another's markers.
+        let styles: Vec<Style> = (0..self.series.len()).map(style).collect();
+        for (s, st) in self.series.iter().zip(&styles) {
+            if !s.line {
+                continue;
+            }
             let pts: Vec<(f64, f64)> = s
                 .points
                 .iter()
-                .filter(|q| ok(q))
-                .map(|&(x, y)| (f.tx(x), f.ty(y)))
+                .copied()
+                .filter(|p| self.usable(p))
                 .collect();
-            if s.line {
-                for pair in pts.windows(2) {
-                    p.line(pair[0], pair[1], c, 2.0);
-                }
+            let line_style = st.color.stroke_width(st.width);
+            if st.dash.0 == 0 {
+                chart.draw_series(LineSeries::new(pts, line_style))?;
             } else {
-                for &q in &pts {
-                    p.dot(q, 4.0, c, true);
+                chart.draw_series(DashedLineSeries::new(pts, st.dash.0, st.dash.1, line_style))?;
+            }
+        }
+        // Filled marks first (small, where they are), then the hollow markers that tell the
+        // series apart, moved aside where they would cover one another.
+        for (s, st) in self.series.iter().zip(&styles) {
+            let small = Style {
+                size: (st.size - 1).max(3),
+                ..*st
+            };
+            for p in s.marks.iter().filter(|p| self.usable(p)) {
+                draw_marker(&upper, &small, chart.backend_coord(p), true)?;
+            }
+        }
+        let (xr, yr) = chart.plotting_area().get_pixel_range();
+        let bounds = (xr.start, xr.end, yr.start, yr.end);
+        let n = self.series.len().max(1);
+        let mut placed: Vec<(i32, i32, i32)> = Vec::new();
+        for (k, (s, st)) in self.series.iter().zip(&styles).enumerate() {
+            let pts: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|p| self.usable(p))
+                .collect();
+            // Lines carry about ten markers, staggered between series so that coinciding
+            // lines show each other's; scatter series mark every point.
+            let stride = if s.line {
+                pts.len().div_ceil(10).max(1)
+            } else {
+                1
+            };
+            let phase = k * stride / n;
+            for (_, p) in pts
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| i % stride == phase % stride)
+            {
+                let c = dodge(chart.backend_coord(p), st.size, bounds, &mut placed);
+                draw_marker(&upper, st, c, false)?;
+            }
+        }
+        // The legend, under the plot: each series' line and marker, then the note.
+        for (k, (s, st)) in self.series.iter().zip(&styles).enumerate() {
+            let (row, col) = ((k / per_row) as i32, (k % per_row) as i32);
+            let x = 20 + col * 230;
+            let y = 10 + row * 20;
+            let seg = [(x, y), (x + 34, y)];
+            if s.line {
+                let line_style = st.color.stroke_width(st.width);
+                if st.dash.0 == 0 {
+                    lower.draw(&PathElement::new(seg.to_vec(), line_style))?;
+                } else {
+                    lower.draw(&plotters::element::DashedPathElement::new(
+                        seg, st.dash.0, st.dash.1, line_style,
+                    ))?;
                 }
             }
-            for &(x, y) in s.marks.iter().filter(|q| ok(q)) {
-                p.dot((f.tx(x), f.ty(y)), 5.0, c, false);
-            }
-            // Legend.
-            let ly = f.top + 10.0 + 20.0 * k as f64;
-            let lx = f.right + 14.0;
-            if s.line {
-                p.line((lx, ly - 4.0), (lx + 18.0, ly - 4.0), c, 2.0);
-            } else {
-                p.dot((lx + 9.0, ly - 4.0), 4.0, c, true);
-            }
-            p.text((lx + 24.0, ly), &s.name, DARK, Anchor::Start, false);
+            draw_marker(&lower, st, (x + 17, y), false)?;
+            lower.draw(&Text::new(
+                s.name.clone(),
+                (x + 42, y - 8),
+                (font, 14).into_font().color(&BLACK),
+            ))?;
         }
         if !self.note.is_empty() {
-            let ly = f.top + 14.0 + 20.0 * self.series.len() as f64;
-            p.text((f.right + 14.0, ly), &self.note, DARK, Anchor::Start, false);
+            let rows = self.series.len().div_ceil(per_row) as i32;
+            lower.draw(&Text::new(
+                self.note.clone(),
+                (20, 2 + rows * 20),
+                (font, 14).into_font().color(&BLACK),
+            ))?;
         }
+        root.present()
     }
 
     /// The chart as an SVG document of `w x h` pixels.
-    #[must_use]
-    pub fn svg(&self, w: u32, h: u32) -> String {
-        let mut s = Svg(String::new());
-        let _ = write!(
-            s.0,
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" \
-             viewBox=\"0 0 {w} {h}\" font-family=\"monospace\" font-size=\"12\">\n\
-             <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-        );
-        self.draw(&mut s, f64::from(w), f64::from(h));
-        s.0.push_str("</svg>\n");
-        s.0
+    ///
+    /// # Errors
+    /// When plotters fails to lay out the chart (e.g. a size too small for its margins).
+    pub fn svg(&self, w: u32, h: u32) -> std::io::Result<String> {
+        let mut out = String::new();
+        {
+            let root = SVGBackend::with_string(&mut out, (w, h)).into_drawing_area();
+            self.draw(&root)
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
+        }
+        Ok(out)
     }
 
     /// The chart as an image of `w x h` pixels.
-    #[must_use]
-    pub fn png(&self, w: u32, h: u32) -> RgbImage {
-        let mut r = Raster(RgbImage::from_pixel(w, h, Rgb([255, 255, 255])));
-        self.draw(&mut r, f64::from(w), f64::from(h));
-        r.0
+    ///
+    /// # Errors
+    /// When plotters fails to lay out the chart (e.g. a size too small for its margins).
+    pub fn png(&self, w: u32, h: u32) -> std::io::Result<RgbImage> {
+        let mut buf = vec![0u8; w as usize * h as usize * 3];
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            self.draw(&root)
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
+        }
+        RgbImage::from_raw(w, h, buf).ok_or_else(|| std::io::Error::other("chart buffer size"))
     }
 
     /// Writes `stem.svg` and `stem.png` of `w x h` pixels.
+    ///
+    /// # Errors
+    /// When a file cannot be written or the chart cannot be laid out.
     pub fn save(&self, stem: &std::path::Path, w: u32, h: u32) -> std::io::Result<()> {
-        std::fs::write(stem.with_extension("svg"), self.svg(w, h))?;
-        self.png(w, h)
+        std::fs::write(stem.with_extension("svg"), self.svg(w, h)?)?;
+        self.png(w, h)?
             .save(stem.with_extension("png"))
             .map_err(std::io::Error::other)
     }
 }
 
-struct Svg(String);
-
-fn hex(c: [u8; 3]) -> String {
-    format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
+/// Moves a marker of radius `r` to the nearest of a few spots beside `at` (inside `bounds`:
+/// x0, x1, y0, y1) where it covers no marker placed before it, and records it; where every
+/// spot is taken it stays at `at`.
+fn dodge(
+    at: (i32, i32),
+    r: i32,
+    (x0, x1, y0, y1): (i32, i32, i32, i32),
+    placed: &mut Vec<(i32, i32, i32)>,
+) -> (i32, i32) {
+    let free = |(x, y): (i32, i32)| {
+        x >= x0
+            && x <= x1
+            && y >= y0
+            && y <= y1
+            && placed.iter().all(|&(px, py, pr)| {
+                ((px - x) as f32).hypot((py - y) as f32) >= (pr + r) as f32 * 0.8
+            })
+    };
+    let d = 2 * r + 1;
+    let spots = [
+        (0, 0),
+        (d, 0),
+        (-d, 0),
+        (0, -d),
+        (0, d),
+        (d, -d),
+        (-d, -d),
+        (d, d),
+        (-d, d),
+        (2 * d, 0),
+        (-2 * d, 0),
+        (0, -2 * d),
+        (0, 2 * d),
+    ];
+    let c = spots
+        .iter()
+        .map(|&(dx, dy)| (at.0 + dx, at.1 + dy))
+        .find(|&c| free(c))
+        .unwrap_or(at);
+    placed.push((c.0, c.1, r));
+    c
 }
 
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
-impl Painter for Svg {
-    fn line(&mut self, a: (f64, f64), b: (f64, f64), c: [u8; 3], w: f64) {
-        let _ = writeln!(
-            self.0,
-            "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"{}\" stroke-width=\"{w}\"/>",
-            a.0,
-            a.1,
-            b.0,
-            b.1,
-            hex(c)
-        );
+fn draw_marker<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    st: &Style,
+    at: (i32, i32),
+    filled: bool,
+) -> DrawResult<DB::ErrorType> {
+    let pts = outline(st.shape, at, st.size);
+    if filled {
+        return area.draw(&Polygon::new(pts, st.color.filled()));
     }
-    fn dot(&mut self, p: (f64, f64), r: f64, c: [u8; 3], filled: bool) {
-        let fill = if filled { hex(c) } else { "none".into() };
-        let _ = writeln!(
-            self.0,
-            "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"{r}\" fill=\"{fill}\" stroke=\"{}\" stroke-width=\"1.5\"/>",
-            p.0,
-            p.1,
-            hex(c)
-        );
-    }
-    fn text(&mut self, p: (f64, f64), s: &str, c: [u8; 3], anchor: Anchor, vertical: bool) {
-        let a = match anchor {
-            Anchor::Start => "start",
-            Anchor::Middle => "middle",
-            Anchor::End => "end",
-        };
-        let rot = if vertical {
-            format!(" transform=\"rotate(-90 {:.1} {:.1})\"", p.0, p.1)
-        } else {
-            String::new()
-        };
-        let _ = writeln!(
-            self.0,
-            "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"{}\" text-anchor=\"{a}\"{rot}>{}</text>",
-            p.0,
-            p.1,
-            hex(c),
-            escape(s)
-        );
-    }
-}
-
-struct Raster(RgbImage);
-
-impl Raster {
-    fn put(&mut self, x: i64, y: i64, c: [u8; 3]) {
-        if x >= 0 && y >= 0 && (x as u32) < self.0.width() && (y as u32) < self.0.height() {
-            self.0.put_pixel(x as u32, y as u32, Rgb(c));
-        }
-    }
-    fn disc(&mut self, p: (f64, f64), r: f64, c: [u8; 3]) {
-        let ri = r.ceil() as i64;
-        for dy in -ri..=ri {
-            for dx in -ri..=ri {
-                let (x, y) = (p.0.round() as i64 + dx, p.1.round() as i64 + dy);
-                let (fx, fy) = (x as f64 - p.0, y as f64 - p.1);
-                if fx * fx + fy * fy <= r * r + 0.25 {
-                    self.put(x, y, c);
-                }
-            }
-        }
-    }
-}
-
-impl Painter for Raster {
-    fn line(&mut self, a: (f64, f64), b: (f64, f64), c: [u8; 3], w: f64) {
-        let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
-        let steps = (len * 2.0).ceil().max(1.0) as usize;
-        for k in 0..=steps {
-            let t = k as f64 / steps as f64;
-            let p = (a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t);
-            if w <= 1.0 {
-                self.put(p.0.round() as i64, p.1.round() as i64, c);
-            } else {
-                self.disc(p, w / 2.0, c);
-            }
-        }
-    }
-    fn dot(&mut self, p: (f64, f64), r: f64, c: [u8; 3], filled: bool) {
-        if filled {
-            self.disc(p, r, c);
-        } else {
-            let steps = (r * 8.0) as usize;
-            for k in 0..steps {
-                let a = std::f64::consts::TAU * k as f64 / steps as f64;
-                self.disc((p.0 + r * a.cos(), p.1 + r * a.sin()), 0.8, c);
-            }
-        }
-    }
-    fn text(&mut self, p: (f64, f64), s: &str, c: [u8; 3], anchor: Anchor, vertical: bool) {
-        // 5x7 glyphs drawn 1:1 with one column of spacing; about 12 px per line.
-        let width = 6.0 * s.chars().count() as f64;
-        let shift = match anchor {
-            Anchor::Start => 0.0,
-            Anchor::Middle => width / 2.0,
-            Anchor::End => width,
-        };
-        for (k, ch) in s.chars().enumerate() {
-            let g = glyph(ch);
-            for (row, bits) in g.iter().enumerate() {
-                for col in 0..5 {
-                    if bits >> (4 - col) & 1 == 1 {
-                        let along = k as f64 * 6.0 + col as f64 - shift;
-                        let across = row as f64 - 7.0;
-                        let (x, y) = if vertical {
-                            (p.0 + across, p.1 - along)
-                        } else {
-                            (p.0 + along, p.1 + across)
-                        };
-                        self.put(x.round() as i64, y.round() as i64, c);
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// A 5x7 glyph, one row per byte (bit 4 is the left column). Lower case is drawn as upper case.
-fn glyph(c: char) -> [u8; 7] {
-    match c.to_ascii_uppercase() {
-        'A' => [0x0E, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'B' => [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E],
-        'C' => [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E],
-        'D' => [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C],
-        'E' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F],
-        'F' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10],
-        'G' => [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F],
-        'H' => [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        'J' => [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C],
-        'K' => [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11],
-        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
-        'M' => [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11],
-        'N' => [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11],
-        'O' => [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
-        'Q' => [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D],
-        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
-        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
-        'T' => [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04],
-        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'V' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04],
-        'W' => [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A],
-        'X' => [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11],
-        'Y' => [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04],
-        'Z' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F],
-        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
-        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
-        '3' => [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E],
-        '4' => [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02],
-        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
-        '6' => [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E],
-        '7' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
-        '8' => [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E],
-        '9' => [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C],
-        '.' => [0, 0, 0, 0, 0, 0x0C, 0x0C],
-        ',' => [0, 0, 0, 0, 0x0C, 0x04, 0x08],
-        ':' => [0, 0x0C, 0x0C, 0, 0x0C, 0x0C, 0],
-        '-' => [0, 0, 0, 0x1F, 0, 0, 0],
-        '+' => [0, 0x04, 0x04, 0x1F, 0x04, 0x04, 0],
-        '/' => [0, 0x01, 0x02, 0x04, 0x08, 0x10, 0],
-        '(' => [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02],
-        ')' => [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08],
-        '[' => [0x0E, 0x08, 0x08, 0x08, 0x08, 0x08, 0x0E],
-        ']' => [0x0E, 0x02, 0x02, 0x02, 0x02, 0x02, 0x0E],
-        '%' => [0x18, 0x19, 0x02, 0x04, 0x08, 0x13, 0x03],
-        '*' => [0, 0x04, 0x15, 0x0E, 0x15, 0x04, 0],
-        '=' => [0, 0, 0x1F, 0, 0x1F, 0, 0],
-        '_' => [0, 0, 0, 0, 0, 0, 0x1F],
-        '<' => [0x02, 0x04, 0x08, 0x10, 0x08, 0x04, 0x02],
-        '>' => [0x08, 0x04, 0x02, 0x01, 0x02, 0x04, 0x08],
-        '\'' => [0x04, 0x04, 0, 0, 0, 0, 0],
-        ' ' => [0; 7],
-        _ => [0x1F, 0x11, 0x11, 0x11, 0x11, 0x11, 0x1F],
-    }
+    // White inside, so a marker stands out against lines under it.
+    area.draw(&Polygon::new(pts.clone(), WHITE.filled()))?;
+    area.draw(&PathElement::new(pts, st.color.stroke_width(2)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_ticks_inside_one_decade() {
+        let t = log_ticks(2.6, 7.0);
+        assert_eq!(t, vec![3.0, 4.0, 5.0, 6.0, 7.0]);
+        let t = log_ticks(1e3, 1e6);
+        assert_eq!(t.len(), 4);
+        assert!(log_ticks(1.0, 100.0).contains(&2.0));
+        let narrow = log_ticks(1.01, 1.09);
+        assert!(narrow.len() >= 3, "{narrow:?}");
+    }
+
+    #[test]
+    fn linear_ticks_round() {
+        let t = linear_ticks(0.0, 1.0);
+        assert_eq!(t.len(), 6);
+        assert!((t[5] - 1.0).abs() < 1e-9 && t[0] == 0.0);
+        assert_eq!(tick_label(0.2, &t), "0.2");
+        assert_eq!(tick_label(20000.0, &[10000.0, 20000.0]), "20k");
+    }
+
+    #[test]
+    fn styles_differ() {
+        let pairs: std::collections::HashSet<_> = (0..40)
+            .map(|k| {
+                let s = style(k);
+                (s.color.0, s.color.1, s.color.2, s.shape as u8, s.size)
+            })
+            .collect();
+        assert_eq!(pairs.len(), 40);
+    }
 
     #[test]
     fn draws_both_formats() {
@@ -520,12 +633,14 @@ mod tests {
             }],
             ..Chart::default()
         };
-        let svg = c.svg(640, 400);
-        assert!(svg.starts_with("<svg") && svg.contains("refit") && svg.ends_with("</svg>\n"));
-        let img = c.png(640, 400);
-        assert!(img.pixels().any(|p| p.0 == PALETTE[0]));
-        let t = ticks(0.0, 1.0);
-        assert_eq!(t.len(), 6);
-        assert!((t[5] - 1.0).abs() < 1e-9 && t[0] == 0.0);
+        let svg = c.svg(640, 400).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("refit") && svg.trim_end().ends_with("</svg>")
+        );
+        let img = c.png(640, 400).unwrap();
+        let blue = PALETTE[0];
+        assert!(img.pixels().any(|p| p.0 == [blue.0, blue.1, blue.2]));
+        // Text is drawn: dark pixels in the title's band.
+        assert!((0..640).any(|x| (0..30).any(|y| img.get_pixel(x, y).0[0] < 100)));
     }
 }

@@ -1365,20 +1365,20 @@ pub fn charts(r: &Report) -> Vec<(&'static str, crate::report::charts::Chart)> {
             .collect()
     };
     let sah = Chart {
-        title: format!("SAH ratio to last build: {}", short(&r.source)),
-        x_label: "frame".into(),
-        y_label: "max SAH ratio".into(),
+        title: format!("SAH cost against the last build: {}", short(&r.source)),
+        x_label: "frame (1 = first)".into(),
+        y_label: "largest SAH ratio over meshes (1 = as built)".into(),
         series: by_policy(&|x| f64::from(x.max_sah_ratio), true),
-        note: "rings: rebuilds".into(),
+        note: "filled marker: a mesh was rebuilt in that frame;  * the default policy".into(),
         ..Chart::default()
     };
     let time = Chart {
-        title: format!("time per frame (update + trace): {}", short(&r.source)),
-        x_label: "frame".into(),
-        y_label: "ms".into(),
+        title: format!("time per frame: {}", short(&r.source)),
+        x_label: "frame (1 = first)".into(),
+        y_label: "update + trace time per frame (ms, wall clock)".into(),
         series: by_policy(&|x| x.update_ms + x.trace_ms, true),
         log_y: true,
-        note: "rings: rebuilds".into(),
+        note: "filled marker: a mesh was rebuilt in that frame;  * the default policy".into(),
         ..Chart::default()
     };
     let mut speed_series: Vec<Series> = Vec::new();
@@ -1391,17 +1391,22 @@ pub fn charts(r: &Report) -> Vec<(&'static str, crate::report::charts::Chart)> {
         });
     }
     let speed = Chart {
-        title: "speed against accuracy".into(),
-        x_label: "update ms per frame".into(),
-        y_label: "trace us per ray".into(),
+        title: format!("update cost against trace cost: {}", short(&r.source)),
+        x_label: "update time per frame (ms)".into(),
+        y_label: "trace time per ray (µs)".into(),
+        note: "builder: rebuilt every frame;  policy: refit or rebuild as it decides;  lower left is better"
+            .into(),
         series: speed_series,
         log_x: true,
         ..Chart::default()
     };
     let predicted = Chart {
-        title: "SAH-predicted against measured traversal cost".into(),
-        x_label: "predicted nodes + triangles per ray".into(),
-        y_label: "measured per ray".into(),
+        title: format!(
+            "SAH-predicted against counted traversal work: {}",
+            short(&r.source)
+        ),
+        x_label: "predicted nodes + triangles visited per ray (SAH)".into(),
+        y_label: "counted nodes + triangles visited per ray".into(),
         series: r
             .policies
             .iter()
@@ -1423,7 +1428,7 @@ pub fn charts(r: &Report) -> Vec<(&'static str, crate::report::charts::Chart)> {
             })
             .collect(),
         diagonal: true,
-        note: "grey: y = x".into(),
+        note: "one marker per frame;  dashed grey: predicted = counted".into(),
         ..Chart::default()
     };
     vec![

@@ -136,7 +136,7 @@ pub fn chart(s: &RaySweep) -> Chart {
     Chart {
         title: format!("refit or rebuild? {}", short(&s.source)),
         x_label: "rays per frame".into(),
-        y_label: "modelled ms per frame".into(),
+        y_label: "modelled update + trace time per frame (ms)".into(),
         series: vec![
             line("always refit", &|r| r.refit_ms),
             line("always rebuild", &|r| r.rebuild_ms),
@@ -145,7 +145,7 @@ pub fn chart(s: &RaySweep) -> Chart {
         ],
         log_x: true,
         log_y: true,
-        note: "where refit and rebuild cross: the answer".into(),
+        note: "modelled: calibrated prices times counted work;  where refit and rebuild cross, the answer changes".into(),
         ..Chart::default()
     }
 }
