@@ -116,7 +116,8 @@ pub struct RungRow {
     /// With the 8-wide collapse after it.
     pub wall_with_collapse_ms: f64,
     /// Share of the SAH (and ray work) refitting lost that the rung won back (1: as a fresh
-    /// build; negative: worse than the refitted tree).
+    /// build; negative: worse than the refitted tree); NaN (`null` in JSON) when no measured
+    /// frame had lost more than 1%.
     pub sah_recovered: f64,
     pub work_recovered: f64,
     /// Wall time over a full rebuild's in the same frames (binary; with collapse).
@@ -140,6 +141,18 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
+}
+
+fn median_or_nan(v: Vec<f64>) -> f64 {
+    if v.is_empty() { f64::NAN } else { median(v) }
+}
+
+fn pct(x: f64) -> String {
+    if x.is_finite() {
+        format!("{:.0}%", 100.0 * x)
+    } else {
+        "–".into()
+    }
 }
 
 fn work(tree: &MeshBvh8, rays: &[Ray]) -> f64 {
@@ -261,8 +274,8 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
                 wall_ms: w,
                 cpu_ms: cpu[k] / m,
                 wall_with_collapse_ms: wc,
-                sah_recovered: median(sah_rec[k].clone()),
-                work_recovered: median(work_rec[k].clone()),
+                sah_recovered: median_or_nan(sah_rec[k].clone()),
+                work_recovered: median_or_nan(work_rec[k].clone()),
                 time_ratio: if rb > 0.0 { w / rb } else { 0.0 },
                 time_ratio_with_collapse: if rbc > 0.0 { wc / rbc } else { 0.0 },
             }
@@ -299,13 +312,13 @@ pub fn table(r: &Report) -> String {
     for row in &r.rows {
         let _ = writeln!(
             s,
-            "{:<18} {:>9.2} {:>9.2} {:>12.2} {:>8.0}% {:>8.0}% {:>11.3} {:>11.3}",
+            "{:<18} {:>9.2} {:>9.2} {:>12.2} {:>9} {:>9} {:>11.3} {:>11.3}",
             row.rung,
             row.wall_ms,
             row.cpu_ms,
             row.wall_with_collapse_ms,
-            100.0 * row.sah_recovered,
-            100.0 * row.work_recovered,
+            pct(row.sah_recovered),
+            pct(row.work_recovered),
             row.time_ratio,
             row.time_ratio_with_collapse
         );
