@@ -2,11 +2,12 @@
 //! drives the default policy: on an animation that degrades a refitted tree, the default
 //! configuration rebuilds. Without the trace time (the same rays through the `&self` batch,
 //! nothing recorded) the policy has no trace cost to weigh against a rebuild and keeps
-//! refitting, so the test separates the two.
+//! refitting, so the test separates the two. Costs are priced from work counts
+//! (`Timing::Priced`), so the decisions do not depend on the machine's load.
 
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
-use dynbvh::engine::{EngineConfig, FrameSource};
+use dynbvh::engine::{EngineConfig, FrameSource, Timing};
 use dynbvh::report::rays::camera_rays;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -21,7 +22,10 @@ fn rebuilds(file: &str, casting: Casting) -> u32 {
     let path = format!("{}/animations/{file}", env!("CARGO_MANIFEST_DIR"));
     let (scene, _) = Scene::load(&path).unwrap();
     let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(24)).unwrap();
-    let mut e = src.engine(EngineConfig::default());
+    let mut e = src.engine(EngineConfig {
+        timing: Timing::Priced,
+        ..EngineConfig::default()
+    });
     let rays = camera_rays(&e.bounds(), 128, 128);
     let mut hits = vec![None; rays.len()];
     let mut any = vec![false; rays.len()];
