@@ -45,6 +45,7 @@ pub struct PartialScratch {
     counts: Vec<u32>,
     costs: Vec<f32>,
     ranked: Vec<(f32, u32)>,
+    stack: Vec<u32>,
     boxes: Vec<Aabb>,
     sub: Bvh,
     top: Bvh,
@@ -121,19 +122,19 @@ impl PartialCut {
             s.top.rebuild(&s.boxes, &params, &mut s.build);
         }
         // Depth first from the root: a node within the limit (or a leaf) is a cut subtree.
-        let mut stack = std::mem::take(&mut s.ranked);
-        stack.clear();
-        stack.push((0.0, 0));
-        while let Some((_, n)) = stack.pop() {
+        // Depth first: at most one pending sibling per level.
+        s.stack.clear();
+        s.stack.reserve(2 * super::MAX_DEPTH + 2);
+        s.stack.push(0);
+        while let Some(n) = s.stack.pop() {
             let node = &bvh.nodes()[n as usize];
             if node.is_leaf() || s.counts[n as usize] <= limit {
                 self.roots.push(n);
             } else {
-                stack.push((0.0, node.first + 1));
-                stack.push((0.0, node.first));
+                s.stack.push(node.first + 1);
+                s.stack.push(node.first);
             }
         }
-        s.ranked = stack;
         bvh.subtree_sah(SahCost::default(), &mut s.costs);
         self.reference
             .extend(self.roots.iter().map(|&r| s.costs[r as usize]));

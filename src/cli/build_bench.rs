@@ -12,8 +12,8 @@ use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
 use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
 
-/// Rays per set by default: a 181x181 camera image and 32,768 random rays, so that the default
-/// run on a mesh of a few thousand triangles takes seconds.
+/// Rays per set by default (a square camera image of about as many rays, and as many random
+/// rays), so that a default run on a small mesh takes seconds rather than minutes.
 const DEFAULT_RAY_BUDGET: u64 = 1 << 15;
 
 /// Arguments of `build-bench`.
