@@ -198,3 +198,66 @@ fn a_rebuilds_measured_ratio_is_the_real_rebuilds() {
         "threshold:1.02 under the ray measure never rebuilt after a refit on explode"
     );
 }
+
+#[test]
+fn sampling_in_the_trace_pass_takes_the_same_sample_as_tracing_again() {
+    // The batch queries sample in their own parallel pass; `sample_rays` traces the sampled
+    // rays again. On the same frames and rays both give the same hits, the same sampled work
+    // per mesh and the same entries (as a set: the pass's order follows the threads).
+    let s = scene("explode.glb");
+    let config = EngineConfig {
+        policy: Policy::Refit,
+        cost: CostMeasure::Rays,
+        timing: Timing::Priced,
+        ..EngineConfig::default()
+    };
+    let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(6)).unwrap();
+    let mut in_pass = src.build(0, config);
+    let mut again = src.build(0, config);
+    let rays = camera_rays(&in_pass.bounds(), 80, 70);
+    let (mut a, mut b) = (vec![None; rays.len()], vec![None; rays.len()]);
+    let mut any_a = vec![false; rays.len()];
+    for f in 1..=6 {
+        for e in [&mut in_pass, &mut again] {
+            src.advance(e, f);
+            e.update();
+        }
+        // Two batches of uneven lengths: the sample runs on over the frame's calls.
+        let (r1, r2) = rays.split_at(1000);
+        let (a1, a2) = a.split_at_mut(1000);
+        in_pass.trace_closest(r1, a1);
+        in_pass.trace_closest(r2, a2);
+        in_pass.trace_any(r1, &mut any_a[..1000]);
+        again.closest_hit_batch(&rays, &mut b);
+        again.sample_rays(r1, Query::Closest);
+        again.sample_rays(r2, Query::Closest);
+        again.sample_rays(r1, Query::Any);
+        assert_eq!(a, b, "frame {f}: hits");
+        for (x, r) in any_a[..1000].iter().zip(r1) {
+            assert_eq!(*x, again.any_hit(r), "frame {f}: any hit");
+        }
+        assert_eq!(in_pass.work_estimate(), again.work_estimate(), "frame {f}");
+        assert_eq!(in_pass.sampled_work(), again.sampled_work(), "frame {f}");
+        assert_eq!(in_pass.sampled_top_work(), again.sampled_top_work());
+        for &m in src.deforming() {
+            assert_eq!(in_pass.sampled_mesh_work(m), again.sampled_mesh_work(m));
+        }
+        let key = |e: &dynbvh::engine::ray_work::SampleEntry| {
+            (
+                e.mesh.0,
+                e.query == Query::Any,
+                e.ray.origin().to_array().map(f32::to_bits),
+                e.ray.dir().to_array().map(f32::to_bits),
+                e.ray.tmax.to_bits(),
+                e.work.nodes,
+                e.work.prims,
+            )
+        };
+        let mut ka: Vec<_> = in_pass.sampled_entries().iter().map(key).collect();
+        let mut kb: Vec<_> = again.sampled_entries().iter().map(key).collect();
+        ka.sort_unstable();
+        kb.sort_unstable();
+        assert!(!ka.is_empty(), "frame {f}: nothing sampled");
+        assert_eq!(ka, kb, "frame {f}: entries");
+    }
+}

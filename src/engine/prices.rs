@@ -32,6 +32,14 @@ pub struct Prices {
     /// One candidate position an optimisation's insertion search looks at, ns.
     #[serde(default = "default_visit")]
     pub optimize_ns_per_visit: f64,
+    /// What taking one ray into the ray-work sample adds to its trace in the batch's own pass
+    /// (the counters and its entries kept), ns.
+    #[serde(default = "default_sample")]
+    pub sample_ns_per_ray: f64,
+}
+
+fn default_sample() -> f64 {
+    Prices::default().sample_ns_per_ray
 }
 
 fn default_restructure() -> f64 {
@@ -55,6 +63,7 @@ impl Default for Prices {
             trace_ns_per_tri: 4.0,
             restructure_ns_per_tri: 40.0,
             optimize_ns_per_visit: 30.0,
+            sample_ns_per_ray: 40.0,
         }
     }
 }
@@ -101,6 +110,12 @@ impl Prices {
     #[must_use]
     pub fn estimate_ms(&self, tris: usize) -> f64 {
         self.estimate_ns_per_tri * tris as f64 * 1e-6
+    }
+
+    /// Modelled cost of taking `rays` into the ray-work sample in their own pass, ms.
+    #[must_use]
+    pub fn sample_ms(&self, rays: u64) -> f64 {
+        self.sample_ns_per_ray * rays as f64 * 1e-6
     }
 
     /// Modelled trace time of `work`, ms.
@@ -220,6 +235,11 @@ impl Prices {
         });
         let visit_ns =
             ((optimize * 1e6 - restructure_ns * n as f64) / visits.get().max(1) as f64).max(1e-3);
+        // Sampling in the trace's own pass: every ray counted and its entry kept, against the
+        // plain trace of the same rays.
+        let plain = median_cpu_ms(passes, || trace_all(&wide, &rays));
+        let recorded = median_cpu_ms(passes, || trace_all_recorded(&wide, &rays));
+        let sample_ns = ((recorded - plain) * 1e6 / rays.len().max(1) as f64).max(1e-3);
         let (w1, t1) = trace_with(2);
         let (w2, t2) = trace_with(16);
         let (node, tri) = solve_trace_prices(w1, t1, w2, t2);
@@ -231,6 +251,7 @@ impl Prices {
             trace_ns_per_tri: tri,
             restructure_ns_per_tri: restructure_ns,
             optimize_ns_per_visit: visit_ns,
+            sample_ns_per_ray: sample_ns,
         }
     }
 }
@@ -263,6 +284,20 @@ fn trace_all(w: &MeshBvh8, rays: &[Ray]) {
         for r in c {
             std::hint::black_box(w.closest_hit(r));
         }
+    });
+}
+
+/// [`trace_all`] with every ray counted and its entry kept, as a sampled ray of a pass is.
+fn trace_all_recorded(w: &MeshBvh8, rays: &[Ray]) {
+    use rayon::prelude::*;
+    rays.par_chunks(256).for_each(|c| {
+        let mut kept = [(TraversalStats::default(), Ray::new(Vec3::ZERO, Vec3::X)); 32];
+        for (i, r) in c.iter().enumerate() {
+            let mut work = TraversalStats::default();
+            std::hint::black_box(w.closest_hit_counted(r, &mut work));
+            kept[i % 32] = (work, *r);
+        }
+        std::hint::black_box(&kept);
     });
 }
 

@@ -78,6 +78,70 @@ pub struct SampleEntry {
     pub query: Query,
     /// The ray in mesh space; `tmax` is the closest hit found before entering.
     pub ray: Ray,
+    /// The work it cost in the tree it walked when it was sampled.
+    pub work: TraversalStats,
+}
+
+/// Which rays of a batch the frame's sample takes: every `stride`-th from `first`.
+#[derive(Clone, Copy, Debug)]
+pub struct SamplePlan {
+    /// Index in the batch of the first sampled ray (may be past its end).
+    pub first: usize,
+    /// One ray in this many.
+    pub stride: usize,
+}
+
+impl SamplePlan {
+    /// True when the batch's ray `i` is sampled.
+    #[must_use]
+    #[inline]
+    pub fn takes(&self, i: usize) -> bool {
+        i >= self.first && (i - self.first).is_multiple_of(self.stride)
+    }
+}
+
+/// Work of some sampled rays, to be merged into the frame's [`RaySample`] (sums of integers, so
+/// the merged sample is the same in whatever order the parts come).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleSums {
+    sampled: u64,
+    work: TraversalStats,
+    top: TraversalStats,
+    sum: f64,
+    sum_sq: f64,
+}
+
+impl SampleSums {
+    /// Adds one sampled ray's work (`top` of it in the top-level tree).
+    pub fn add(&mut self, work: TraversalStats, top: TraversalStats) {
+        self.sampled += 1;
+        self.work += work;
+        self.top += top;
+        let w = (work.nodes + work.prims) as f64;
+        self.sum += w;
+        self.sum_sq += w * w;
+    }
+
+    /// Rays in this part.
+    #[must_use]
+    pub fn sampled(&self) -> u64 {
+        self.sampled
+    }
+
+    /// Their work, both levels.
+    #[must_use]
+    pub fn work(&self) -> TraversalStats {
+        self.work
+    }
+
+    /// Adds another part.
+    pub fn merge(&mut self, o: &Self) {
+        self.sampled += o.sampled;
+        self.work += o.work;
+        self.top += o.top;
+        self.sum += o.sum;
+        self.sum_sq += o.sum_sq;
+    }
 }
 
 /// The frame's sample so far: which rays it takes and the work they cost.
@@ -125,23 +189,38 @@ impl RaySample {
         }
     }
 
-    /// Indices within a batch of `n` rays (cast after the frame's earlier ones) that the sample
-    /// takes; counts the batch's rays.
-    pub fn take(&mut self, n: usize) -> impl Iterator<Item = usize> + use<> {
+    /// Which rays of a batch of `n` (cast after the frame's earlier ones) the sample takes;
+    /// counts the batch's rays.
+    pub fn plan(&mut self, n: usize) -> SamplePlan {
         let start = self.rays;
         self.rays += n as u64;
         let first = (SAMPLE_STRIDE - (start + self.offset) % SAMPLE_STRIDE) % SAMPLE_STRIDE;
-        (first as usize..n).step_by(SAMPLE_STRIDE as usize)
+        SamplePlan {
+            first: first as usize,
+            stride: SAMPLE_STRIDE as usize,
+        }
+    }
+
+    /// Indices within a batch of `n` rays that the sample takes ([`RaySample::plan`]).
+    pub fn take(&mut self, n: usize) -> impl Iterator<Item = usize> + use<> {
+        let p = self.plan(n);
+        (p.first..n).step_by(p.stride)
     }
 
     /// Adds one sampled ray's work (`top` of it in the top-level tree).
     pub fn add(&mut self, work: TraversalStats, top: TraversalStats) {
-        self.sampled += 1;
-        self.work += work;
-        self.top += top;
-        let w = (work.nodes + work.prims) as f64;
-        self.sum += w;
-        self.sum_sq += w * w;
+        let mut s = SampleSums::default();
+        s.add(work, top);
+        self.merge(&s);
+    }
+
+    /// Adds the work of sampled rays.
+    pub fn merge(&mut self, s: &SampleSums) {
+        self.sampled += s.sampled;
+        self.work += s.work;
+        self.top += s.top;
+        self.sum += s.sum;
+        self.sum_sq += s.sum_sq;
     }
 
     /// Scale from sampled work to the frame's estimated total: the stride.

@@ -1,9 +1,9 @@
 //! Batches of rays through the engine, each of which feeds the refit-or-rebuild policy: its
-//! wall-clock time is recorded as the frame's trace time ([`Engine::record_trace`]) and every
-//! 64th ray is taken into the ray-work sample ([`Engine::sample_rays`]), so that a caller who
-//! only casts batches gets the same decisions as the frame loop of the benchmarks. The `&self`
-//! forms (`*_batch`) trace the same rays without telling the policy, for callers that price
-//! their trace themselves or cast from several threads at once.
+//! wall-clock time is recorded as the frame's trace time ([`Engine::record_trace`]) and one ray
+//! in [`crate::engine::ray_work::SAMPLE_STRIDE`] is taken into the ray-work sample in the same
+//! pass, so that a caller who only casts batches gets the same decisions as the frame loop of
+//! the benchmarks. The `&self` forms (`*_batch`) trace the same rays without telling the
+//! policy, for callers that price their trace themselves or cast from several threads at once.
 
 use super::{Engine, RAY_CHUNK, SceneHit, ms_since};
 use crate::bvh::MAX_PACKET;
@@ -25,8 +25,8 @@ impl Engine {
     /// When the lengths differ.
     pub fn trace_closest(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
         let t = Instant::now();
-        self.closest_hit_batch(rays, out);
-        self.traced(ms_since(t), rays, Query::Closest)
+        self.closest_hit_batch_sampled(rays, out);
+        self.traced_in_pass(ms_since(t), rays)
     }
 
     /// Any-hit answers of many rays, in parallel, recorded as this frame's trace as
@@ -36,8 +36,21 @@ impl Engine {
     /// When the lengths differ.
     pub fn trace_any(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
         let t = Instant::now();
-        self.any_hit_batch(rays, out);
-        self.traced(ms_since(t), rays, Query::Any)
+        self.any_sampled(rays, out);
+        self.traced_in_pass(ms_since(t), rays)
+    }
+
+    /// Closest hits of many rays, in parallel, with this frame's share of them taken into the
+    /// ray-work sample in the same pass (as [`Engine::trace_closest`] does), but without
+    /// recording the trace time: for callers that time their trace themselves (then call
+    /// [`Engine::record_trace`]). Returns the share of the pass's time the sampling took
+    /// beyond tracing those rays plainly (from the tasks' own clocks); that time is added to
+    /// the frame's `sample_ms`.
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_batch_sampled(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        self.closest_sampled(rays, out)
     }
 
     /// The same as [`Engine::trace_closest`] (kept for the frame loops written against it).
@@ -136,10 +149,16 @@ impl Engine {
         self.stats.sample_ms += ms_since(t);
     }
 
-    /// Records a batch traced in `ms` and samples it; returns `ms`.
+    /// Records a batch traced in `ms` and samples it again; returns `ms`.
     fn traced(&mut self, ms: f64, rays: &[Ray], query: Query) -> f64 {
         self.record_trace(ms, rays.len() as u64);
         self.sample_timed(rays, query);
+        ms
+    }
+
+    /// Records a batch traced in `ms` that was sampled in its own pass; returns `ms`.
+    fn traced_in_pass(&mut self, ms: f64, rays: &[Ray]) -> f64 {
+        self.record_trace(ms, rays.len() as u64);
         ms
     }
 }

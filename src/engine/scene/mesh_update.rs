@@ -241,16 +241,22 @@ impl MeshEntry {
     }
 
     /// The replayed work of the tree an action made against the one it replaced: the old tree's
-    /// cost over the new one's (0 without a sample).
-    fn replay_after(&mut self, id: MeshId, old: Option<TraversalStats>, cx: &FrameContext<'_>) {
-        if let Some(old) = old {
-            let new = sample::tree_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
-            let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
-            self.stats.model_ms += old + new;
-            if new > 0.0 {
-                self.stats.measured_work_ratio = (old / new) as f32;
-            }
+    /// cost over the new one's (0 without a sample). Returns what both replays cost (ms at the
+    /// prices): part of the action's price, since the policy pays it whenever it acts.
+    fn replay_after(
+        &mut self,
+        id: MeshId,
+        old: Option<TraversalStats>,
+        cx: &FrameContext<'_>,
+    ) -> f64 {
+        let Some(old) = old else { return 0.0 };
+        let new = sample::tree_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
+        let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
+        self.stats.model_ms += old + new;
+        if new > 0.0 {
+            self.stats.measured_work_ratio = (old / new) as f32;
         }
+        old + new
     }
 
     /// A full rebuild, after a refit (`refitted`) or instead of one.
@@ -291,7 +297,7 @@ impl MeshEntry {
         if cx.estimate {
             self.stats.model_ms += cx.prices.estimate_ms(self.fresh.sample_len());
         }
-        self.replay_after(id, old_work, cx);
+        let replay_ms = self.replay_after(id, old_work, cx);
         if Self::wants_cut(cx.policy) {
             self.cut.reset(&self.bvh, &mut cx.restructure.partial);
         }
@@ -307,7 +313,11 @@ impl MeshEntry {
         }
         let replaced = self.state;
         // What the policy weighs; the statistics keep the measured time.
-        let rebuild_cost = cx.timing.build_ms(rebuild_ms, tris, &cx.prices);
+        // (The measured time includes the replays already.)
+        let rebuild_cost = match cx.timing {
+            Timing::Measured => rebuild_ms,
+            t => t.build_ms(rebuild_ms, tris, &cx.prices) + replay_ms,
+        };
         self.state.rebuilt(self.sah, est, rebuild_cost);
         self.probe = None;
         if let (true, Some(refit_sah)) = (probe, refit_sah) {
@@ -373,11 +383,11 @@ impl MeshEntry {
         }
         self.sah = super::tree_sah(self.bvh.bvh());
         self.stats.model_ms += modelled;
-        self.replay_after(id, old_work, cx);
+        let replay_ms = self.replay_after(id, old_work, cx);
         let ms = ms_since(t);
         let cost = match cx.timing {
             Timing::Measured => ms,
-            _ => modelled,
+            _ => modelled + replay_ms,
         };
         // What the degradation was and what is left of it.
         let (before, after) = if cx.ray_judged && self.stats.measured_work_ratio > 0.0 {

@@ -1,47 +1,262 @@
-//! The engine's side of the ray-work sample ([`crate::engine::ray_work`]): the sampled rays are
-//! traced again through the same trees with counters, each entry into an instance is kept, and
-//! the work is added up per mesh.
+//! The engine's side of the ray-work sample ([`crate::engine::ray_work`]): the sampled rays of
+//! a batch are traced with counters in the batch's own pass (or again, for rays the caller
+//! traced itself), each entry into an instance is kept with the work it cost, and the work is
+//! added up per mesh.
+//!
+//! In a pass, each task keeps its sampled entries in a small buffer of its own and moves them
+//! into the frame's log under a lock when it fills or the task ends: the log's order then
+//! depends on the threads, but everything read from it is a sum of integers, the same in any
+//! order.
 
-use super::{Engine, local_ray};
+use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
-use crate::engine::ray_work::{Query, RaySample, SampleEntry, WorkEstimate};
-use crate::geom::Ray;
+use crate::engine::ray_work::{
+    Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
+};
+use crate::geom::{Hit, Ray};
+use rayon::prelude::*;
+use std::sync::{Mutex, PoisonError};
+use std::time::Instant;
+
+/// What a recorded trace found and cost.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Traced {
+    /// The closest hit (closest-hit queries).
+    pub hit: Option<SceneHit>,
+    /// Something was hit (both queries).
+    pub blocked: bool,
+    /// Work in both levels.
+    pub work: TraversalStats,
+    /// Work in the top-level tree.
+    pub top: TraversalStats,
+}
+
+/// The frame's log of sampled entries while a pass runs.
+#[derive(Default)]
+struct SampleLog {
+    entries: Vec<SampleEntry>,
+    /// The entries' capacity when the pass began.
+    capacity: usize,
+    sums: SampleSums,
+    /// Wall-clock time of the sampled rays' recorded traces and of the others, summed over
+    /// the tasks, ns (the sampling overhead is measured from them).
+    sampled_ns: f64,
+    plain_ns: f64,
+}
+
+/// Entries a task keeps before moving them into the log.
+const BUF: usize = 32;
+
+/// One task's sampled entries and work, moved into the shared log when full and when dropped.
+struct TaskBuf<'a> {
+    items: [SampleEntry; BUF],
+    len: usize,
+    sums: SampleSums,
+    sampled_ns: f64,
+    plain_ns: f64,
+    log: &'a Mutex<SampleLog>,
+}
+
+impl<'a> TaskBuf<'a> {
+    fn new(log: &'a Mutex<SampleLog>) -> Self {
+        let blank = SampleEntry {
+            mesh: MeshId(0),
+            query: Query::Closest,
+            ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+            work: TraversalStats::default(),
+        };
+        Self {
+            items: [blank; BUF],
+            len: 0,
+            sums: SampleSums::default(),
+            sampled_ns: 0.0,
+            plain_ns: 0.0,
+            log,
+        }
+    }
+
+    fn push(&mut self, e: SampleEntry) {
+        if self.len == BUF {
+            self.flush();
+        }
+        self.items[self.len] = e;
+        self.len += 1;
+    }
+
+    fn flush(&mut self) {
+        let mut log = self.log.lock().unwrap_or_else(PoisonError::into_inner);
+        log.entries.extend_from_slice(&self.items[..self.len]);
+        log.sums.merge(&self.sums);
+        log.sampled_ns += self.sampled_ns;
+        log.plain_ns += self.plain_ns;
+        self.len = 0;
+        self.sums = SampleSums::default();
+        self.sampled_ns = 0.0;
+        self.plain_ns = 0.0;
+    }
+}
+
+impl Drop for TaskBuf<'_> {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
 
 impl Engine {
-    /// Takes this frame's share of `rays` into the ray-work sample (call it with every batch a
-    /// frame casts, after the trace or before: the trees are the same until the next update):
-    /// every [`crate::engine::ray_work::SAMPLE_STRIDE`]-th ray is traced again with counters.
-    /// [`Engine::trace_frame`] and [`Engine::trace_frame_any`] call it. The policy reads the
-    /// sample at the next [`Engine::update`]. Allocates only to grow the entry buffer past the
+    /// Takes this frame's share of `rays` into the ray-work sample by tracing the sampled ones
+    /// again with counters: for rays the caller traced itself (the `&self` queries, packets,
+    /// its own threads). The batch queries ([`Engine::trace_closest`], [`Engine::trace_any`])
+    /// sample in their own pass instead. Call it with every batch a frame casts, after the
+    /// trace or before (the trees are the same until the next update); the policy reads the
+    /// sample at the next [`Engine::update`]. Allocates only to grow the entry log past the
     /// largest frame's sample so far.
     pub fn sample_rays(&mut self, rays: &[Ray], query: Query) {
+        let Some(plan) = self.begin_sample(rays.len()) else {
+            return;
+        };
+        let (before, log) = self.open_log();
+        let first = plan.first.min(rays.len());
+        let sampled = (rays.len() - first).div_ceil(plan.stride);
+        let per_task = RAY_CHUNK / 16;
+        let this = &*self;
+        (0..sampled.div_ceil(per_task))
+            .into_par_iter()
+            .for_each(|c| {
+                let mut buf = TaskBuf::new(&log);
+                for j in c * per_task..((c + 1) * per_task).min(sampled) {
+                    let t = this.trace_recording(&rays[first + j * plan.stride], query, &mut |e| {
+                        buf.push(e);
+                    });
+                    buf.sums.add(t.work, t.top);
+                }
+            });
+        let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
+        // Traced again in full: the sample costs its whole work.
+        let model = self.config.prices.trace_ms(log.sums.work());
+        self.close_log(log, before, model);
+    }
+
+    /// Closest hits of a batch in parallel, this frame's sample taken in the same pass (the
+    /// sampled rays traced with counters, their entries kept). Returns the share of the pass's
+    /// time the sampling took beyond tracing those rays plainly (from the tasks' clocks).
+    pub(super) fn closest_sampled(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
+        self.sampled_pass(rays, out, Query::Closest, Engine::closest_hit, |t| t.hit)
+    }
+
+    /// Any-hit answers of a batch with the sample taken in the same pass (see
+    /// [`Engine::closest_sampled`]).
+    pub(super) fn any_sampled(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        self.sampled_pass(rays, out, Query::Any, Engine::any_hit, |t| t.blocked)
+    }
+
+    fn sampled_pass<O: Send>(
+        &mut self,
+        rays: &[Ray],
+        out: &mut [O],
+        query: Query,
+        plain: impl Fn(&Engine, &Ray) -> O + Sync,
+        recorded: impl Fn(&Traced) -> O + Sync,
+    ) -> f64 {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let pass = Instant::now();
+        let plan = self.begin_sample(rays.len());
+        let (before, log) = self.open_log();
+        let this = &*self;
+        out.par_chunks_mut(RAY_CHUNK)
+            .zip(rays.par_chunks(RAY_CHUNK))
+            .enumerate()
+            .for_each(|(c, (o, r))| {
+                let base = c * RAY_CHUNK;
+                let Some(plan) = plan.filter(|p| p.first < rays.len()) else {
+                    for (o, r) in o.iter_mut().zip(r) {
+                        *o = plain(this, r);
+                    }
+                    return;
+                };
+                let mut buf = TaskBuf::new(&log);
+                let start = Instant::now();
+                let mut sampled_ns = 0.0;
+                for (j, (o, r)) in o.iter_mut().zip(r).enumerate() {
+                    if plan.takes(base + j) {
+                        let ts = Instant::now();
+                        let t = this.trace_recording(r, query, &mut |e| buf.push(e));
+                        buf.sums.add(t.work, t.top);
+                        *o = recorded(&t);
+                        sampled_ns += ts.elapsed().as_nanos() as f64;
+                    } else {
+                        *o = plain(this, r);
+                    }
+                }
+                buf.sampled_ns += sampled_ns;
+                buf.plain_ns += start.elapsed().as_nanos() as f64 - sampled_ns;
+            });
+        let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
+        if plan.is_none() {
+            self.entries = log.entries;
+            return 0.0;
+        }
+        // Each sampled ray's overhead: its recorded trace beyond what an unsampled ray took.
+        let k = log.sums.sampled() as f64;
+        let plain_per_ray = log.plain_ns / (rays.len() as f64 - k).max(1.0);
+        let overhead = (log.sampled_ns - k * plain_per_ray).max(0.0);
+        let share = overhead / (log.sampled_ns + log.plain_ns).max(1.0);
+        let model = self.config.prices.sample_ms(log.sums.sampled());
+        self.close_log(log, before, model);
+        self.stats.sample_ms += share * super::ms_since(pass);
+        share
+    }
+
+    /// The frame's sample plan for a batch of `n` rays, starting a new sample at a new frame;
+    /// `None` (nothing sampled) when no mesh was refitted or rebuilt.
+    fn begin_sample(&mut self, n: usize) -> Option<SamplePlan> {
         // Nothing was refitted or rebuilt: no policy has anything to weigh.
         if !self.meshes.iter().any(|m| m.moved) {
-            return;
+            return None;
         }
         if self.sample.frame != self.frame {
             self.sample = RaySample::new(self.frame);
             self.entries.clear();
             self.sample_work.fill(TraversalStats::default());
             self.sample_entries.fill(0);
+            self.stats.model_sample_ms = 0.0;
         }
-        let mut sample = self.sample;
-        let capacity = self.entries.capacity();
-        for i in sample.take(rays.len()) {
-            let (work, top) = self.sample_one(&rays[i], query);
-            sample.add(work, top);
+        Some(self.sample.plan(n))
+    }
+
+    /// The entry log for a pass (the engine's buffer, moved), and where its new entries start.
+    fn open_log(&mut self) -> (usize, Mutex<SampleLog>) {
+        let entries = std::mem::take(&mut self.entries);
+        (
+            entries.len(),
+            Mutex::new(SampleLog {
+                capacity: entries.capacity(),
+                entries,
+                ..SampleLog::default()
+            }),
+        )
+    }
+
+    /// Merges a pass's log (its entries from `before` on are new) into the frame's sample;
+    /// `model_ms` is what the sampling cost at the prices.
+    fn close_log(&mut self, log: SampleLog, before: usize, model_ms: f64) {
+        let grew = log.entries.capacity() != log.capacity;
+        self.entries = log.entries;
+        for e in &self.entries[before..] {
+            let k = e.mesh.0 as usize;
+            self.sample_work[k] += e.work;
+            self.sample_entries[k] += 1;
         }
-        self.sample = sample;
-        // When it had to grow, headroom: later frames whose rays enter a few more instances do
-        // not grow it again.
-        if self.entries.capacity() != capacity {
+        // Headroom once it has had to grow: later frames whose rays enter a few more instances
+        // do not grow it again.
+        if grew {
             self.entries.reserve_exact(self.entries.len());
         }
+        self.sample.merge(&log.sums);
         let p = &self.config.prices;
-        self.stats.model_trace_ms = sample.scale() * p.trace_ms(sample.work);
-        self.stats.model_sample_ms = p.trace_ms(sample.work);
-        self.stats.work = sample.estimate();
+        self.stats.model_trace_ms = self.sample.scale() * p.trace_ms(self.sample.work);
+        self.stats.model_sample_ms += model_ms;
+        self.stats.work = self.sample.estimate();
     }
 
     /// True when the sample belongs to the frame traced since the last update.
@@ -98,7 +313,6 @@ impl Engine {
     /// parallel for long lists (the sum is the same in any order).
     #[must_use]
     pub fn mesh_work_on(&self, mesh: MeshId, entries: &[SampleEntry]) -> TraversalStats {
-        use rayon::prelude::*;
         let m = &self.meshes[mesh.0 as usize];
         entries
             .par_chunks(1024)
@@ -123,35 +337,23 @@ impl Engine {
         let mut per_mesh = vec![TraversalStats::default(); self.meshes.len()];
         let mut top = TraversalStats::default();
         for r in rays.iter().skip(offset).step_by(stride.max(1)) {
-            let (_, t) = self.trace_recording(r, query, entries, &mut per_mesh);
-            top += t;
+            let t = self.trace_recording(r, query, &mut |e| {
+                per_mesh[e.mesh.0 as usize] += e.work;
+                entries.push(e);
+            });
+            top += t.top;
         }
         (top, per_mesh)
     }
 
-    /// Traces one sampled ray with counters, keeping its entries: `(all work, top-level work)`.
-    fn sample_one(&mut self, ray: &Ray, query: Query) -> (TraversalStats, TraversalStats) {
-        let mut entries = std::mem::take(&mut self.entries);
-        let mut work = std::mem::take(&mut self.sample_work);
-        let before = entries.len();
-        let out = self.trace_recording(ray, query, &mut entries, &mut work);
-        for e in &entries[before..] {
-            self.sample_entries[e.mesh.0 as usize] += 1;
-        }
-        self.entries = entries;
-        self.sample_work = work;
-        out
-    }
-
-    /// One ray through the scene with counters: each instance entry appended to `entries`, each
-    /// mesh's work added to `per_mesh`; returns `(all work, top-level work)`.
-    fn trace_recording(
+    /// One ray through the scene with counters, each entry into an instance handed to
+    /// `record` with the work it cost there.
+    pub(super) fn trace_recording(
         &self,
         ray: &Ray,
         query: Query,
-        entries: &mut Vec<SampleEntry>,
-        sample_work: &mut [TraversalStats],
-    ) -> (TraversalStats, TraversalStats) {
+        record: &mut impl FnMut(SampleEntry),
+    ) -> Traced {
         let Engine {
             tlas,
             tlas_instances,
@@ -162,6 +364,7 @@ impl Engine {
         let prims = tlas.prim_indices();
         let mut inner = TraversalStats::default();
         let mut top = TraversalStats::default();
+        let mut best = None;
         let mut test = |slot: usize, tmax: f32| {
             let k = tlas_instances[prims[slot] as usize];
             let inst = &instances[k as usize];
@@ -171,44 +374,59 @@ impl Engine {
             let local = local_ray(inst, ray, tmax);
             let m = &meshes[inst.mesh as usize];
             let mut w = TraversalStats::default();
-            let t = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
-            sample_work[inst.mesh as usize] += w;
+            let h = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
             inner += w;
-            entries.push(SampleEntry {
+            record(SampleEntry {
                 mesh: MeshId(inst.mesh),
                 query,
                 ray: local,
+                work: w,
             });
-            t
+            let h = h?;
+            best = Some(SceneHit {
+                t: h.t,
+                u: h.u,
+                v: h.v,
+                prim: h.prim,
+                instance: super::InstanceId(k),
+            });
+            Some(h.t)
         };
-        match query {
-            Query::Closest => {
-                let _ = tlas.closest_slot(ray, &mut test, &mut top);
-            }
-            Query::Any => {
-                let _ = tlas.any_slot(ray, &mut test, &mut top);
-            }
+        let blocked = match query {
+            Query::Closest => tlas.closest_slot(ray, &mut test, &mut top).is_some(),
+            Query::Any => tlas.any_slot(ray, &mut test, &mut top).is_some(),
+        };
+        let mut work = inner;
+        work += top;
+        Traced {
+            hit: if query == Query::Closest { best } else { None },
+            blocked,
+            work,
+            top,
         }
-        let mut all = inner;
-        all += top;
-        (all, top)
     }
 }
 
-/// One query through a mesh's tree (the wide one when there is one), counted: the hit distance
-/// (0 for an any-hit ray that is blocked).
+/// One query through a mesh's tree (the wide one when there is one), counted: the hit (one
+/// at distance 0 for an any-hit ray that is blocked).
 fn trace_counted(
     bvh: &MeshBvh,
     wide: Option<&MeshBvh8>,
     ray: &Ray,
     query: Query,
     w: &mut TraversalStats,
-) -> Option<f32> {
+) -> Option<Hit> {
+    let blocked = Hit {
+        t: 0.0,
+        u: 0.0,
+        v: 0.0,
+        prim: 0,
+    };
     match (query, wide) {
-        (Query::Closest, Some(t)) => t.closest_hit_counted(ray, w).map(|h| h.t),
-        (Query::Closest, None) => bvh.closest_hit_counted(ray, w).map(|h| h.t),
-        (Query::Any, Some(t)) => t.any_hit_counted(ray, w).then_some(0.0),
-        (Query::Any, None) => bvh.any_hit_counted(ray, w).then_some(0.0),
+        (Query::Closest, Some(t)) => t.closest_hit_counted(ray, w),
+        (Query::Closest, None) => bvh.closest_hit_counted(ray, w),
+        (Query::Any, Some(t)) => t.any_hit_counted(ray, w).then_some(blocked),
+        (Query::Any, None) => bvh.any_hit_counted(ray, w).then_some(blocked),
     }
 }
 
