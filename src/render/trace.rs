@@ -281,7 +281,7 @@ pub struct PacketUse {
 }
 
 impl PacketUse {
-    /// What measured faster (`dynbvh render --bench`): packets for both.
+    /// Packets for both, the faster choice (compare with `dynbvh render --bench`).
     pub const DEFAULT: PacketUse = PacketUse {
         primary: true,
         shadow: true,
