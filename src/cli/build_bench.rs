@@ -8,6 +8,7 @@ use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
 use dynbvh::report::accel_bench;
 use dynbvh::report::build_bench::{self, Options, Row};
+use dynbvh::report::or_dash;
 use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
 use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
@@ -280,19 +281,19 @@ fn print_table(rows: &[Row]) {
     );
     for r in rows {
         println!(
-            "{:<16} {:>10.1} {:>9.2} {:>8.2} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            "{:<16} {:>10.1} {:>9} {:>8} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8} {:>8} {:>5}/{:<3}",
             r.method,
             r.build_ms,
-            r.refit_ms,
-            r.sah,
+            or_dash(Some(r.refit_ms), 2),
+            or_dash(Some(f64::from(r.sah)), 2),
             r.nodes,
             r.depth,
             r.memory_bytes as f64 / (1 << 20) as f64,
             r.rays,
             r.mrays,
             r.any_mrays,
-            r.packet_mrays,
-            r.packet_any_mrays,
+            or_dash(Some(r.packet_mrays), 2),
+            or_dash(Some(r.packet_any_mrays), 2),
             r.mismatches,
             r.checked
         );

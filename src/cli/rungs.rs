@@ -53,15 +53,8 @@ pub fn run(a: RungsArgs) -> Result<()> {
         a.size.pixels().saturating_mul(64),
     )?;
     let scene = super::load_scene(&a.file, None)?;
-    let anim = match &a.animation {
-        Some(k) => scene
-            .find_animation(k)
-            .with_context(|| format!("{}: no animation {k:?}", a.file.display()))?,
-        None if scene.animations.is_empty() => {
-            anyhow::bail!("{}: no animation: nothing deforms", a.file.display())
-        }
-        None => 0,
-    };
+    let anim = args::animation_or_first(&scene, &a.file, a.animation.as_deref())?
+        .with_context(|| format!("{}: no animation: nothing deforms", a.file.display()))?;
     let mut src = GltfSource::new(&scene, Some(anim), FrameTimes::Count(a.frames as usize))?;
     let opts = Options {
         rungs: a.rungs,
