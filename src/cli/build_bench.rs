@@ -182,24 +182,13 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         ..Options::default()
     };
     let samples = build_bench::brute_force_samples(&mesh, &sets, opts.check_rays);
-    let bar = super::progress::bar(
+    let mut steps = super::progress::Steps::new(
         (methods.len() + structures.len()) as u64,
         "builders",
         "building and tracing",
     );
-    let mut started = false;
-    let mut step = |m: &str| {
-        if std::mem::replace(&mut started, true) {
-            bar.inc(1);
-        }
-        if bar.is_hidden() {
-            eprintln!("  {m} ...");
-        } else {
-            bar.set_message(m.to_string());
-        }
-    };
     let mut rows =
-        build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| step(m));
+        build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| steps.start(m));
     rows.extend(accel_bench::run(
         &mesh,
         &structures,
@@ -207,15 +196,18 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         &samples,
         opts.build_runs,
         opts.trace_runs,
-        |m| step(m),
+        |m| steps.start(m),
     ));
-    bar.finish_and_clear();
+    steps.finish();
     let wide_rows = if args.no_wide {
         Vec::new()
     } else {
-        wide_bench::run(&mesh, &BuildParams::BINNED, &sets, opts, |t| {
-            eprintln!("  {t} (collapsed from binned16) ...");
-        })
+        let mut trees = super::progress::Steps::new(2, "wide trees", "collapsing and tracing");
+        let rows = wide_bench::run(&mesh, &BuildParams::BINNED, &sets, opts, |t| {
+            trees.start(&format!("{t} (collapsed from binned16)"));
+        });
+        trees.finish();
+        rows
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);

@@ -287,7 +287,7 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
                     f.counts.shadow,
                     f.sah_ratio,
                     or_dash(counted.then(|| f.counts.work_per_pixel()), 1),
-                    or_dash(counted.then(|| f.counts.max_work as f64), 0),
+                    or_dash(counted.then_some(f.counts.max_work as f64), 0),
                 );
             }
         }
