@@ -16,7 +16,8 @@ pub struct RungsArgs {
     /// Animation (index or name; default the first).
     #[arg(short, long)]
     pub animation: Option<String>,
-    /// Frames spread over one loop of the animation.
+    /// Frames spread over one loop of the animation (numbered from 0, the animation's start,
+    /// as in every command's output; the tree is built at frame 0).
     #[arg(long, allow_negative_numbers = true, default_value_t = 30, value_parser = clap::value_parser!(u64).range(2..=args::MAX_TIMELINE))]
     pub frames: u64,
     /// Measure every N-th frame.
