@@ -29,12 +29,10 @@
 //!
 //! # Using dynbvh from another crate
 //!
-//! The crate's public types are built on [`glam`] (vectors, affine transforms); it is re-exported
-//! as `dynbvh::glam`, so a dependent uses that one instead of matching its version by hand:
-//! `use dynbvh::glam::{Affine3A, Vec3};`. The two-level scene is [`engine::Engine`]; a glTF
-//! file is loaded by [`anim::Scene::load`] and posed into an engine by
-//! [`engine::gltf::GltfSource`] (see that module's quick start). A simulator's frame: pose,
-//! update, query.
+//! The public types are built on [`glam`], re-exported as `dynbvh::glam` so that a dependent
+//! need not match its version. The two-level scene is [`engine::Engine`]; a glTF file is loaded
+//! by [`anim::Scene::load`] and posed into an engine by [`engine::gltf::GltfSource`] (see that
+//! module's quick start). A simulator's frame: pose, update, query.
 //!
 //! ```
 //! use dynbvh::engine::{Engine, EngineConfig, QueryFilter};
@@ -72,21 +70,10 @@
 //! assert_eq!(engine.count_hits(&Ray::new(Vec3::new(0.0, 0.05, 0.0), Vec3::X)), 1); // inside
 //! ```
 //!
-//! **SIMD width.** The packet and wide-tree kernels use the `wide` crate, which picks AVX-512,
-//! AVX2 or SSE vectors *at compile time* from the enabled target features. This repository's
-//! `.cargo/config.toml` sets `-C target-cpu=native`, but Cargo reads configuration only from the
-//! directory it is run in (and its parents, and `~/.cargo`), never from a dependency: a
-//! dependent builds dynbvh for the baseline x86-64 target (SSE2) unless it asks for more. To get
-//! the machine's width, put the same in the dependent's own `.cargo/config.toml`:
-//!
-//! ```toml
-//! [build]
-//! rustflags = ["-C", "target-cpu=native"]
-//! ```
-//!
-//! or build with `RUSTFLAGS="-C target-cpu=native" cargo build --release` (for binaries shipped
-//! to other machines, name a target instead, e.g. `-C target-cpu=x86-64-v3` for AVX2). Results
-//! are the same at every width; only the speed differs.
+//! **SIMD width.** The packet and wide-tree kernels take their vector width from the target
+//! features dynbvh is compiled with, and a dependent's build does not read this repository's
+//! `-C target-cpu=native`: set it in the dependent's own `.cargo/config.toml` or `RUSTFLAGS`
+//! (`docs/library.md`, "SIMD width"). Results are the same at every width; only speed differs.
 
 pub use glam;
 

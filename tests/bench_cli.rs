@@ -225,11 +225,115 @@ fn sweep_lists_failures_and_exits_non_zero() {
         stdout.contains("FAILED") && stdout.contains("broken.glb"),
         "{stdout}"
     );
-    assert!(stdout.contains("swap.glb [swap]"), "{stdout}");
+    // The name column fits the longest name: the whole path is printed, not cut.
+    assert!(
+        stdout.contains(&format!("{}/swap.glb [swap]", dir.display())),
+        "{stdout}"
+    );
     assert!(stdout.contains("Conclusion"), "{stdout}");
     assert!(stdout.contains("lowest worst ratio"), "{stdout}");
     assert!(stdout.contains("rows with a deforming mesh"), "{stdout}");
     assert!(stdout.contains("default amortized"), "{stdout}");
     assert!(!stdout.contains("Why amortized is the default"), "{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `bench --frames A..B` runs the frames of a range as `render --frames A..B` does (built at
+/// A, updated through B - 1), numbers them as render does, and `--out` keeps the printed table
+/// as summary.txt.
+#[test]
+fn a_frame_range_is_numbered_as_render_numbers_it_and_the_summary_is_written() {
+    let out = cli_util::tmp_dir("bench", "range");
+    let out_s = out.to_string_lossy().into_owned();
+    let swap = animation("swap.glb");
+    let args = [
+        "bench",
+        &swap,
+        "--frames",
+        "5..12",
+        "--fps",
+        "12",
+        "--size",
+        "16x16",
+        "--no-builders",
+        "--no-tlas-compare",
+        "-p",
+        "refit",
+        "-p",
+        "amortized",
+        "--out",
+        &out_s,
+    ];
+    let stdout = cli_util::ok(&dynbvh(&args));
+    let summary = std::fs::read_to_string(out.join("summary.txt")).unwrap();
+    assert_eq!(summary, stdout, "summary.txt is the printed summary");
+    assert!(stdout.contains("frames 5..12"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    for p in ["refit", "amortized"] {
+        let frames: Vec<usize> = csv
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|c| c[0] == p)
+            .map(|c| c[1].parse().unwrap())
+            .collect();
+        assert_eq!(frames, (6..12).collect::<Vec<_>>(), "{p}: {csv}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["frames"], 6);
+    assert_eq!(report["per_frame"][0]["frame"], 6);
+
+    // A range past the animation's end is refused with the frames it has; an empty one too.
+    let o = dynbvh(&["bench", &swap, "--frames", "5..900", "--size", "8x8"]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("frames 0.."),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        !dynbvh(&["bench", &swap, "--frames", "7..7"])
+            .status
+            .success()
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Without the oracle, the ratios to it were not computed: the tables print `–`, not 0.
+#[test]
+fn values_not_computed_print_as_a_dash() {
+    let tube = animation("tube.glb");
+    let stdout = cli_util::ok(&dynbvh(&[
+        "bench",
+        &tube,
+        "--frames",
+        "4",
+        "--size",
+        "16x16",
+        "--no-builders",
+        "--no-tlas-compare",
+        "--no-oracle",
+        "-p",
+        "refit",
+        "-p",
+        "rebuild",
+    ]));
+    let wall = stdout
+        .lines()
+        .skip_while(|l| !l.starts_with("wall clock"))
+        .nth(1)
+        .unwrap_or_else(|| panic!("a wall-clock table:\n{stdout}"));
+    assert!(wall.ends_with("/oracle"), "{wall}");
+    for p in ["refit", "rebuild"] {
+        let row = stdout
+            .lines()
+            .skip_while(|l| !l.starts_with("wall clock"))
+            .find(|l| l.starts_with(&format!("{p} ")))
+            .unwrap_or_else(|| panic!("a {p} row:\n{stdout}"));
+        let cells: Vec<&str> = row.split_whitespace().collect();
+        // max fresh and /oracle need the oracle's builds.
+        assert_eq!(cells[cells.len() - 2..], ["\u{2013}", "\u{2013}"], "{row}");
+    }
+    assert!(!stdout.contains(" 0.000 "), "{stdout}");
 }

@@ -68,11 +68,26 @@ fn split_ranges_join_up_and_gif_is_written() {
 struct BenchRow {
     frame: usize,
     action: String,
-    build_ms: f64,
+    /// `None` where the table prints `–` (not computed: frames after a run's first).
+    build_ms: Option<f64>,
+    /// Pose time, `None` on a run's first frame (a fresh build).
+    pose_ms: Option<f64>,
     primary: u64,
     shadow: u64,
     work_per_px: String,
-    max_work: u64,
+    max_work: String,
+}
+
+/// A table cell: a number, or `None` for the dash of a value not computed.
+fn cell(c: &str) -> Option<f64> {
+    if c == "\u{2013}" {
+        None
+    } else {
+        Some(
+            c.parse()
+                .unwrap_or_else(|_| panic!("{c:?} is neither a number nor –")),
+        )
+    }
 }
 
 /// The per-frame rows of policy `policy` in `render --bench` output.
@@ -88,11 +103,12 @@ fn bench_rows(out: &str, policy: &str) -> Vec<BenchRow> {
             BenchRow {
                 frame: c[0].parse().unwrap(),
                 action: c[1].to_string(),
-                build_ms: c[2].parse().unwrap(),
+                build_ms: cell(c[2]),
+                pose_ms: cell(c[3]),
                 primary: c[8].parse().unwrap(),
                 shadow: c[9].parse().unwrap(),
                 work_per_px: c[11].to_string(),
-                max_work: c[12].parse().unwrap(),
+                max_work: c[12].to_string(),
             }
         })
         .collect()
@@ -127,19 +143,25 @@ fn a_range_starts_with_a_fresh_build() {
     assert_eq!(range.len(), 2, "{range:?}");
     assert_eq!((range[0].frame, range[1].frame), (8, 9));
     assert_eq!(range[0].action, "rebuild", "{range:?}");
-    assert!(range[0].build_ms > 0.0, "{range:?}");
+    assert!(range[0].build_ms.is_some_and(|b| b > 0.0), "{range:?}");
+    assert_eq!(
+        (range[0].pose_ms, range[1].build_ms),
+        (None, None),
+        "{range:?}"
+    );
+    assert!(range[1].pose_ms.is_some(), "{range:?}");
     assert_eq!(range[1].action, "refit", "{range:?}");
     assert!(refitted[1..].iter().all(|r| r.action == "refit"));
     let fresh = &rebuilt[8];
     assert_eq!((fresh.frame, refitted[8].frame), (8, 8));
     assert_eq!(
-        (&range[0].work_per_px, range[0].max_work),
-        (&fresh.work_per_px, fresh.max_work),
+        (&range[0].work_per_px, &range[0].max_work),
+        (&fresh.work_per_px, &fresh.max_work),
         "the range's first frame traces a freshly built tree"
     );
     assert_ne!(
-        (&refitted[8].work_per_px, refitted[8].max_work),
-        (&fresh.work_per_px, fresh.max_work),
+        (&refitted[8].work_per_px, &refitted[8].max_work),
+        (&fresh.work_per_px, &fresh.max_work),
         "refitting since frame 0 makes a different tree by frame 8"
     );
 }
@@ -367,6 +389,22 @@ fn bench_prints_the_ray_counts_and_what_it_averaged() {
         let out = ok(&dynbvh(&a));
         let rows = bench_rows(&out, "amortized");
         assert_eq!(rows.len(), 5, "{out}");
+        // Values not computed print as a dash: the build after the first frame, the pose and
+        // update of the first (a fresh build), and the traversal work of shaded frames.
+        assert!(
+            rows[0].build_ms.is_some() && rows[0].pose_ms.is_none(),
+            "{out}"
+        );
+        assert!(
+            rows[1..]
+                .iter()
+                .all(|r| r.build_ms.is_none() && r.pose_ms.is_some())
+        );
+        assert!(
+            rows.iter()
+                .all(|r| r.work_per_px == "\u{2013}" && r.max_work == "\u{2013}"),
+            "{out}"
+        );
         for r in &rows {
             assert_eq!(r.primary, 48 * 36, "one primary ray per pixel: {r:?}");
             if shadows {

@@ -22,9 +22,9 @@ mod triangles;
 
 pub use bih::{Bih, BihParams};
 pub use grid::{Grid, GridParams};
-pub use kdtree::{KdBuild, KdParams, KdTree};
+pub use kdtree::{KdBuild, KdParams, KdTree, MAX_KD_DEPTH};
 pub use kind::AccelKind;
-pub use octree::{Octree, OctreeParams};
+pub use octree::{MAX_OCTREE_DEPTH, Octree, OctreeParams};
 
 use crate::bvh::TraversalStats;
 use crate::geom::{Hit, Ray, TriMesh};

@@ -506,8 +506,8 @@ fn skin_chunk<'o>(
 }
 
 /// `Σ w[i] · joints[j[i]] · p` over one set of four influences: the four affine matrices are
-/// blended by weight, then the blend maps `p` once (measured faster than mapping `p` by each
-/// matrix and blending the points).
+/// blended by weight, then the blend maps `p` once (one matrix-vector product instead of
+/// four).
 #[inline(always)]
 fn blend4(joints: &[Affine3A], j: &[u16; 4], w: &[f32; 4], p: Vec3A) -> Vec3A {
     let m = |i: usize| &joints[usize::from(j[i])];

@@ -2,16 +2,12 @@
 //!
 //! - **First active ray** (Wald, Boulos & Shirley 2007): each node on the stack carries the
 //!   index of the first ray that may still need it; a node is entered when some ray from that
-//!   one on hits its box (16 rays per SIMD test, stopping at the first group with a hit), and
-//!   its children inherit that index. Leaves test their triangles against the rays of every
-//!   group with a ray that hits the leaf's box.
+//!   one on hits its box (16 rays per SIMD test), and its children inherit that index.
 //! - **Interval arithmetic**: the packet's origins and reciprocal directions are bounded per
-//!   axis; a node whose slab intervals, computed from those bounds, cannot overlap for any ray
-//!   (or lie beyond every ray's current `tmax`) is skipped for the whole packet with one test.
-//!   Rounding is monotone, so the bounds hold for every ray's own rounded slab distances.
-//! - The triangle test is the watertight one of [`crate::geom::intersect_triangle`], run for 16
-//!   rays at once by [`crate::simd::packet`]; it reports bit for bit what the single-ray test
-//!   does, so a packet's hits are exactly the single-ray (and brute-force) hits.
+//!   axis; a node that no ray's slab interval can overlap (or that lies beyond every ray's
+//!   `tmax`) is skipped with one test. Rounding is monotone, so the bounds hold for every ray.
+//! - The triangle test is [`crate::geom::intersect_triangle`]'s watertight one, 16 rays at once
+//!   ([`crate::simd::packet`]): a packet's hits are exactly the single-ray (and brute-force) hits.
 //! - Rays that are not coherent (directions spread wider than [`COHERENT_COS`], or fewer than
 //!   [`MIN_PACKET`] rays) are traced one by one, which is faster for them.
 

@@ -17,9 +17,8 @@ use crate::geom::Aabb;
 /// On several threads, subtrees with at least this many descendant nodes (or an eighth of a
 /// thread's share, when more) are split into their two children's subtrees, refitted as
 /// parallel tasks; smaller ones are updated and swept by one task. One thread updates and
-/// sweeps the whole tree at once: splitting it measured slower at every size tried (subtrees
-/// of 16,384 nodes: 15% more time at 1M triangles, 65,536: 5%), although smaller subtrees
-/// keep their slots in the cache between update and sweep.
+/// sweeps the whole tree at once: splitting it costs more in task overhead than the smaller
+/// subtrees win by staying in the cache between update and sweep (`docs/build_speed.md`).
 const PARALLEL_NODES: usize = 1 << 14;
 
 /// What a refit does at the slots and leaves of a tree.

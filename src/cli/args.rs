@@ -5,6 +5,7 @@
 use anyhow::{Result, bail};
 use clap::Args;
 use dynbvh::anim::Scene;
+use dynbvh::engine::gltf::FrameTimes;
 use std::fmt;
 use std::str::FromStr;
 
@@ -346,6 +347,99 @@ pub fn frame_rate(s: &str) -> std::result::Result<f32, String> {
     }
 }
 
+/// `--frames`: a count spread over one loop of the animation, or a range `A..B` (B excluded)
+/// of the frames of the timeline at `--fps`. Frames are numbered from 0, the animation's
+/// start, in every command's output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameSpan {
+    /// `N` frames spread over one loop.
+    Count(usize),
+    /// Frames `start..end` of the timeline at `--fps`.
+    Range {
+        /// First frame (the fresh build).
+        start: usize,
+        /// One past the last frame.
+        end: usize,
+    },
+}
+
+impl FromStr for FrameSpan {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let whole = |v: &str| -> std::result::Result<usize, String> {
+            v.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("{s:?}: expected a frame count N or a range A..B"))
+        };
+        match s.split_once("..") {
+            Some((a, b)) => {
+                let (start, end) = (whole(a)?, whole(b)?);
+                if end <= start {
+                    return Err(format!("{s:?}: the range is empty (B must exceed A)"));
+                }
+                Ok(FrameSpan::Range { start, end })
+            }
+            None => match whole(s)? {
+                0 => Err("0 frames: give at least 1".into()),
+                n => Ok(FrameSpan::Count(n)),
+            },
+        }
+    }
+}
+
+impl fmt::Display for FrameSpan {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FrameSpan::Count(n) => write!(f, "{n}"),
+            FrameSpan::Range { start, end } => write!(f, "{start}..{end}"),
+        }
+    }
+}
+
+/// The frame timeline that `--frames` and `--fps` ask for, and the range of it to run (`None`:
+/// all of it); `default` when neither is given. A range takes its frames at `--fps` (default
+/// 30); a count and `--fps` both set the count, so they are refused together. The count or
+/// range is checked against `--max-frames`.
+pub fn timeline(
+    frames: Option<FrameSpan>,
+    fps: Option<f32>,
+    default: FrameTimes,
+    limits: &Limits,
+) -> Result<(FrameTimes, Option<(usize, usize)>)> {
+    let at_fps = FrameTimes::Fps(fps.unwrap_or(30.0));
+    match frames {
+        None => Ok((fps.map_or(default, FrameTimes::Fps), None)),
+        Some(FrameSpan::Count(n)) => {
+            if fps.is_some() {
+                bail!(
+                    "--frames {n} and --fps both set the frame count: give one (or a range A..B \
+                     with --fps)"
+                );
+            }
+            limits.check_frames(&format!("--frames {n}"), n as f64)?;
+            Ok((FrameTimes::Count(n), None))
+        }
+        Some(FrameSpan::Range { start, end }) => {
+            limits.check_frames(&format!("--frames {start}..{end}"), (end - start) as f64)?;
+            Ok((at_fps, Some((start, end))))
+        }
+    }
+}
+
+/// The animation `-a/--animation` names (`None`: the file's first, or none when it has no
+/// animation, and then every frame is the rest pose).
+pub fn animation_or_first(
+    scene: &Scene,
+    file: &std::path::Path,
+    key: Option<&str>,
+) -> Result<Option<usize>> {
+    match key {
+        Some(k) => choose_animation(scene, file, k).map(Some),
+        None => Ok((!scene.animations.is_empty()).then_some(0)),
+    }
+}
+
 /// The animation `key` (a name or an index) of `scene`, or an error naming the file and
 /// listing the animations it has. The one place `-a/--animation` is resolved.
 pub fn choose_animation(scene: &Scene, file: &std::path::Path, key: &str) -> Result<usize> {
@@ -392,6 +486,44 @@ mod tests {
         assert_eq!("100".parse::<Bytes>(), Ok(Bytes(100)));
         assert!("99999999999T".parse::<Bytes>().is_err());
         assert!("4Q".parse::<Bytes>().is_err());
+    }
+
+    #[test]
+    fn frame_spans() {
+        assert_eq!("12".parse::<FrameSpan>(), Ok(FrameSpan::Count(12)));
+        assert_eq!(
+            "100..200".parse::<FrameSpan>(),
+            Ok(FrameSpan::Range {
+                start: 100,
+                end: 200
+            })
+        );
+        assert_eq!("3..7".parse::<FrameSpan>().unwrap().to_string(), "3..7");
+        for bad in ["5..5", "7..3", "x", "0", "1..", "-1"] {
+            assert!(bad.parse::<FrameSpan>().is_err(), "{bad}");
+        }
+        let limits = Limits {
+            max_frames: 1000,
+            ..Limits::default()
+        };
+        let count = FrameTimes::Count(60);
+        let t = |f: &str, fps| timeline(Some(f.parse().unwrap()), fps, count, &limits);
+        assert_eq!(t("12", None).unwrap(), (FrameTimes::Count(12), None));
+        assert_eq!(
+            t("100..200", Some(24.0)).unwrap(),
+            (FrameTimes::Fps(24.0), Some((100, 200)))
+        );
+        assert_eq!(
+            t("0..5", None).unwrap(),
+            (FrameTimes::Fps(30.0), Some((0, 5)))
+        );
+        assert!(t("12", Some(10.0)).is_err());
+        assert!(t("0..5000", None).is_err());
+        assert_eq!(timeline(None, None, count, &limits).unwrap(), (count, None));
+        assert_eq!(
+            timeline(None, Some(10.0), count, &limits).unwrap(),
+            (FrameTimes::Fps(10.0), None)
+        );
     }
 
     #[test]

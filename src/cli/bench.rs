@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
-use dynbvh::engine::source::{FrameSource, SineSphere};
+use dynbvh::engine::source::{FrameSource, SineSphere, Window};
 use dynbvh::engine::{CostMeasure, Policy, Prices, Traversal};
 use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep, SweepFailure};
 use std::path::{Path, PathBuf};
@@ -38,9 +38,12 @@ pub struct BenchArgs {
     /// Animation name or index (default: the first).
     #[arg(long, short)]
     animation: Option<String>,
-    /// Frames spread over one loop of the animation (default 60).
-    #[arg(long, allow_negative_numbers = true, conflicts_with = "fps")]
-    frames: Option<usize>,
+    /// Frames: a count N spread over one loop of the animation (default 60), or a range A..B
+    /// (B excluded) of the frames at --fps (default 30), as `render --frames` takes them: the
+    /// engines are built at frame A and updated through B - 1. Frames are numbered from 0, the
+    /// animation's start, in the tables, CSV and JSON as in every command's output.
+    #[arg(long, allow_negative_numbers = true, value_name = "N|A..B")]
+    frames: Option<args::FrameSpan>,
     /// Frames per second of animation time instead of a frame count.
     #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     fps: Option<f32>,
@@ -59,8 +62,9 @@ pub struct BenchArgs {
     /// amortized-plain.
     /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized, amortized-plain.
     #[arg(long = "policy", short)]
-    policies: Vec<String>,
-    /// Directory for frames.csv, report.json and the charts (SVG and PNG).
+    policies: Vec<Policy>,
+    /// Directory for summary.txt (the printed table), frames.csv, report.json and the charts
+    /// (SVG and PNG); with `--all`, summary.txt and sweep.json.
     #[arg(long)]
     out: Option<PathBuf>,
     /// Print the report as JSON instead of the table.
@@ -154,11 +158,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         opts.builders.clear();
     }
     if !a.policies.is_empty() {
-        opts.policies = a
-            .policies
-            .iter()
-            .map(|p| p.parse::<Policy>().map_err(anyhow::Error::from))
-            .collect::<Result<_>>()?;
+        opts.policies.clone_from(&a.policies);
     }
     opts.rays = match (a.rays, a.size) {
         (n, _) if a.lidar => RaySpec::Lidar(n.map_or(65_536, |n| n as usize)),
@@ -179,23 +179,15 @@ pub fn run(a: BenchArgs) -> Result<()> {
         &format!("{ray_arg} ({ray_count} rays per frame)"),
         ray_count * RAY_BYTES,
     )?;
-    if let Some(n) = a.frames {
-        a.limits.check_frames(&format!("--frames {n}"), n as f64)?;
-    }
-    let times = match (a.frames, a.fps) {
-        (_, Some(fps)) => FrameTimes::Fps(fps),
-        (Some(n), None) => FrameTimes::Count(n.max(1)),
-        (None, None) => FrameTimes::Count(60),
-    };
-    let progress = |m: &str| eprintln!("  {m} ...");
+    let default_count = FrameTimes::Count(if a.all { 30 } else { 60 });
+    let (times, range) = args::timeline(a.frames, a.fps, default_count, &a.limits)?;
     if a.all {
         if a.rays.is_none() && a.size.is_none() {
             opts.rays = RaySpec::Size(128, 128);
         }
-        let times = match (a.frames, a.fps) {
-            (None, None) => FrameTimes::Count(30),
-            _ => times,
-        };
+        if range.is_some() {
+            bail!("--all runs whole animations: give --frames N or --fps, not a range A..B");
+        }
         opts.builders.clear();
         return sweep(&a, &opts, times);
     }
@@ -203,70 +195,104 @@ pub fn run(a: BenchArgs) -> Result<()> {
         (Some(path), _) => {
             let scene = super::load_scene(path, None)?;
             a.limits.memory.check_scene(&scene, args::BENCH_MEMORY, 1)?;
-            let anim = match &a.animation {
-                Some(k) => Some(args::choose_animation(&scene, path, k)?),
-                None if scene.animations.is_empty() => {
-                    eprintln!(
-                        "{}: no animation; every frame is the rest pose",
-                        path.display()
-                    );
-                    None
-                }
-                None => Some(0),
-            };
-            if let FrameTimes::Fps(fps) = times {
+            let anim = args::animation_or_first(&scene, path, a.animation.as_deref())?;
+            if anim.is_none() {
+                eprintln!(
+                    "{}: no animation; every frame is the rest pose",
+                    path.display()
+                );
+            }
+            if let (FrameTimes::Fps(fps), None) = (times, range) {
                 let d = anim.map_or(0.0, |k| scene.animations[k].duration);
                 let n = args::frames_at(d, fps);
                 a.limits
                     .check_frames(&format!("--fps {fps} over the animation's {d} s"), n)?;
             }
             let mut src = GltfSource::new(&scene, anim, times)?;
-            eprintln!("{}: {} frames", src.name(), src.frames());
-            frame_bench::run(&mut src, &opts, progress)
+            run_frames(&mut src, range, &opts)?
         }
         (None, Some(n)) => {
             a.limits.check_memory(
                 &format!("--synthetic {n}"),
                 (n as u64).saturating_mul(args::BENCH_MEMORY.triangle),
             )?;
-            let frames = match times {
-                FrameTimes::Count(n) => n,
-                FrameTimes::Fps(f) => {
+            let frames = match (times, range) {
+                (_, Some((_, end))) => end,
+                (FrameTimes::Count(n), None) => n,
+                (FrameTimes::Fps(f), None) => {
                     let n = args::frames_at(1.0, f);
                     a.limits.check_frames(&format!("--fps {f} over 1 s"), n)?;
                     n as usize
                 }
             };
             let mut src = SineSphere::new(n, frames, 0.02, 0.15);
-            eprintln!("{}: {} frames", src.name(), src.frames());
-            frame_bench::run(&mut src, &opts, progress)
+            run_frames(&mut src, range, &opts)?
         }
         (None, None) => unreachable!("clap requires one"),
     };
+    let table = frame_bench::summary_table(&report);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{}", frame_bench::summary_table(&report));
+        print!("{table}");
     }
-
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        std::fs::write(
-            dir.join("frames.csv"),
-            frame_bench::to_csv(&report.per_frame),
-        )?;
-        std::fs::write(
-            dir.join("report.json"),
-            serde_json::to_string_pretty(&report)?,
-        )?;
-        for (stem, chart) in frame_bench::charts(&report) {
-            chart
-                .save(&dir.join(stem), 960, 540)
-                .with_context(|| format!("writing chart {stem}"))?;
-        }
+        write_report(dir, &report, &table)?;
         eprintln!("wrote {}", dir.display());
     }
     check_oracle(std::slice::from_ref(&report))
+}
+
+/// Runs the benchmark over `src`, or over its frames `start..end` when `range` is given
+/// (the engines built at `start`).
+fn run_frames(
+    src: &mut dyn FrameSource,
+    range: Option<(usize, usize)>,
+    opts: &Options,
+) -> Result<frame_bench::Report> {
+    let progress = |m: &str| eprintln!("  {m} ...");
+    let Some((start, end)) = range else {
+        eprintln!("{}: {} frames", src.name(), src.frames());
+        return Ok(frame_bench::run(src, opts, progress));
+    };
+    let last = src.frames();
+    let mut window = Window::new(src, start, end).with_context(|| {
+        format!(
+            "--frames {start}..{end}: a range needs at least two frames within the \
+             animation's frames 0..{} at this rate",
+            last + 1
+        )
+    })?;
+    eprintln!(
+        "{}: frames {start}..{end} (built at {start})",
+        window.name()
+    );
+    Ok(frame_bench::run(&mut window, opts, progress))
+}
+
+/// Writes what `bench --out` (and the default job) keeps of a run into `dir`: the printed
+/// `summary` as summary.txt, frames.csv, report.json and the charts.
+pub fn write_report(
+    dir: &Path,
+    report: &frame_bench::Report,
+    summary: &str,
+) -> Result<Vec<&'static str>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+    };
+    write("summary.txt", summary)?;
+    write("frames.csv", &frame_bench::to_csv(&report.per_frame))?;
+    write("report.json", &serde_json::to_string_pretty(report)?)?;
+    let mut charts = Vec::new();
+    for (stem, chart) in frame_bench::charts(report) {
+        chart
+            .save(&dir.join(stem), 960, 540)
+            .with_context(|| format!("writing chart {stem}"))?;
+        charts.push(stem);
+    }
+    Ok(charts)
 }
 
 /// Fails loudly when a policy's modelled total fell below the modelled oracle's, the exact
@@ -412,7 +438,7 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
     }
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        std::fs::write(dir.join("sweep.txt"), &table)?;
+        std::fs::write(dir.join("summary.txt"), &table)?;
         std::fs::write(
             dir.join("sweep.json"),
             serde_json::to_string_pretty(&sweep)?,

@@ -8,6 +8,7 @@ use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
 use dynbvh::report::accel_bench;
 use dynbvh::report::build_bench::{self, Options, Row};
+use dynbvh::report::or_dash;
 use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
 use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
@@ -181,24 +182,13 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         ..Options::default()
     };
     let samples = build_bench::brute_force_samples(&mesh, &sets, opts.check_rays);
-    let bar = super::progress::bar(
+    let mut steps = super::progress::Steps::new(
         (methods.len() + structures.len()) as u64,
         "builders",
         "building and tracing",
     );
-    let mut started = false;
-    let mut step = |m: &str| {
-        if std::mem::replace(&mut started, true) {
-            bar.inc(1);
-        }
-        if bar.is_hidden() {
-            eprintln!("  {m} ...");
-        } else {
-            bar.set_message(m.to_string());
-        }
-    };
     let mut rows =
-        build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| step(m));
+        build_bench::run_with_samples(&mesh, &methods, &sets, opts, &samples, |m| steps.start(m));
     rows.extend(accel_bench::run(
         &mesh,
         &structures,
@@ -206,15 +196,18 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         &samples,
         opts.build_runs,
         opts.trace_runs,
-        |m| step(m),
+        |m| steps.start(m),
     ));
-    bar.finish_and_clear();
+    steps.finish();
     let wide_rows = if args.no_wide {
         Vec::new()
     } else {
-        wide_bench::run(&mesh, &BuildParams::BINNED, &sets, opts, |t| {
-            eprintln!("  {t} (collapsed from binned16) ...");
-        })
+        let mut trees = super::progress::Steps::new(2, "wide trees", "collapsing and tracing");
+        let rows = wide_bench::run(&mesh, &BuildParams::BINNED, &sets, opts, |t| {
+            trees.start(&format!("{t} (collapsed from binned16)"));
+        });
+        trees.finish();
+        rows
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
@@ -280,19 +273,19 @@ fn print_table(rows: &[Row]) {
     );
     for r in rows {
         println!(
-            "{:<16} {:>10.1} {:>9.2} {:>8.2} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>5}/{:<3}",
+            "{:<16} {:>10.1} {:>9} {:>8} {:>9} {:>6} {:>9.1} {:<14} {:>8.2} {:>8.2} {:>8} {:>8} {:>5}/{:<3}",
             r.method,
             r.build_ms,
-            r.refit_ms,
-            r.sah,
+            or_dash(Some(r.refit_ms), 2),
+            or_dash(Some(f64::from(r.sah)), 2),
             r.nodes,
             r.depth,
             r.memory_bytes as f64 / (1 << 20) as f64,
             r.rays,
             r.mrays,
             r.any_mrays,
-            r.packet_mrays,
-            r.packet_any_mrays,
+            or_dash(Some(r.packet_mrays), 2),
+            or_dash(Some(r.packet_any_mrays), 2),
             r.mismatches,
             r.checked
         );

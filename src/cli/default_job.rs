@@ -154,26 +154,8 @@ fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
         ..Options::default()
     };
     let report = frame_bench::run(&mut src, &opts, |m| eprintln!("  {m} ..."));
-    std::fs::create_dir_all(&bench_dir)
-        .with_context(|| format!("creating {}", bench_dir.display()))?;
     let table = frame_bench::summary_table(&report);
-    std::fs::write(bench_dir.join("summary.txt"), &table)?;
-    std::fs::write(
-        bench_dir.join("frames.csv"),
-        frame_bench::to_csv(&report.per_frame),
-    )?;
-    std::fs::write(
-        bench_dir.join("report.json"),
-        serde_json::to_string_pretty(&report)?,
-    )?;
-    let mut charts = Vec::new();
-    for (stem, chart) in frame_bench::charts(&report) {
-        let path = bench_dir.join(stem);
-        chart
-            .save(&path, 960, 540)
-            .with_context(|| format!("writing chart {stem}"))?;
-        charts.push(stem);
-    }
+    let mut charts = super::bench::write_report(&bench_dir, &report, &table)?;
 
     eprintln!("refit or rebuild at 1k to 1M lidar rays a frame on the sensor scene ...");
     let sensor = base_dir().join(SENSOR_ANIMATION);

@@ -30,3 +30,37 @@ pub fn bar(len: u64, unit: &'static str, what: &str) -> ProgressBar {
     b.set_message(what.to_string());
     b
 }
+
+/// A bar over named steps: each [`Steps::start`] counts the step before it as done and shows
+/// the new one's name (printed as a line instead when the bar is hidden).
+pub struct Steps {
+    bar: ProgressBar,
+    started: bool,
+}
+
+impl Steps {
+    /// `len` steps of `unit` (plural), labelled `what`.
+    pub fn new(len: u64, unit: &'static str, what: &str) -> Self {
+        Self {
+            bar: bar(len, unit, what),
+            started: false,
+        }
+    }
+
+    /// Step `name` starts.
+    pub fn start(&mut self, name: &str) {
+        if std::mem::replace(&mut self.started, true) {
+            self.bar.inc(1);
+        }
+        if self.bar.is_hidden() {
+            eprintln!("  {name} ...");
+        } else {
+            self.bar.set_message(name.to_string());
+        }
+    }
+
+    /// All steps are done: the bar goes.
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}

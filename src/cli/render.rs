@@ -12,6 +12,7 @@ use dynbvh::render::{
     Camera, EngineShading, FrameCounts, GltfCamera, PacketUse, Renderer, Settings, Stage,
     animation_bounds, font, gltf_cameras,
 };
+use dynbvh::report::or_dash;
 use image::RgbImage;
 use image::codecs::gif::{GifEncoder, Repeat};
 use indicatif::ProgressBar;
@@ -28,10 +29,12 @@ pub struct RenderArgs {
     #[arg(long, short)]
     pub animation: Option<String>,
     /// Frames: a count N spread over one loop of the animation, or a range A..B (B excluded)
-    /// of the frames at --fps (default 30). Each run starts with a fresh build at its first
-    /// frame, so a long sequence can be split over processes. Default: every frame at --fps.
+    /// of the frames at --fps (default 30). Frames are numbered from 0, the animation's start,
+    /// as in every command's output (PNG names, captions, tables). Each run starts with a fresh
+    /// build at its first frame, so a long sequence can be split over processes. Default:
+    /// every frame at --fps.
     #[arg(long, allow_negative_numbers = true, value_name = "N|A..B")]
-    pub frames: Option<String>,
+    pub frames: Option<args::FrameSpan>,
     /// Frames per second of animation time (default 30).
     #[arg(long, allow_negative_numbers = true, value_parser = args::frame_rate)]
     pub fps: Option<f32>,
@@ -40,8 +43,8 @@ pub struct RenderArgs {
     pub size: Size,
     /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized,
     /// amortized-plain.
-    #[arg(long, short, default_value = "amortized")]
-    pub policy: String,
+    #[arg(long, short, default_value_t = Policy::DEFAULT)]
+    pub policy: Policy,
     /// Output directory.
     #[arg(long, default_value = "out/render")]
     pub out: PathBuf,
@@ -71,8 +74,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub auto_camera: bool,
     /// Render every frame under two policies side by side (e.g. refit,rebuild).
-    #[arg(long, value_name = "P1,P2")]
-    pub compare: Option<String>,
+    #[arg(long, value_name = "P1,P2", value_delimiter = ',')]
+    pub compare: Vec<Policy>,
     /// Measure only: render without writing images; print each frame's timings and ray counts
     /// (primary, shadow), then their means over the frames after the first (whose fresh build
     /// is left out).
@@ -83,34 +86,14 @@ pub struct RenderArgs {
     pub threads: Option<usize>,
     /// Rays traced as packets: primary, shadow, both or none (the pictures are the same).
     /// Shaded frames only: heat maps trace ray by ray.
-    #[arg(long, value_name = "WHICH", default_value = "both")]
-    pub packets: String,
+    #[arg(long, value_name = "both|primary|shadow|none", default_value_t = PacketUse::DEFAULT)]
+    pub packets: PacketUse,
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones;
     /// the pictures are the same).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
     pub traversal: Traversal,
     #[command(flatten)]
     pub limits: Limits,
-}
-
-/// Parses `--packets`.
-fn parse_packets(s: &str) -> Result<PacketUse> {
-    Ok(match s {
-        "both" => PacketUse {
-            primary: true,
-            shadow: true,
-        },
-        "primary" => PacketUse {
-            primary: true,
-            shadow: false,
-        },
-        "shadow" => PacketUse {
-            primary: false,
-            shadow: true,
-        },
-        "none" => PacketUse::NONE,
-        _ => anyhow::bail!("--packets {s:?}: expected both, primary, shadow or none"),
-    })
 }
 
 /// Timings of one rendered frame of one policy, ms.
@@ -171,51 +154,6 @@ impl RenderSummary {
             steady.len() as f64 * 1e3 / ms
         } else {
             0.0
-        }
-    }
-}
-
-/// The frame timeline and the range of it to render.
-fn timeline(
-    frames: Option<&str>,
-    fps: Option<f32>,
-) -> Result<(FrameTimes, Option<(usize, usize)>)> {
-    let fps = match fps {
-        Some(f) if f > 0.0 && f.is_finite() => Some(f),
-        Some(f) => bail!("--fps {f}: must be positive and finite"),
-        None => None,
-    };
-    match frames {
-        None => Ok((FrameTimes::Fps(fps.unwrap_or(30.0)), None)),
-        Some(s) => {
-            if let Some((a, b)) = s.split_once("..") {
-                let a: usize = a
-                    .trim()
-                    .parse()
-                    .with_context(|| format!("--frames {s:?}: expected A..B"))?;
-                let b: usize = b
-                    .trim()
-                    .parse()
-                    .with_context(|| format!("--frames {s:?}: expected A..B"))?;
-                if b <= a {
-                    bail!("--frames {s:?}: the range is empty");
-                }
-                Ok((FrameTimes::Fps(fps.unwrap_or(30.0)), Some((a, b))))
-            } else {
-                if fps.is_some() {
-                    bail!(
-                        "--frames N and --fps both set the frame count: give one (or a range A..B with --fps)"
-                    );
-                }
-                let n: usize = s
-                    .trim()
-                    .parse()
-                    .with_context(|| format!("--frames {s:?}: expected N or A..B"))?;
-                if n == 0 {
-                    bail!("--frames 0: nothing to render");
-                }
-                Ok((FrameTimes::Count(n), None))
-            }
         }
     }
 }
@@ -329,21 +267,27 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
                 "policy {name}: frame  action   build_ms  pose_ms  update_ms  normals_ms  trace_ms  total_ms  primary  shadow  SAH ratio  work/px  max work"
             );
             for f in t {
+                // A run's first frame is a fresh build (no pose or update of its own); the
+                // others are posed and updated (no build).
+                let built = f.frame == s.range.0;
+                let (build, update) = (built.then_some(f.build_ms), (!built).then_some(()));
+                // Traversal work is counted for heat maps only.
+                let counted = f.counts.max_work > 0;
                 println!(
-                    "policy {name}: {:5}  {:7}  {:8.3}  {:7.3}  {:9.3}  {:10.3}  {:8.3}  {:8.3}  {:7}  {:6}  {:9.3}  {:7.1}  {:8}",
+                    "policy {name}: {:5}  {:7}  {:>8}  {:>7}  {:>9}  {:10.3}  {:8.3}  {:8.3}  {:7}  {:6}  {:9.3}  {:>7}  {:>8}",
                     f.frame,
                     f.action.name(),
-                    f.build_ms,
-                    f.pose_ms,
-                    f.update_ms,
+                    or_dash(build, 3),
+                    or_dash(update.map(|()| f.pose_ms), 3),
+                    or_dash(update.map(|()| f.update_ms), 3),
                     f.normals_ms,
                     f.trace_ms,
                     f.total_ms,
                     f.counts.primary,
                     f.counts.shadow,
                     f.sah_ratio,
-                    f.counts.work_per_pixel(),
-                    f.counts.max_work
+                    or_dash(counted.then(|| f.counts.work_per_pixel()), 1),
+                    or_dash(counted.then_some(f.counts.max_work as f64), 0),
                 );
             }
         }
@@ -369,7 +313,7 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
             "none without --shadows"
         };
         println!(
-            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps, pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame ({averaged}); rays/frame: {:.0} primary (one per pixel) + {:.0} shadow ({shadow_note}) = {:.0}, {:.1} Mrays/s while tracing",
+            "{name}: {} frames {}..{} at {}x{}, {} triangles: {:.1} fps, pose {:.2} + update {:.2} + normals {:.2} + trace {:.2} = {:.2} ms/frame ({averaged}); rays/frame: {:.0} primary (one per pixel) + {:.0} shadow ({shadow_note}) = {:.0}, {} Mrays/s while tracing",
             t.len(),
             s.range.0,
             s.range.1,
@@ -385,11 +329,7 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
             primary,
             shadow,
             primary + shadow,
-            if trace > 0.0 {
-                (primary + shadow) / (trace * 1e3)
-            } else {
-                0.0
-            },
+            or_dash((trace > 0.0).then(|| (primary + shadow) / (trace * 1e3)), 1),
         );
     }
     println!("camera: {}", s.camera);
@@ -405,37 +345,18 @@ pub fn print_summary(s: &RenderSummary, per_frame: bool) {
 pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     args::init_threads(a.threads)?;
     let Size { w, h } = a.size;
-    let (mut times, range) = timeline(a.frames.as_deref(), a.fps)?;
-    match (times, range) {
-        (FrameTimes::Count(n), _) => a.limits.check_frames(&format!("--frames {n}"), n as f64)?,
-        (_, Some((s, e))) => a
-            .limits
-            .check_frames(&format!("--frames {s}..{e}"), (e - s) as f64)?,
-        (FrameTimes::Fps(_), None) => {}
-    }
-    let policies: Vec<Policy> = match &a.compare {
-        Some(c) => {
-            let p: Vec<Policy> = c
-                .split(',')
-                .map(|p| p.parse::<Policy>().map_err(anyhow::Error::from))
-                .collect::<Result<_>>()?;
-            if p.len() != 2 {
-                bail!("--compare {c:?}: expected two policies, e.g. refit,rebuild");
-            }
-            p
-        }
-        None => vec![a.policy.parse::<Policy>()?],
+    let (mut times, range) = args::timeline(a.frames, a.fps, FrameTimes::Fps(30.0), &a.limits)?;
+    let policies: Vec<Policy> = match a.compare.len() {
+        0 => vec![a.policy],
+        2 => a.compare.clone(),
+        n => bail!("--compare: {n} policies given; expected two, e.g. refit,rebuild"),
     };
 
     let scene = super::load_scene(&a.file, None)?;
     a.limits
         .memory
         .check_scene(&scene, args::RENDER_MEMORY, policies.len() as u64)?;
-    let anim = match &a.animation {
-        Some(k) => Some(args::choose_animation(&scene, &a.file, k)?),
-        None if scene.animations.is_empty() => None,
-        None => Some(0),
-    };
+    let anim = args::animation_or_first(&scene, &a.file, a.animation.as_deref())?;
     if let FrameTimes::Fps(fps) = times {
         let d = anim.map_or(0.0, |k| scene.animations[k].duration);
         let n = args::frames_at(d, fps);
@@ -469,7 +390,6 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         &format!("--size {} (x{} policies)", a.size, policies.len()),
         images,
     )?;
-    let packets = parse_packets(&a.packets)?;
     let settings = Settings {
         width: w,
         height: h,
@@ -481,7 +401,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
         .iter()
         .map(|&p| {
             Pipeline::new(&scene, anim, times, p, settings).map(|mut pl| {
-                pl.packets = packets;
+                pl.packets = a.packets;
                 pl.traversal = a.traversal;
                 pl
             })
@@ -539,10 +459,10 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
     if let Some(o) = &out {
         std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
     }
-    let stem = match (&a.compare, a.heatmap) {
-        (Some(_), _) => "compare",
-        (None, true) => "heatmap",
-        (None, false) => "frame",
+    let stem = match (policies.len() > 1, a.heatmap) {
+        (true, _) => "compare",
+        (false, true) => "heatmap",
+        (false, false) => "frame",
     };
     let partial = range.is_some();
     let gif_path = out.as_ref().filter(|_| a.gif).map(|o| {
@@ -680,26 +600,5 @@ fn compose(pipes: &mut [Pipeline<'_>], out: &mut RgbImage, heat: bool) {
         label(&mut p.img, &p.policy, &t, heat);
         let x0 = k as u32 * (w + gap);
         image::imageops::replace(out, &p.img, i64::from(x0), 0);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn frames_parse() {
-        assert_eq!(
-            timeline(Some("12"), None).unwrap(),
-            (FrameTimes::Count(12), None)
-        );
-        assert_eq!(
-            timeline(Some("100..200"), Some(24.0)).unwrap(),
-            (FrameTimes::Fps(24.0), Some((100, 200)))
-        );
-        assert_eq!(timeline(None, None).unwrap(), (FrameTimes::Fps(30.0), None));
-        assert!(timeline(Some("5..5"), None).is_err());
-        assert!(timeline(Some("12"), Some(10.0)).is_err());
-        assert!(timeline(Some("x"), None).is_err());
     }
 }

@@ -16,7 +16,8 @@ pub struct RungsArgs {
     /// Animation (index or name; default the first).
     #[arg(short, long)]
     pub animation: Option<String>,
-    /// Frames spread over one loop of the animation.
+    /// Frames spread over one loop of the animation (numbered from 0, the animation's start,
+    /// as in every command's output; the tree is built at frame 0).
     #[arg(long, allow_negative_numbers = true, default_value_t = 30, value_parser = clap::value_parser!(u64).range(2..=args::MAX_TIMELINE))]
     pub frames: u64,
     /// Measure every N-th frame.
@@ -53,15 +54,8 @@ pub fn run(a: RungsArgs) -> Result<()> {
         a.size.pixels().saturating_mul(64),
     )?;
     let scene = super::load_scene(&a.file, None)?;
-    let anim = match &a.animation {
-        Some(k) => scene
-            .find_animation(k)
-            .with_context(|| format!("{}: no animation {k:?}", a.file.display()))?,
-        None if scene.animations.is_empty() => {
-            anyhow::bail!("{}: no animation: nothing deforms", a.file.display())
-        }
-        None => 0,
-    };
+    let anim = args::animation_or_first(&scene, &a.file, a.animation.as_deref())?
+        .with_context(|| format!("{}: no animation: nothing deforms", a.file.display()))?;
     let mut src = GltfSource::new(&scene, Some(anim), FrameTimes::Count(a.frames as usize))?;
     let opts = Options {
         rungs: a.rungs,

@@ -72,9 +72,8 @@ impl FreshSah {
     /// The largest subsample.
     pub const MAX_SAMPLE: usize = 4096;
     /// Meshes up to this many triangles are sampled whole, and larger ones by at least this
-    /// many. At 256, the estimate missed a morph of AnimatedMorphSphere (960 triangles) and
-    /// `amortized` reached 1.10 of the oracle there; at 1024 its worst over
-    /// `dynbvh bench --all --frames 60 --size 192x192` was 1.075 in two idle runs.
+    /// many: a smaller sample misses morphs that move only part of a mesh of about a thousand
+    /// triangles (`docs/internals.md`, "Constants and the runs behind them").
     pub const WHOLE: usize = 1024;
 
     /// The subsample for a mesh of `triangles` triangles, leaves of at most `max_leaf`.

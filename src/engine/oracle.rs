@@ -7,18 +7,12 @@
 //! instance does not depend on the trees, see [`super::ray_work`]), so the scene's oracle is
 //! the sum of the meshes' plus what no schedule changes.
 //!
-//! Two cost models fill it:
-//! - [`WorkCosts`], the **modelled** measure: refits and rebuilds priced by their work and the
-//!   trace cost of every tree `b -> f` counted on frame `f`'s sampled rays, all at the same
-//!   [`super::Prices`] the engine's runs are charged at. The engine under the ray-work measure
-//!   makes no other move (it never goes back to an earlier tree), so no policy can come out
-//!   below this oracle; the bench checks it.
-//! - [`MeshCosts`], the **wall-clock** measure: refit and rebuild times measured in the
-//!   always-refit and always-rebuild runs, and the trace time modelled from the always-rebuild
-//!   run's plus `alpha x fresh x max(SAH ratio - 1, 0)`, `alpha` fitted per scene so that the
-//!   model reproduces the measured always-refit total ([`SceneCosts::calibrate`]). It follows
-//!   the machine's load, and its SAH model misjudges real ray sets, so policies can come out
-//!   slightly below it; it is kept beside the modelled one for comparison.
+//! Two cost models fill it: [`WorkCosts`], the **modelled** measure (updates priced by their
+//! work and every tree `b -> f` traced on frame `f`'s sampled rays at the engine's
+//! [`super::Prices`]), which no policy can beat; and [`MeshCosts`], the **wall-clock**
+//! measure (measured update times, trace time modelled from the SAH and calibrated by
+//! [`SceneCosts::calibrate`]), kept beside it for comparison: it follows the machine's load,
+//! so policies can come out slightly below it (`docs/internals.md`, the benchmark).
 
 /// The measured and recorded costs of one mesh over frames `0 ..= F` (index 0, the initial
 /// build, costs nothing).

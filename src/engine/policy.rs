@@ -2,21 +2,17 @@
 //!
 //! Every policy but `rebuild` and `periodic` refits first, then may rebuild. What it weighs
 //! depends on the engine's [`super::CostMeasure`]:
-//! - **ray work** (the default): the frame's own rays, sampled ([`super::ray_work`]), give each
+//! - **ray work** (the default): the frame's sampled rays ([`super::ray_work`]) give each
 //!   mesh's share of the trace cost, and the degradation is the sampled work per entry into the
-//!   mesh over the fresh tree's (measured the frame after each build), corrected by what each
-//!   rebuild's replay of the sampled rays on both trees showed;
-//! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by a
-//!   quick build over a subsample ([`super::estimate::FreshSah`]), the trace share split by
-//!   expected SAH cost; rebuilds are probed (the replaced tree refitted alongside, and the mesh
-//!   goes back to it if it is better again before the rebuild has paid).
+//!   mesh over the fresh tree's, corrected by each rebuild's replay of the rays on both trees;
+//! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
+//!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
+//!   tree if it is better again before the rebuild has paid).
 //!
 //! `amortized` rebuilds when the trace time its degradation has cost since the last build
-//! (degradation minus one, times the mesh's fresh trace time, summed) passes a rebuild's
-//! cost: the optimal period for linearly growing degradation, and no rebuild without rays or
-//! without degradation. `amortized-plain` is that rule on the ratio to the last build, without
-//! estimate, calibration or probation, for comparison. The sweeps that chose the default and
-//! its constants are in `docs/policy_sweep.md` and `docs/ray_work.md`.
+//! passes a rebuild's cost: the optimal period for linearly growing degradation, and no rebuild
+//! without rays or degradation. `amortized-plain` is that rule without estimate, calibration or
+//! probation. The sweeps behind the default: `docs/policy_sweep.md`, `docs/ray_work.md`.
 use std::fmt;
 use std::str::FromStr;
 
@@ -130,7 +126,7 @@ impl RungModel {
 
 impl Policy {
     /// The default policy: [`Policy::Amortized`], the one that adapts to the cost of a rebuild
-    /// and to how many rays a frame casts (see the crate's bench reports for measurements).
+    /// and to how many rays a frame casts (`docs/policy_sweep.md` compares it with the others).
     pub const DEFAULT: Policy = Policy::Amortized;
 
     /// The policies `dynbvh bench` compares when none is given.

@@ -2,19 +2,16 @@
 //! visited and triangles tested on the trees those rays walk), beside the SAH's prediction for
 //! uniformly random lines.
 //!
-//! The sample is systematic: of the frame's rays, counted in the order they are cast over all
-//! of the frame's calls, every [`SAMPLE_STRIDE`]-th is traced again with counters, starting at
-//! an offset drawn from the frame number. Each ray of the frame is sampled with probability
-//! `1 / stride` whatever the offset, so `stride` times the sampled work is an unbiased estimate
-//! of the frame's total (Horvitz-Thompson), and the same frames and rays give the same sample
-//! on every run. Work is counted per mesh: each entry of a sampled ray into an instance is kept
-//! (the ray in the mesh's space, with the interval it entered with), so that other trees of the
-//! same mesh can be measured on exactly the same rays (the engine's rebuilds and the oracle).
+//! The sample is systematic: every [`SAMPLE_STRIDE`]-th ray of the frame, counted over all of
+//! its calls from an offset drawn from the frame number, is traced again with counters. Each
+//! ray is sampled with probability `1 / stride`, so `stride` times the sampled work is an
+//! unbiased estimate of the frame's total (Horvitz-Thompson), the same on every run.
 //!
-//! Why this separates per mesh: traversal is exact, so the distance of the closest hit in an
-//! instance, and whether an any-hit ray is blocked, do not depend on the trees; hence neither do
-//! the top-level traversal nor the interval each instance is entered with. Only the work inside
-//! a mesh's tree depends on that tree.
+//! Work is counted per mesh: each entry of a sampled ray into an instance is kept (the ray in
+//! mesh space, with its interval), so other trees of the mesh can be measured on the same rays.
+//! This separates per mesh because traversal is exact: the closest hit in an instance, and
+//! whether an any-hit ray is blocked, do not depend on the trees, hence neither does the
+//! interval each instance is entered with; only the work inside a mesh's tree does.
 
 use super::MeshId;
 use crate::bvh::TraversalStats;

@@ -5,39 +5,14 @@
 //!
 //! A mesh whose vertices are written ([`Engine::set_positions`], [`Engine::positions_mut`]) is
 //! refitted or rebuilt in the next [`Engine::update`] as the [`Policy`] decides, each mesh on
-//! its own; a mesh nobody writes is never touched again. An instance places a mesh with an
-//! affine transform; rays are carried into the instance's space with the inverse transform. The
-//! direction is transformed without renormalising, so a hit's `t` is the same parameter along
-//! the world ray and hits of different instances compare directly.
+//! its own; a mesh nobody writes is never touched again. Rays are carried into an instance's
+//! space with its inverse transform, the direction not renormalised, so a hit's `t` is the
+//! same parameter along the world ray in every instance.
 //!
-//! After the first frame, [`Engine::update`] allocates nothing, rebuilds included: a tree is
-//! rebuilt into its own storage with the engine's one [`BuildWorkspace`] (shared by every mesh
-//! and the top-level tree, sized by the first builds), a wide tree is collapsed into its own
-//! storage ([`MeshBvh8::collapse_from`]), and neither ray casting nor
-//! [`Engine::predicted_work`] allocates. [`Policy::Amortized`] keeps the tree a rebuild
-//! replaced for a while (see [`Policy::Amortized`]): its rebuilds go into a spare tree reserved
-//! when the mesh is added (or when [`Engine::set_policy`] switches to it), as large as the
-//! mesh's tree (about 94 bytes a triangle with the default builder), for every mesh, since the
-//! engine cannot know which will deform; the reservation is not written until the mesh's first
-//! probed rebuild, so with the usual allocators a large one costs address space only until
-//! then. A revert to the replaced tree collapses it into the wide tree's storage. Trees keep
-//! headroom for rebuilds that come out larger (an eighth more binary nodes, a quarter more wide
-//! nodes and triangle blocks than the first build): a rebuild beyond that grows its tree once.
-//!
-//! The first [`Engine::add_mesh`] gives every thread of the current rayon pool its build
-//! scratch ([`crate::bvh::build::prepare_threads`]: the binned builder's spare bin stacks, eight
-//! a thread, which a thread would otherwise make at the first build task it runs), so build
-//! the scene in the pool the frames run in. What can still allocate is rayon's own: a parallel
-//! call made from a thread outside the pool (the main thread, with the global pool) goes
-//! through `Registry::inject`, which pushes its job onto the pool's injector
-//! (`crossbeam_deque::Injector`, a linked list of blocks of 63 jobs: every 63rd such call
-//! allocates a block), so run the frame loop inside the pool's `install`. Within a pool,
-//! parallel calls are `join`s whose jobs live on the stack and go through the workers' own
-//! deques, which allocate only to grow past (or shrink back from) 64 pending jobs, more than a
-//! frame's recursive splits keep; a thread allocates a bin stack only if more than eight build
-//! tasks nest on it (waiting in `join`, it runs stolen ones). `tests/engine_alloc.rs` proves
-//! no allocation on one thread; the same frames in 2- and 4-thread pools allocated nothing
-//! either (counted when this was written, not asserted: nesting is the scheduler's).
+//! After the first frame [`Engine::update`] allocates nothing, rebuilds included: trees are
+//! rebuilt into their own storage with one shared [`BuildWorkspace`], and the first
+//! [`Engine::add_mesh`] prepares every thread of the current rayon pool, so build the scene and
+//! run the frame loop inside that pool's `install` (`docs/internals.md`, "Engine memory").
 
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
@@ -75,13 +50,12 @@ pub struct InstanceId(pub u32);
 
 /// How the top-level tree follows moving instances.
 ///
-/// The default, [`TlasPolicy::Rebuild`], is chosen by measurement (`dynbvh bench --all`, the
-/// `tlas` columns): the top-level tree holds one box per instance, so rebuilding it costs
-/// microseconds (0.06 ms a frame for the 166 instances of `animations/orbit.glb`) and every
-/// frame traces through a fresh tree; on `orbit.glb` refitting lets its SAH ratio reach 1.16
-/// and traces about 10% slower, and the threshold policy at 1.5 never triggers. On scenes of
-/// one or a few instances the three are within measurement noise. A rebuild goes into the
-/// existing tree with the engine's build workspace and allocates nothing once warm.
+/// The default is [`TlasPolicy::Rebuild`]: the top-level tree holds one box per instance, so
+/// a rebuild is cheap next to the frame and every frame traces through a fresh tree, while a
+/// refitted top-level tree over many moving instances degrades and traces slower (the runs
+/// behind this are in `docs/internals.md`, "Constants and the runs behind them"). A rebuild
+/// goes into the existing tree with the engine's build workspace and allocates nothing once
+/// warm.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum TlasPolicy {
     /// Always refit (rebuilt only when instances are added).
@@ -134,11 +108,9 @@ pub enum Traversal {
 }
 
 impl Traversal {
-    /// The engine's default, [`Traversal::Wide`], chosen by measurement (`docs/packets.md`,
-    /// "The engine on the wide trees"): on the shipped animations and `CesiumMan` the
-    /// `dynbvh bench` totals (single rays, update included) drop by 30-40%, and `dynbvh render
-    /// --shadows` (packets) takes about 2% less CPU time a frame; the collapse makes each
-    /// rebuild dearer (about 60 ns a triangle), which the policy sees.
+    /// The engine's default, [`Traversal::Wide`]: the wide tree traces single rays and packets
+    /// faster than the binary one, which outweighs the collapse each rebuild adds (the policy
+    /// sees that cost); see `docs/packets.md`, "The engine on the wide trees".
     pub const DEFAULT: Traversal = Traversal::Wide;
 }
 
@@ -1081,16 +1053,14 @@ impl Engine {
 }
 
 /// Share of a mesh's refit and trace time the fresh-build estimate may spend (so that it runs
-/// every few frames where the estimate costs about as much as a refit, e.g. small meshes). 5%
-/// cost 3-5% of the total on the small shipped animations, where the trace takes 15-20
-/// times a refit and an estimate as much as a refit; 1% was as good at deciding (see the
-/// policy module's docs).
+/// only every few frames where the estimate costs about as much as a refit, e.g. small
+/// meshes). Small enough that the estimate does not show in the total, large enough that the
+/// decisions do not get worse (`docs/internals.md`, "Constants and the runs behind them").
 const ESTIMATE_SHARE: f64 = 0.01;
 
 /// How much refitting the replaced tree alongside a new one may cost, as a share of the
-/// rebuild's cost, before the probation ends undecided. With the whole rebuild cost, failed
-/// rebuilds on `MorphStressTest` cost twice as much as the rebuild (1.08-1.11 of the oracle);
-/// with half, 1.06.
+/// rebuild's cost, before the probation ends undecided: with the whole rebuild cost, a failed
+/// rebuild costs the mesh about twice what it set out to save.
 const PROBE_SHARE: f64 = 0.5;
 
 /// Weight of the past in the smoothed ray-work ratio (each frame's sample is a few hundred
@@ -1130,10 +1100,10 @@ fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing, prices: &Prices) 
         m.state.estimate_gain = learnt.estimate_gain;
         m.state.rebuild_scale = learnt.rebuild_scale;
         // A rebuild that earned back less than half its cost before the old tree won was a
-        // mistake to learn from (on `swap.glb` a tree built mid-swap is worse than the frame-0
-        // tree two frames later); one that earned more was worth about what it cost (on
-        // `AnimatedMorphSphere` the morph swings back to where the old tree was built, and
-        // penalising those returns halved the rebuilds the mesh needs).
+        // mistake to learn from (a tree built mid-way through a motion that swings back is
+        // soon worse than the old one); one that earned more was worth about what it cost (a
+        // morph that returns to where the old tree was built), and penalising those returns
+        // would keep the mesh from the rebuilds it needs.
         if p.saved_ms < 0.5 * p.rebuild_ms {
             m.state.rebuild_failed();
         }

@@ -27,6 +27,65 @@ pub trait FrameSource {
     fn flat_triangle(&self, hit: &SceneHit) -> usize;
     /// Triangles in the scene.
     fn triangle_count(&self) -> usize;
+    /// The number reports give this source's frame 0: 0, unless the source is a stretch of a
+    /// longer sequence ([`Window`]), so that its frames keep the longer sequence's numbers.
+    fn first_frame(&self) -> usize {
+        0
+    }
+}
+
+/// Frames `start..end` (end excluded) of another source, as a source of its own: its frame 0
+/// is `start` (the pose engines are built at) and its last frame `end - 1`.
+pub struct Window<'a> {
+    inner: &'a mut dyn FrameSource,
+    start: usize,
+    end: usize,
+}
+
+impl<'a> Window<'a> {
+    /// The stretch `start..end` of `inner`, or `None` unless it holds at least two frames
+    /// within `inner`'s `0 ..= frames()`.
+    pub fn new(inner: &'a mut dyn FrameSource, start: usize, end: usize) -> Option<Self> {
+        (start + 2 <= end && end <= inner.frames() + 1).then_some(Self { inner, start, end })
+    }
+}
+
+impl FrameSource for Window<'_> {
+    fn name(&self) -> String {
+        format!("{} frames {}..{}", self.inner.name(), self.start, self.end)
+    }
+
+    fn frames(&self) -> usize {
+        self.end - self.start - 1
+    }
+
+    fn build(&mut self, frame: usize, config: EngineConfig) -> Engine {
+        self.inner.build(self.start + frame, config)
+    }
+
+    fn advance(&mut self, engine: &mut Engine, frame: usize) {
+        self.inner.advance(engine, self.start + frame);
+    }
+
+    fn deforming(&self) -> &[MeshId] {
+        self.inner.deforming()
+    }
+
+    fn flatten_into(&self, out: &mut TriMesh) {
+        self.inner.flatten_into(out);
+    }
+
+    fn flat_triangle(&self, hit: &SceneHit) -> usize {
+        self.inner.flat_triangle(hit)
+    }
+
+    fn triangle_count(&self) -> usize {
+        self.inner.triangle_count()
+    }
+
+    fn first_frame(&self) -> usize {
+        self.inner.first_frame() + self.start
+    }
 }
 
 /// A generated deforming mesh: a bumpy sphere under a travelling sine wave, one instance.

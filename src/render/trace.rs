@@ -281,7 +281,7 @@ pub struct PacketUse {
 }
 
 impl PacketUse {
-    /// What measured faster (`dynbvh render --bench`): packets for both.
+    /// Packets for both, the faster choice (compare with `dynbvh render --bench`).
     pub const DEFAULT: PacketUse = PacketUse {
         primary: true,
         shadow: true,
@@ -296,6 +296,33 @@ impl PacketUse {
 impl Default for PacketUse {
     fn default() -> Self {
         Self::DEFAULT
+    }
+}
+
+impl std::str::FromStr for PacketUse {
+    type Err = String;
+
+    /// `both`, `primary`, `shadow` or `none`: the rays traced as packets.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (primary, shadow) = match s.trim().to_ascii_lowercase().as_str() {
+            "both" => (true, true),
+            "primary" => (true, false),
+            "shadow" => (false, true),
+            "none" => (false, false),
+            _ => return Err(format!("{s:?}: expected both, primary, shadow or none")),
+        };
+        Ok(PacketUse { primary, shadow })
+    }
+}
+
+impl std::fmt::Display for PacketUse {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match (self.primary, self.shadow) {
+            (true, true) => "both",
+            (true, false) => "primary",
+            (false, true) => "shadow",
+            (false, false) => "none",
+        })
     }
 }
 
@@ -380,6 +407,16 @@ impl Tracer for BruteForce<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn packet_use_names_round_trip() {
+        for name in ["both", "primary", "shadow", "none"] {
+            let p: PacketUse = name.parse().unwrap();
+            assert_eq!(p.to_string(), name);
+        }
+        assert_eq!("both".parse::<PacketUse>(), Ok(PacketUse::DEFAULT));
+        assert!("all".parse::<PacketUse>().is_err());
+    }
 
     #[test]
     fn normals_of_a_tent_are_area_weighted() {

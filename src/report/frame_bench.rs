@@ -137,7 +137,8 @@ impl Default for Options {
 pub struct FrameRow {
     /// Policy name.
     pub policy: String,
-    /// Frame number (1-based; frame 0 is the pose the engine was built at).
+    /// Frame number (frame 0 is the animation's start; the engines are built at the run's
+    /// first frame, which has no row).
     pub frame: usize,
     /// `refit`, `rebuild` (some mesh rebuilt) or `none`.
     pub action: Action,
@@ -265,7 +266,7 @@ pub struct PolicySummary {
     /// True when `wait_ms` exceeds [`BUSY_SHARE`] of `cpu_ms`: the machine was busy and the
     /// wall-clock figures are disturbed.
     pub busy: bool,
-    /// Frames (1-based) some mesh was rebuilt at.
+    /// Frames some mesh was rebuilt at (numbered as [`FrameRow::frame`]).
     pub rebuild_frames: Vec<usize>,
     /// Wall-clock time of sampling over the wall-clock trace time.
     pub sample_share: f64,
@@ -926,7 +927,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             }
         })
         .collect();
-    Report {
+    let mut report = Report {
         source: src.name(),
         triangles: src.triangle_count(),
         deforming_meshes: deforming,
@@ -944,6 +945,30 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         tlas,
         speed,
         per_frame,
+    };
+    number_frames(&mut report, src.first_frame());
+    report
+}
+
+/// Gives the report's frames the source's numbers (the run counts from 0, the frame it was
+/// built at; a [`crate::engine::source::Window`] starts further on).
+fn number_frames(r: &mut Report, first: usize) {
+    if first == 0 {
+        return;
+    }
+    for row in &mut r.per_frame {
+        row.frame += first;
+    }
+    let frame_lists = r
+        .policies
+        .iter_mut()
+        .map(|p| &mut p.rebuild_frames)
+        .chain(r.oracle.rebuild_frames.iter_mut())
+        .chain(r.oracle_modelled.rebuild_frames.iter_mut());
+    for list in frame_lists {
+        for f in list {
+            *f += first;
+        }
     }
 }
 
@@ -1164,10 +1189,10 @@ fn modelled_table(r: &Report) -> String {
     ));
     for q in &r.policies {
         s.push_str(&format!(
-            "{:<16} {:>12.3} {:>8.4} {:>8} {:>10.2} {:>10.2} {:>5} {:>9} {:>8.3} {:>8.3} {:>8.3}\n",
+            "{:<16} {:>12.3} {:>8} {:>8} {:>10.2} {:>10.2} {:>5} {:>9} {:>8.3} {:>8.3} {:>8.3}\n",
             format!("{}{}", q.policy, if q.default { "*" } else { "" }),
             q.modelled_ms,
-            q.oracle_ratio_modelled,
+            super::nonzero_or_dash(q.oracle_ratio_modelled, 4),
             q.rebuilds,
             q.wall_ms,
             q.cpu_ms,
@@ -1175,7 +1200,7 @@ fn modelled_table(r: &Report) -> String {
             if q.busy {
                 "(busy)".to_string()
             } else {
-                format!("{:.3}", q.oracle_ratio)
+                super::nonzero_or_dash(q.oracle_ratio, 3)
             },
             q.p50_ms,
             q.p95_ms,
@@ -1257,7 +1282,7 @@ pub fn summary_table(r: &Report) -> String {
     ));
     for p in &r.policies {
         s.push_str(&format!(
-            "{:<14} {:>10.2} {:>10.2} {:>10.2} {:>9.3} {:>9.3} {:>8} {:>8.3} {:>8.3} {:>9.3} {:>8.3}\n",
+            "{:<14} {:>10.2} {:>10.2} {:>10.2} {:>9.3} {:>9.3} {:>8} {:>8.3} {:>8.3} {:>9} {:>8}\n",
             format!("{}{}", p.policy, if p.default { "*" } else { "" }),
             p.total_ms,
             p.update_ms,
@@ -1271,8 +1296,8 @@ pub fn summary_table(r: &Report) -> String {
             },
             p.mean_sah_ratio,
             p.max_sah_ratio,
-            p.max_fresh_ratio,
-            p.oracle_ratio
+            super::nonzero_or_dash(f64::from(p.max_fresh_ratio), 3),
+            super::nonzero_or_dash(p.oracle_ratio, 3)
         ));
     }
     if r.oracle.total_ms > 0.0 {
@@ -1307,22 +1332,21 @@ pub fn summary_table(r: &Report) -> String {
         r.frames, "policy", "pose", "meshes", "tlas", "update", "trace", "upd/trace", "mean upd"
     ));
     for p in &r.policies {
-        let ratio = if p.median_trace_ms > 0.0 {
-            p.median_update_ms / p.median_trace_ms
-        } else {
-            f64::INFINITY
-        };
+        let ratio = (p.median_trace_ms > 0.0).then(|| p.median_update_ms / p.median_trace_ms);
         s.push_str(&format!(
-            "{:<14} {:>9.3} {:>9.3} {:>9.4} {:>10.3} {:>10.3} {:>10.3} {:>10.3}  {}\n",
+            "{:<14} {:>9.3} {:>9.3} {:>9.4} {:>10.3} {:>10.3} {:>10} {:>10.3}  {}\n",
             format!("{}{}", p.policy, if p.default { "*" } else { "" }),
             p.median_pose_ms,
             p.median_blas_ms,
             p.median_tlas_ms,
             p.median_update_ms,
             p.median_trace_ms,
-            ratio,
+            super::or_dash(ratio, 3),
             p.update_ms_per_frame,
-            match (ratio < 1.0, p.update_ms_per_frame < p.trace_ms_per_frame) {
+            match (
+                ratio.is_some_and(|r| r < 1.0),
+                p.update_ms_per_frame < p.trace_ms_per_frame
+            ) {
                 (true, true) => "yes (median and mean)",
                 (true, false) => "median only",
                 (false, true) => "mean only",
@@ -1702,8 +1726,15 @@ fn sweep_rows(reports: &[Report]) -> String {
         "total time / oracle ({} frames, {} rays/frame, {} thread(s); * default)\n",
         first.frames, first.rays_per_frame, first.threads
     );
+    // The name column fits the longest name, so that no file name is cut.
+    let width = reports
+        .iter()
+        .map(|r| r.source.chars().count())
+        .chain(["file [animation]".len()])
+        .max()
+        .unwrap_or(0);
     s.push_str(&format!(
-        "{:<44} {:>7} {:>4}",
+        "{:<width$} {:>7} {:>4}",
         "file [animation]", "tris", "dfm"
     ));
     for n in names.iter().chain(&tlas_names) {
@@ -1713,18 +1744,18 @@ fn sweep_rows(reports: &[Report]) -> String {
     let mut worst = vec![0.0f64; names.len()];
     let mut worst_tlas = vec![0.0f64; tlas_names.len()];
     for r in reports {
-        let mut name = r.source.clone();
-        if name.len() > 44 {
-            name = format!("...{}", &name[name.len() - 41..]);
-        }
         s.push_str(&format!(
-            "{:<44} {:>7} {:>4}",
-            name, r.triangles, r.deforming_meshes
+            "{:<width$} {:>7} {:>4}",
+            r.source, r.triangles, r.deforming_meshes
         ));
         for (k, n) in names.iter().enumerate() {
             let v = r.policies.get(k).map_or(0.0, |p| p.oracle_ratio);
             worst[k] = worst[k].max(v);
-            s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+            s.push_str(&format!(
+                " {:>w$}",
+                super::nonzero_or_dash(v, 3),
+                w = n.len().max(8)
+            ));
         }
         let best_tlas = r
             .tlas
@@ -1734,16 +1765,25 @@ fn sweep_rows(reports: &[Report]) -> String {
         for (k, n) in tlas_names.iter().enumerate() {
             let v = r.tlas.get(k).map_or(0.0, |t| t.total_ms / best_tlas);
             worst_tlas[k] = worst_tlas[k].max(v);
-            s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+            s.push_str(&format!(
+                " {:>w$}",
+                super::nonzero_or_dash(v, 3),
+                w = n.len().max(8)
+            ));
         }
         s.push('\n');
     }
-    s.push_str(&format!("{:<44} {:>7} {:>4}", "worst", "", ""));
-    for (v, n) in worst.iter().zip(&names) {
-        s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
-    }
-    for (v, n) in worst_tlas.iter().zip(&tlas_names) {
-        s.push_str(&format!(" {:>w$.3}", v, w = n.len().max(8)));
+    s.push_str(&format!("{:<width$} {:>7} {:>4}", "worst", "", ""));
+    for (v, n) in worst
+        .iter()
+        .zip(&names)
+        .chain(worst_tlas.iter().zip(&tlas_names))
+    {
+        s.push_str(&format!(
+            " {:>w$}",
+            super::nonzero_or_dash(*v, 3),
+            w = n.len().max(8)
+        ));
     }
     s.push_str("\n(tlas columns: total time over the best top-level policy on that file)\n");
     s

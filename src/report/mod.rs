@@ -10,3 +10,36 @@ pub mod ray_sweep;
 pub mod rays;
 pub mod rungs;
 pub mod wide_bench;
+
+/// What the text tables print for a value that was not computed.
+pub const NOT_COMPUTED: &str = "\u{2013}";
+
+/// `v` with `decimals` decimals, or [`NOT_COMPUTED`] when it is `None` or not finite.
+#[must_use]
+pub fn or_dash(v: Option<f64>, decimals: usize) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:.decimals$}"),
+        _ => NOT_COMPUTED.to_string(),
+    }
+}
+
+/// `v`, where 0 stands for "not computed" (as in the reports' ratios to the oracle), with
+/// `decimals` decimals, or [`NOT_COMPUTED`].
+#[must_use]
+pub fn nonzero_or_dash(v: f64, decimals: usize) -> String {
+    or_dash((v != 0.0).then_some(v), decimals)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dashes_for_missing_values() {
+        assert_eq!(or_dash(Some(1.23456), 3), "1.235");
+        assert_eq!(or_dash(None, 3), NOT_COMPUTED);
+        assert_eq!(or_dash(Some(f64::NAN), 2), NOT_COMPUTED);
+        assert_eq!(nonzero_or_dash(0.0, 3), NOT_COMPUTED);
+        assert_eq!(nonzero_or_dash(1.5, 1), "1.5");
+    }
+}

@@ -151,7 +151,7 @@ fn pct(x: f64) -> String {
     if x.is_finite() {
         format!("{:.0}%", 100.0 * x)
     } else {
-        "–".into()
+        super::NOT_COMPUTED.into()
     }
 }
 

@@ -37,8 +37,7 @@ impl Splitter for Median {
 }
 
 /// Puts the reference with the `mid`-th smallest centroid on `axis` at `mid`, the smaller ones
-/// before it. Kept out of line: inlined into `split`, the selection came out a few per cent
-/// slower.
+/// before it. Kept out of line: inlined into `split`, the selection runs slower.
 #[inline(never)]
 fn select_median(refs: &mut [PrimRef], mid: usize, axis: usize) {
     refs.select_nth_unstable_by(mid, |a, b| a.c2()[axis].total_cmp(&b.c2()[axis]));

@@ -55,15 +55,10 @@ pub const MAX_BINS: usize = 64;
 impl BuildParams {
     /// Binned SAH with the default bin count: the builder dynbvh uses for rebuilds.
     ///
-    /// Why 16 bins on all three axes (`examples/prof_build.rs`, one thread, CPU time of a warm
-    /// rebuild, sphere_1m; full sweep SAH 48.80): 4 / 8 / 16 / 32 bins took 189 / 194 / 204 /
-    /// 208 ms for SAH 50.27 / 49.67 / 49.36 / 49.12. The builder bins while it partitions, so
-    /// the bin count changes the time by a few per cent only, and 16 bins stay within 1.2% of
-    /// the sweep on every shared input (8 bins: 1.8% at 1M and on sphere_100k). (Those figures
-    /// predate the cheaper small nodes of `docs/build_speed.md`'s third round, after which 16
-    /// bins are within 1.4% of the sweep.) Binning only the
-    /// widest axis saved 10% of the time (184 ms) for a 4.3% worse SAH (51.47), which costs
-    /// more in tracing than it saves in building.
+    /// Why 16 bins on all three axes: the builder bins while it partitions, so the bin count
+    /// changes the build time little, and 16 bins come close to the full sweep's SAH; binning
+    /// only the widest axis saves less build time than its worse trees cost in tracing. The
+    /// runs are in `docs/build_speed.md`.
     pub const BINNED: BuildParams = BuildParams::binned(16);
     /// Full-sweep SAH: slowest, best quality.
     pub const SWEEP: BuildParams = BuildParams {

@@ -40,9 +40,9 @@ const FIRST_BITS: u32 = 27;
 /// are split into several.
 pub const MAX_WIDE_LEAF: u32 = 16;
 /// Binary subtrees of at most this many triangles that do not fit into their parent's lanes
-/// become one leaf lane (two blocks of four) instead of a nearly empty node of their own.
-/// On sphere_1m (BVH8, one thread) 6, 8 and 12 traced within noise of each other, and 4 about
-/// 15% slower on random rays; 8 fills nodes to 7.75 children of 8.
+/// become one leaf lane (two blocks of four) instead of a nearly empty node of their own;
+/// 8 keeps the nodes nearly full (values near it trace alike, smaller ones slower: see
+/// `docs/wide.md`).
 const MERGE: u32 = 8;
 /// Most triangles a wide tree holds (its leaves store the first slot in 27 bits).
 pub const MAX_WIDE_PRIMS: usize = 1 << FIRST_BITS;

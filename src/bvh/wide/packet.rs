@@ -1,19 +1,16 @@
-//! Packet traversal of the wide tree: up to [`MAX_PACKET`](crate::bvh::MAX_PACKET) coherent rays walk a [`WideBvh`]
-//! together, as they walk the binary tree in `crate::bvh::packet`.
+//! Packet traversal of the wide tree: up to [`MAX_PACKET`](crate::bvh::MAX_PACKET) coherent
+//! rays walk a [`WideBvh`] together, as they walk the binary tree in `crate::bvh::packet`.
 //!
 //! - An interior node is expanded once for the packet: one interval-arithmetic test of the
-//!   packet's origin and reciprocal-direction bounds against all `K` child boxes culls the
-//!   children no ray can reach, and the others go on the stack ordered by the packet's mean
-//!   direction (the child whose centre lies furthest along it at the bottom).
+//!   packet's ray bounds against all `K` child boxes culls the children no ray can reach; the
+//!   others go on the stack ordered by the packet's mean direction.
 //! - A stack entry is a child lane with the index of the first ray that may still need it
-//!   (first-active-ray traversal). When it is popped, its box is tested against the rays from
-//!   that one on (16 rays per SIMD test, stopping at the first group with a hit) with their
-//!   current `tmax`, so a child behind the hits found meanwhile is skipped.
-//! - A leaf's rays are those whose slab test touches its box; its triangle blocks are tested
-//!   triangle by triangle against them with the watertight 16-ray kernel, which reports bit for
-//!   bit the single-ray test's distances.
-//! - A subtree that at most [`SINGLE_BELOW`] rays still need is walked by each of them alone with
-//!   the single-ray wide traversal; packets that are not coherent are traced ray by ray.
+//!   (first-active-ray traversal); when popped, its box is tested against the rays from that
+//!   one on (16 rays per SIMD test) with their current `tmax`.
+//! - A leaf's triangle blocks are tested against the rays whose slab test touches its box,
+//!   with the watertight 16-ray kernel (bit for bit the single-ray test's distances).
+//! - A subtree that at most [`SINGLE_BELOW`] rays still need is walked by each of them alone;
+//!   packets that are not coherent are traced ray by ray.
 
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};

@@ -67,7 +67,7 @@ impl<const K: usize> WideBvh<K> {
     }
 
     /// Asks for the cache lines of a child that is likely visited soon: the whole node, or a
-    /// leaf's first block (prefetching every block of a leaf measured no better).
+    /// leaf's first block (asking for every block of a leaf traced no faster).
     #[inline(always)]
     pub(super) fn prefetch(&self, c: u32) {
         if c & LEAF_BIT != 0 {
