@@ -217,7 +217,16 @@ fn sweep_lists_failures_and_exits_non_zero() {
     std::fs::copy(animation("swap.glb"), dir.join("swap.glb")).unwrap();
     let dir_s = dir.to_string_lossy().into_owned();
     let o = dynbvh(&[
-        "bench", "--all", "--dir", &dir_s, "--frames", "4", "--size", "16x16",
+        "bench",
+        "--all",
+        "--dir",
+        &dir_s,
+        "--generated",
+        "none",
+        "--frames",
+        "4",
+        "--size",
+        "16x16",
     ]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(!o.status.success(), "a failed file must fail the sweep");

@@ -32,6 +32,11 @@ pub struct BenchArgs {
     /// Folder searched by `--all` (repeatable).
     #[arg(long = "dir", requires = "all")]
     dirs: Vec<PathBuf>,
+    /// Sizes (triangles, e.g. 100k,1m) at which `--all` also generates and runs the explode,
+    /// swap, tube and wave animations (the scenes where a tree update costs as much as the
+    /// trace); `none` for none. Default 100k,1m (the 1M rows take a few minutes each).
+    #[arg(long, requires = "all", value_name = "SIZES", value_parser = generated_sizes)]
+    generated: Option<GeneratedSizes>,
     /// Instead of a file: a bumpy sphere of about N triangles deformed by a travelling wave.
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     synthetic: Option<usize>,
@@ -338,6 +343,68 @@ fn gltf_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
+/// Triangle counts of the generated rows of `bench --all`.
+#[derive(Clone, Debug)]
+pub struct GeneratedSizes(Vec<usize>);
+
+impl Default for GeneratedSizes {
+    fn default() -> Self {
+        Self(vec![100_000, 1_000_000])
+    }
+}
+
+/// Largest generated size `--generated` takes.
+const MAX_GENERATED: usize = 4_000_000;
+
+fn generated_sizes(s: &str) -> Result<GeneratedSizes, String> {
+    if s.trim().eq_ignore_ascii_case("none") {
+        return Ok(GeneratedSizes(Vec::new()));
+    }
+    s.split(',')
+        .map(|t| {
+            let t = t.trim().to_ascii_lowercase();
+            let (digits, scale) = match t.strip_suffix('k') {
+                Some(d) => (d, 1_000),
+                None => match t.strip_suffix('m') {
+                    Some(d) => (d, 1_000_000),
+                    None => (t.as_str(), 1),
+                },
+            };
+            let n = digits
+                .parse::<usize>()
+                .ok()
+                .and_then(|n| n.checked_mul(scale))
+                .ok_or_else(|| format!("{t:?}: expected a triangle count such as 100k or 1m"))?;
+            if (1_000..=MAX_GENERATED).contains(&n) {
+                Ok(n)
+            } else {
+                Err(format!("{t:?}: from 1k to {MAX_GENERATED} triangles"))
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(GeneratedSizes)
+}
+
+/// The generated animations of `bench --all`, written under the system's temporary folder
+/// (made again on every run: the generator is deterministic).
+fn generated_files(sizes: &GeneratedSizes, limits: &Limits) -> Result<Vec<PathBuf>> {
+    use dynbvh::anim::generate::{Kind, generate};
+    let dir = std::env::temp_dir().join("dynbvh-bench-generated");
+    let mut out = Vec::new();
+    for &n in &sizes.0 {
+        for kind in [Kind::Explode, Kind::Swap, Kind::Tube, Kind::Wave] {
+            limits.check_memory(&format!("--generated {n}"), n as u64 * 600)?;
+            std::fs::create_dir_all(&dir).map_err(|e| dynbvh::Error::io(&dir, e))?;
+            let path = dir.join(format!("{}_{}.glb", kind.name(), n));
+            eprintln!("generating {} ...", path.display());
+            let g = generate(kind, n, 1);
+            std::fs::write(&path, &g.glb).map_err(|e| dynbvh::Error::io(&path, e))?;
+            out.push(path);
+        }
+    }
+    Ok(out)
+}
+
 /// `bench --all`: the sweep over every animated file.
 fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
     let dirs = if a.dirs.is_empty() {
@@ -352,6 +419,10 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
     for d in &dirs {
         gltf_files(d, &mut files)?;
     }
+    files.extend(generated_files(
+        &a.generated.clone().unwrap_or_default(),
+        &a.limits,
+    )?);
     let mut reports = Vec::new();
     let mut failed = Vec::new();
     let mut not_animated = Vec::new();
@@ -459,4 +530,19 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod generated_tests {
+    use super::generated_sizes;
+
+    #[test]
+    fn generated_sizes_parse_counts_suffixes_and_none() {
+        assert_eq!(generated_sizes("100k,1m").unwrap().0, [100_000, 1_000_000]);
+        assert_eq!(generated_sizes(" 250000 ").unwrap().0, [250_000]);
+        assert!(generated_sizes("none").unwrap().0.is_empty());
+        for bad in ["", "k", "10", "5m", "1.5m", "-1k", "99999999999999999999m"] {
+            assert!(generated_sizes(bad).is_err(), "{bad:?}");
+        }
+    }
 }

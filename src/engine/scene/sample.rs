@@ -39,11 +39,41 @@ struct SampleLog {
     /// The entries' capacity when the pass began.
     capacity: usize,
     sums: SampleSums,
-    /// Wall-clock time of the sampled rays' recorded traces and of the others, summed over
-    /// the tasks, ns (the sampling overhead is measured from them).
-    sampled_ns: f64,
-    plain_ns: f64,
+    clock: PassClock,
 }
+
+/// What a pass's sampling took beyond its trace, measured in pairs: every [`TIMED`]-th
+/// sampled ray's recorded trace and the plain trace of the ray cast right after it (a
+/// neighbour of the same kind), each timed, so that the clock's own cost cancels out of the
+/// difference; summed over the tasks, with the tasks' whole time.
+#[derive(Clone, Copy, Debug, Default)]
+struct PassClock {
+    recorded_ns: f64,
+    neighbour_ns: f64,
+    pairs: u64,
+    pass_ns: f64,
+}
+
+impl PassClock {
+    fn merge(&mut self, o: &Self) {
+        self.recorded_ns += o.recorded_ns;
+        self.neighbour_ns += o.neighbour_ns;
+        self.pairs += o.pairs;
+        self.pass_ns += o.pass_ns;
+    }
+
+    /// The share of the pass the sampling of `sampled` rays took.
+    fn share(&self, sampled: u64) -> f64 {
+        if self.pairs == 0 || self.pass_ns <= 0.0 {
+            return 0.0;
+        }
+        let per_ray = (self.recorded_ns - self.neighbour_ns) / self.pairs as f64;
+        (per_ray * sampled as f64 / self.pass_ns).max(0.0)
+    }
+}
+
+/// One sampled ray in this many is timed against its neighbour.
+const TIMED: usize = 8;
 
 /// Entries a task keeps before moving them into the log.
 const BUF: usize = 32;
@@ -53,8 +83,7 @@ struct TaskBuf<'a> {
     items: [SampleEntry; BUF],
     len: usize,
     sums: SampleSums,
-    sampled_ns: f64,
-    plain_ns: f64,
+    clock: PassClock,
     log: &'a Mutex<SampleLog>,
 }
 
@@ -70,8 +99,7 @@ impl<'a> TaskBuf<'a> {
             items: [blank; BUF],
             len: 0,
             sums: SampleSums::default(),
-            sampled_ns: 0.0,
-            plain_ns: 0.0,
+            clock: PassClock::default(),
             log,
         }
     }
@@ -88,12 +116,10 @@ impl<'a> TaskBuf<'a> {
         let mut log = self.log.lock().unwrap_or_else(PoisonError::into_inner);
         log.entries.extend_from_slice(&self.items[..self.len]);
         log.sums.merge(&self.sums);
-        log.sampled_ns += self.sampled_ns;
-        log.plain_ns += self.plain_ns;
+        log.clock.merge(&self.clock);
         self.len = 0;
         self.sums = SampleSums::default();
-        self.sampled_ns = 0.0;
-        self.plain_ns = 0.0;
+        self.clock = PassClock::default();
     }
 }
 
@@ -166,41 +192,74 @@ impl Engine {
         out.par_chunks_mut(RAY_CHUNK)
             .zip(rays.par_chunks(RAY_CHUNK))
             .enumerate()
-            .for_each(|(c, (o, r))| {
+            .for_each(|(c, (o, chunk))| {
                 let base = c * RAY_CHUNK;
                 let Some(plan) = plan.filter(|p| p.first < rays.len()) else {
-                    for (o, r) in o.iter_mut().zip(r) {
+                    for (o, r) in o.iter_mut().zip(chunk) {
                         *o = plain(this, r);
                     }
                     return;
                 };
                 let mut buf = TaskBuf::new(&log);
                 let start = Instant::now();
-                let mut sampled_ns = 0.0;
-                for (j, (o, r)) in o.iter_mut().zip(r).enumerate() {
-                    if plan.takes(base + j) {
-                        let ts = Instant::now();
+                // A timed ray's time until its pair is complete: half the pairs time the plain
+                // neighbour after the sampled ray, half before it, so that what the first leaves
+                // in the caches for the second favours neither side.
+                let mut pending: Option<(f64, bool)> = None;
+                let timed = |i: usize| {
+                    let k = (i - plan.first) / plan.stride;
+                    k.is_multiple_of(TIMED)
+                        .then_some((k / TIMED).is_multiple_of(2))
+                };
+                for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
+                    let i = base + j;
+                    if plan.takes(i) {
+                        let order = timed(i);
+                        let ts = order.map(|_| Instant::now());
                         let t = this.trace_recording(r, query, &mut |e| buf.push(e));
                         buf.sums.add(t.work, t.top);
                         *o = recorded(&t);
-                        sampled_ns += ts.elapsed().as_nanos() as f64;
-                    } else {
+                        if let Some(ts) = ts {
+                            let ns = ts.elapsed().as_nanos() as f64;
+                            match pending.take() {
+                                Some((plain_ns, false)) => {
+                                    buf.clock.recorded_ns += ns;
+                                    buf.clock.neighbour_ns += plain_ns;
+                                    buf.clock.pairs += 1;
+                                }
+                                _ if order == Some(true) => pending = Some((ns, true)),
+                                _ => {}
+                            }
+                        }
+                        continue;
+                    }
+                    let before_timed =
+                        j + 1 < chunk.len() && plan.takes(i + 1) && timed(i + 1) == Some(false);
+                    let after_timed = matches!(pending, Some((_, true)));
+                    if !(before_timed || after_timed) {
                         *o = plain(this, r);
+                        continue;
+                    }
+                    let ts = Instant::now();
+                    *o = plain(this, r);
+                    let ns = ts.elapsed().as_nanos() as f64;
+                    if let Some((recorded_ns, true)) = pending.take() {
+                        buf.clock.recorded_ns += recorded_ns;
+                        buf.clock.neighbour_ns += ns;
+                        buf.clock.pairs += 1;
+                    }
+                    if before_timed {
+                        pending = Some((ns, false));
                     }
                 }
-                buf.sampled_ns += sampled_ns;
-                buf.plain_ns += start.elapsed().as_nanos() as f64 - sampled_ns;
+                buf.clock.pass_ns += start.elapsed().as_nanos() as f64;
             });
         let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
         if plan.is_none() {
             self.entries = log.entries;
             return 0.0;
         }
-        // Each sampled ray's overhead: its recorded trace beyond what an unsampled ray took.
-        let k = log.sums.sampled() as f64;
-        let plain_per_ray = log.plain_ns / (rays.len() as f64 - k).max(1.0);
-        let overhead = (log.sampled_ns - k * plain_per_ray).max(0.0);
-        let share = overhead / (log.sampled_ns + log.plain_ns).max(1.0);
+        let share = log.clock.share(log.sums.sampled());
         let model = self.config.prices.sample_ms(log.sums.sampled());
         self.close_log(log, before, model);
         self.stats.sample_ms += share * super::ms_since(pass);
