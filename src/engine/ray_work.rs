@@ -3,7 +3,8 @@
 //! uniformly random lines.
 //!
 //! The sample is systematic: every [`SAMPLE_STRIDE`]-th ray of the frame, counted over all of
-//! its calls from an offset drawn from the frame number, is traced again with counters. Each
+//! its calls from an offset drawn from the frame number, is traced with counters (in the
+//! batch's own pass, or again for rays traced outside the batch queries). Each
 //! ray is sampled with probability `1 / stride`, so `stride` times the sampled work is an
 //! unbiased estimate of the frame's total (Horvitz-Thompson), the same on every run.
 //!
@@ -19,7 +20,7 @@ use crate::geom::Ray;
 use std::fmt;
 use std::str::FromStr;
 
-/// One ray in this many is traced again with counters.
+/// One ray in this many is taken into the sample.
 pub const SAMPLE_STRIDE: u64 = 64;
 
 /// What a policy measures a tree's degradation and a frame's trace cost by.

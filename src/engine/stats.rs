@@ -86,9 +86,10 @@ pub struct FrameStats {
     /// Modelled trace cost of the frame's rays: the ray-work sample's estimate of the frame's
     /// total work at the engine's prices, ms.
     pub model_trace_ms: f64,
-    /// Modelled cost of tracing the sample again with counters, ms.
+    /// Modelled cost of the sample: what counting the sampled rays in the trace's own pass
+    /// adds, or their whole work when they were traced again ([`super::Engine::sample_rays`]), ms.
     pub model_sample_ms: f64,
-    /// Wall-clock time spent sampling (tracing the sampled rays again with counters), ms.
+    /// Wall-clock time sampling added to the trace (measured in the pass), ms.
     pub sample_ms: f64,
     /// The ray-work sample's estimate of the mean work per ray.
     pub work: super::ray_work::WorkEstimate,
