@@ -68,6 +68,9 @@ struct Job {
     sensor_rays: &'static [usize],
     /// Triangles and passes of the price calibration.
     calibration: (usize, usize),
+    /// Triangles of the generated explode animation the policies are also benchmarked on (a
+    /// mesh whose updates cost as much as its trace), and its frames.
+    generated: (usize, usize),
 }
 
 impl Job {
@@ -83,8 +86,17 @@ impl Job {
             bench_rays: (256, 192),
             sensor_rays: &SENSOR_RAYS,
             calibration: (100_000, 5),
+            generated: (100_000, 30),
         }
     }
+}
+
+/// A policy's modelled total over the oracle's in `r`, `–` when it did not run.
+fn ratio_of(r: &frame_bench::Report, policy: &str) -> String {
+    r.policies.iter().find(|p| p.policy == policy).map_or_else(
+        || "–".to_owned(),
+        |p| format!("{:.3}x", p.oracle_ratio_modelled),
+    )
 }
 
 /// Runs the default job.
@@ -157,6 +169,29 @@ fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
     let table = frame_bench::summary_table(&report);
     let mut charts = super::bench::write_report(&bench_dir, &report, &table)?;
 
+    let (gen_tris, gen_frames) = job.generated;
+    eprintln!("benchmarking the policies on a generated explode of {gen_tris} triangles ...");
+    let generated =
+        dynbvh::anim::generate::generate(dynbvh::anim::generate::Kind::Explode, gen_tris, 1);
+    let gen_dir = bench_dir.join(format!("explode_{gen_tris}"));
+    std::fs::create_dir_all(&gen_dir).map_err(|e| dynbvh::Error::io(&gen_dir, e))?;
+    let gen_file = gen_dir.join("explode.glb");
+    std::fs::write(&gen_file, &generated.glb).map_err(|e| dynbvh::Error::io(&gen_file, e))?;
+    let gen_scene = super::load_scene(&gen_file, None)?;
+    let mut gen_src = GltfSource::new(&gen_scene, Some(0), FrameTimes::Count(gen_frames))?;
+    let gen_report = frame_bench::run(
+        &mut gen_src,
+        &Options {
+            rays: RaySpec::Size(128, 128),
+            builders: Vec::new(),
+            tlas_compare: false,
+            ..opts.clone()
+        },
+        |m| eprintln!("  {m} ..."),
+    );
+    let gen_table = frame_bench::summary_table(&gen_report);
+    let gen_charts = super::bench::write_report(&gen_dir, &gen_report, &gen_table)?;
+
     eprintln!("refit or rebuild at 1k to 1M lidar rays a frame on the sensor scene ...");
     let sensor = base_dir().join(SENSOR_ANIMATION);
     let sensor_scene = super::load_scene(&sensor, None)?;
@@ -185,6 +220,7 @@ fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
     // Where everything went.
     writeln!(w)?;
     writeln!(w, "{table}")?;
+    writeln!(w, "{gen_table}")?;
     writeln!(w, "{sweep_table}")?;
     writeln!(w, "written:")?;
     writeln!(
@@ -213,6 +249,12 @@ fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
         "  {:<44} summary.txt, report.json, frames.csv, charts {} (.svg and .png)",
         format!("{}/", bench_dir.display()),
         charts.join(", ")
+    )?;
+    writeln!(
+        w,
+        "  {:<44} the same on the generated explode ({gen_tris} triangles): charts {}",
+        format!("{}/", gen_dir.display()),
+        gen_charts.join(", ")
     )?;
 
     // The short story.
@@ -280,6 +322,18 @@ fn run_job(job: &Job, w: &mut dyn Write) -> Result<()> {
             w,
             "  default policy {}: {:.1} ms modelled, {} rebuilds, {:.3}x the oracle",
             d.policy, d.modelled_ms, d.rebuilds, d.oracle_ratio_modelled
+        )?;
+    }
+    if let Some(d) = gen_report.policies.iter().find(|p| p.default) {
+        writeln!(
+            w,
+            "  generated explode of {gen_tris} triangles: default policy {:.3}x the oracle ({} \
+             rebuilds against its {}; always-refit {}, always-rebuild {})",
+            d.oracle_ratio_modelled,
+            d.rebuilds,
+            gen_report.oracle_modelled.rebuilds,
+            ratio_of(&gen_report, "refit"),
+            ratio_of(&gen_report, "rebuild"),
         )?;
     }
     if let (Some(first), Some(last)) = (sweep.rows.first(), sweep.rows.last()) {
@@ -358,6 +412,7 @@ mod tests {
             bench_rays: (48, 36),
             sensor_rays: &[500, 2000],
             calibration: (5_000, 1),
+            generated: (2_000, 4),
         };
         let mut printed = Vec::new();
         run_job(&job, &mut printed).unwrap();
