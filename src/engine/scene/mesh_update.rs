@@ -312,8 +312,8 @@ impl MeshEntry {
             }
         }
         let replaced = self.state;
-        // What the policy weighs; the statistics keep the measured time.
-        // (The measured time includes the replays already.)
+        // What the policy weighs, the replays that judge it included (the measured time has
+        // them already); the statistics keep the measured time.
         let rebuild_cost = match cx.timing {
             Timing::Measured => rebuild_ms,
             t => t.build_ms(rebuild_ms, tris, &cx.prices) + replay_ms,
