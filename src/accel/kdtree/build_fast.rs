@@ -233,9 +233,11 @@ fn split_list(
     tmp: &mut Vec<Event>,
 ) -> (Range<usize>, Range<usize>) {
     let len = src.len();
-    tmp.clear();
-    tmp.resize(2 * len, 0);
-    let (tl, tr) = tmp.split_at_mut(len);
+    // Grown, never cleared: only the slots written below are read.
+    if tmp.len() < 2 * len {
+        tmp.resize(2 * len, 0);
+    }
+    let (tl, tr) = tmp[..2 * len].split_at_mut(len);
     let (mut nl, mut nr) = (0, 0);
     for &e in &list[src] {
         let s = side[tri_of(e) as usize];

@@ -102,20 +102,6 @@ pub(super) struct Split {
     pub(super) cost: f64,
 }
 
-/// The SAH cost of a split with `pl`, `pr` the children's area over the node's and `nl`, `nr`
-/// their triangle counts; an empty child earns the empty-space bonus.
-#[inline(always)]
-pub(super) fn split_cost(params: &KdParams, pl: f64, pr: f64, nl: usize, nr: usize) -> f64 {
-    let bonus = if nl == 0 || nr == 0 {
-        1.0 - f64::from(params.empty_bonus)
-    } else {
-        1.0
-    };
-    bonus
-        * (f64::from(params.traversal_cost)
-            + f64::from(params.intersection_cost) * (pl * nl as f64 + pr * nr as f64))
-}
-
 /// The cheapest split of `cell` among the planes of `events` (sorted, on `axis`) strictly inside
 /// the cell, for `n` triangles; `None` when the cell has no such plane.
 pub(super) fn best_split_on_axis(
@@ -136,41 +122,60 @@ pub(super) fn best_split_on_axis(
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let (eu, ev) = (f64::from(e[u]), f64::from(e[v]));
     let (face, perim) = (eu * ev / area, (eu + ev) / area);
-    let mut best: Option<Split> = None;
+    let (kt, ki) = (
+        f64::from(params.traversal_cost),
+        f64::from(params.intersection_cost),
+    );
+    let bonus = 1.0 - f64::from(params.empty_bonus);
+    let cost = |pl: f64, pr: f64, nl: usize, nr: usize| {
+        let c = kt + ki * (pl * nl as f64 + pr * nr as f64);
+        if nl == 0 || nr == 0 { bonus * c } else { c }
+    };
+    let (mut best_cost, mut best_pos, mut best_planar_left) = (f64::INFINITY, 0.0, true);
     let (mut nl, mut nr) = (0usize, n);
     let mut i = 0;
     while i < events.len() {
         let key = pos_key(events[i]);
-        let mut count = [0usize; 4];
-        while i < events.len() && pos_key(events[i]) == key {
-            count[kind_of(events[i])] += 1;
+        // Events at one position, counted by kind without branching on the kind.
+        let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
+        while let Some(&e) = events.get(i) {
+            if pos_key(e) != key {
+                break;
+            }
+            let k = kind_of(e);
+            ends += usize::from(k == 0);
+            planar += usize::from(k == 1);
+            starts += usize::from(k == 2);
             i += 1;
         }
-        let [ends, planar, starts, _] = count;
         nr -= planar + ends;
         let pos = pos_of(events[i - 1]);
         if lo < pos && pos < hi {
             let pl = face + perim * f64::from(pos - lo);
             let pr = face + perim * f64::from(hi - pos);
-            let cost_left = split_cost(params, pl, pr, nl + planar, nr);
-            let cost_right = split_cost(params, pl, pr, nl, nr + planar);
-            let (cost, planar_left) = if cost_left <= cost_right {
+            let cost_left = cost(pl, pr, nl + planar, nr);
+            let (c, planar_left) = if planar == 0 {
                 (cost_left, true)
             } else {
-                (cost_right, false)
+                let cost_right = cost(pl, pr, nl, nr + planar);
+                if cost_left <= cost_right {
+                    (cost_left, true)
+                } else {
+                    (cost_right, false)
+                }
             };
-            if best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split {
-                    axis,
-                    pos,
-                    planar_left,
-                    cost,
-                });
+            if c < best_cost {
+                (best_cost, best_pos, best_planar_left) = (c, pos, planar_left);
             }
         }
         nl += starts + planar;
     }
-    best
+    best_cost.is_finite().then_some(Split {
+        axis,
+        pos: best_pos,
+        planar_left: best_planar_left,
+        cost: best_cost,
+    })
 }
 
 /// The cheapest split over the three axes' sorted events (the lowest axis on ties), if it
