@@ -127,9 +127,12 @@ pub(super) fn best_split_on_axis(
         f64::from(params.intersection_cost),
     );
     let bonus = 1.0 - f64::from(params.empty_bonus);
+    // The bonus discounts the children's intersection cost only (as in pbrt), not the
+    // traversal: cutting empty space off a cell pays only where it saves triangle tests, so a
+    // leaf of one triangle is never cut down further.
     let cost = |pl: f64, pr: f64, nl: usize, nr: usize| {
-        let c = kt + ki * (pl * nl as f64 + pr * nr as f64);
-        if nl == 0 || nr == 0 { bonus * c } else { c }
+        let c = ki * (pl * nl as f64 + pr * nr as f64);
+        kt + if nl == 0 || nr == 0 { bonus * c } else { c }
     };
     let (mut best_cost, mut best_pos, mut best_planar_left) = (f64::INFINITY, 0.0, true);
     let (mut nl, mut nr) = (0usize, n);
