@@ -3,7 +3,9 @@
 //! two planes on one axis, the left child's largest and the right child's smallest coordinate.
 //! The build splits the node's candidate box (not its triangles' bounds) in the middle of its
 //! longest side, sorting triangles by their box centre, and halves the candidate box again
-//! when one side would be empty (the global heuristic). Traversal clips the ray's interval by
+//! when one side would be empty (the global heuristic); where that empty side leaves a wide gap
+//! between the triangles and the box traversal knows, a node with an empty child cuts the gap
+//! off (without it, rays through the gap reach the subtree). Traversal clips the ray's interval by
 //! both planes; the children may overlap, so both are visited, nearer first. A refit keeps the
 //! tree and recomputes the planes from the moved triangles.
 
@@ -146,19 +148,17 @@ impl Builder {
                 // One side empty: the candidate box is halved again (the global heuristic).
                 // Where the triangles leave a wide gap to the box traversal knows, a node with
                 // an empty child cuts it off, so rays through the gap skip the subtree.
-                let lo = items
-                    .iter()
-                    .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis]));
-                let hi = items
-                    .iter()
-                    .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis]));
                 let gap = seen.extent()[axis] * EMPTY_CUT;
-                let cut = if split == begin && lo - seen.min[axis] > gap {
-                    Some((true, [f32::NEG_INFINITY, lo]))
-                } else if split == end && seen.max[axis] - hi > gap {
-                    Some((false, [hi, f32::INFINITY]))
+                let cut = if split == begin {
+                    let lo = items
+                        .iter()
+                        .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis]));
+                    (lo - seen.min[axis] > gap).then_some((true, [f32::NEG_INFINITY, lo]))
                 } else {
-                    None
+                    let hi = items
+                        .iter()
+                        .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis]));
+                    (seen.max[axis] - hi > gap).then_some((false, [hi, f32::INFINITY]))
                 };
                 cand = if split == begin {
                     right_cand
@@ -167,18 +167,18 @@ impl Builder {
                 };
                 if let Some((left_empty, planes)) = cut {
                     let first = self.nodes.len();
+                    // The empty child is a leaf of no slots where its sibling's slots begin
+                    // (left) or end (right), so the leaves still cover the slots in order.
                     self.nodes.push(BihNode::leaf(begin, 0));
                     self.nodes.push(BihNode::leaf(end, 0));
                     self.nodes[index] = BihNode::interior(axis, planes, first);
                     let mut tighter = seen;
                     if left_empty {
-                        tighter.min[axis] = lo;
-                        self.nodes[first] = BihNode::leaf(begin, 0);
+                        tighter.min[axis] = planes[1];
                         self.node(first + 1, (begin, end), cand, tighter, depth + 1);
                     } else {
-                        tighter.max[axis] = hi;
+                        tighter.max[axis] = planes[0];
                         self.node(first, (begin, end), cand, tighter, depth + 1);
-                        self.nodes[first + 1] = BihNode::leaf(end, 0);
                     }
                     return;
                 }
