@@ -3,7 +3,9 @@
 //! two planes on one axis, the left child's largest and the right child's smallest coordinate.
 //! The build splits the node's candidate box (not its triangles' bounds) in the middle of its
 //! longest side, sorting triangles by their box centre, and halves the candidate box again
-//! when one side would be empty (the global heuristic). Traversal clips the ray's interval by
+//! when one side would be empty (the global heuristic); where that empty side leaves a wide gap
+//! between the triangles and the box traversal knows, a node with an empty child cuts the gap
+//! off (without it, rays through the gap reach the subtree). Traversal clips the ray's interval by
 //! both planes; the children may overlap, so both are visited, nearer first. A refit keeps the
 //! tree and recomputes the planes from the moved triangles.
 
@@ -33,6 +35,10 @@ impl Default for BihParams {
 
 /// Candidate-box halvings tried at one node before giving up and making a leaf.
 const MAX_EMPTY_SPLITS: usize = 32;
+
+/// An empty side whose gap to the node's box (as traversal knows it) is wider than this
+/// fraction of the box on that axis is cut off by a node with an empty child.
+const EMPTY_CUT: f32 = 0.1;
 
 /// A node: an interior node's two planes and axis (children adjacent, stored after it), or a
 /// leaf's range of triangle slots.
@@ -111,8 +117,16 @@ struct Builder {
 }
 
 impl Builder {
-    /// Builds node `index` over `items[begin..end]` with candidate box `cand`.
-    fn node(&mut self, index: usize, begin: usize, end: usize, mut cand: Aabb, depth: usize) {
+    /// Builds node `index` over `items[begin..end]` with candidate box `cand`; `seen` is the
+    /// box traversal knows the node by (its ancestors' planes).
+    fn node(
+        &mut self,
+        index: usize,
+        (begin, end): (usize, usize),
+        mut cand: Aabb,
+        seen: Aabb,
+        depth: usize,
+    ) {
         self.depth = self.depth.max(depth);
         let n = end - begin;
         if n <= self.max_leaf || depth + 1 >= MAX_BIH_DEPTH {
@@ -129,28 +143,64 @@ impl Builder {
             let (mut left_cand, mut right_cand) = (cand, cand);
             left_cand.max[axis] = mid;
             right_cand.min[axis] = mid;
-            if split == begin {
-                cand = right_cand;
-                continue;
-            }
-            if split == end {
-                cand = left_cand;
+            let items = &self.items[begin..end];
+            if split == begin || split == end {
+                // One side empty: the candidate box is halved again (the global heuristic).
+                // Where the triangles leave a wide gap to the box traversal knows, a node with
+                // an empty child cuts it off, so rays through the gap skip the subtree.
+                let gap = seen.extent()[axis] * EMPTY_CUT;
+                let cut = if split == begin {
+                    let lo = items
+                        .iter()
+                        .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis]));
+                    (lo - seen.min[axis] > gap).then_some((true, [f32::NEG_INFINITY, lo]))
+                } else {
+                    let hi = items
+                        .iter()
+                        .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis]));
+                    (seen.max[axis] - hi > gap).then_some((false, [hi, f32::INFINITY]))
+                };
+                cand = if split == begin {
+                    right_cand
+                } else {
+                    left_cand
+                };
+                if let Some((left_empty, planes)) = cut {
+                    let first = self.nodes.len();
+                    // The empty child is a leaf of no slots where its sibling's slots begin
+                    // (left) or end (right), so the leaves still cover the slots in order.
+                    self.nodes.push(BihNode::leaf(begin, 0));
+                    self.nodes.push(BihNode::leaf(end, 0));
+                    self.nodes[index] = BihNode::interior(axis, planes, first);
+                    let mut tighter = seen;
+                    if left_empty {
+                        tighter.min[axis] = planes[1];
+                        self.node(first + 1, (begin, end), cand, tighter, depth + 1);
+                    } else {
+                        tighter.max[axis] = planes[0];
+                        self.node(first, (begin, end), cand, tighter, depth + 1);
+                    }
+                    return;
+                }
                 continue;
             }
             let planes = [
-                self.items[begin..split]
+                items[..split - begin]
                     .iter()
                     .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis])),
-                self.items[split..end]
+                items[split - begin..]
                     .iter()
                     .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis])),
             ];
+            let (mut left_seen, mut right_seen) = (seen, seen);
+            left_seen.max[axis] = left_seen.max[axis].min(planes[0]);
+            right_seen.min[axis] = right_seen.min[axis].max(planes[1]);
             let first = self.nodes.len();
             self.nodes.push(BihNode::leaf(0, 0));
             self.nodes.push(BihNode::leaf(0, 0));
             self.nodes[index] = BihNode::interior(axis, planes, first);
-            self.node(first, begin, split, left_cand, depth + 1);
-            self.node(first + 1, split, end, right_cand, depth + 1);
+            self.node(first, (begin, split), left_cand, left_seen, depth + 1);
+            self.node(first + 1, (split, end), right_cand, right_seen, depth + 1);
             return;
         }
         self.nodes[index] = BihNode::leaf(begin, n);
@@ -197,7 +247,7 @@ impl Bih {
         if !b.items.is_empty() {
             b.nodes.push(BihNode::leaf(0, 0));
             let n = b.items.len();
-            b.node(0, 0, n, bounds, 0);
+            b.node(0, (0, n), bounds, bounds, 0);
         }
         let prims: Vec<u32> = b.items.iter().map(|it| it.prim).collect();
         let tris = prims.iter().map(|&p| mesh.triangle(p as usize)).collect();
@@ -287,6 +337,9 @@ impl Bih {
                     return;
                 }
             } else {
+                // Nothing beyond the best hit can help: a child that starts past it is not
+                // entered (children overlap, so one may start past a hit found in the other).
+                tf = tf.min(beyond(best()));
                 let axis = n.axis();
                 let first = n.first_child();
                 let (near, far, near_plane, far_plane) = if lower_is_near(ray, axis) {
@@ -415,7 +468,8 @@ impl Bih {
         let n = self.nodes[i];
         if n.is_leaf() {
             let slots = n.slots();
-            if slots.start != *next_slot || slots.end > self.prims.len() || slots.is_empty() {
+            // Empty leaves are the cut-off side of an empty-space node.
+            if slots.start != *next_slot || slots.end > self.prims.len() {
                 return Err(format!(
                     "leaf {i}: slots {slots:?}, expected from {next_slot}"
                 ));

@@ -84,9 +84,9 @@ impl Grid {
             .max(1.0);
         loop {
             let mut g = Self::with_resolution(bounds, resolution(&bounds, target));
-            let (count, total) = g.count_refs(&boxes);
+            let (ranges, count, total) = g.count_refs(&boxes);
             if total <= MAX_REFS_PER_TRIANGLE * n as u64 + count.len() as u64 || target <= 1.0 {
-                g.fill(&boxes, count);
+                g.fill(&ranges, count);
                 g.tris = tris;
                 return g;
             }
@@ -138,28 +138,51 @@ impl Grid {
         self.res.iter().map(|&r| r as usize).product()
     }
 
-    /// References per cell, and their total.
-    fn count_refs(&self, boxes: &[Aabb]) -> (Vec<u32>, u64) {
+    /// Each triangle's cell range (`[x0, y0, z0, x1, y1, z1]`, inclusive; `None` without a
+    /// box), the references per cell, and their total; computed once, so the fill does not
+    /// locate the triangles in the grid again.
+    fn count_refs(&self, boxes: &[Aabb]) -> (Vec<Option<[u32; 6]>>, Vec<u32>, u64) {
         let mut count = vec![0u32; self.cell_count()];
         let mut total = 0u64;
-        for b in boxes.iter().filter(|b| !b.is_empty()) {
-            let [rx, ry, rz] = self.cell_range(b);
-            total += (rx.clone().count() * ry.clone().count() * rz.clone().count()) as u64;
-            if total > u64::from(u32::MAX) {
-                return (count, u64::MAX);
+        let (nx, nxy) = (
+            self.res[0] as usize,
+            self.res[0] as usize * self.res[1] as usize,
+        );
+        let mut ranges = Vec::with_capacity(boxes.len());
+        for b in boxes {
+            if b.is_empty() {
+                ranges.push(None);
+                continue;
             }
-            for z in rz {
-                for y in ry.clone() {
-                    for x in rx.clone() {
-                        count[self.cell_index(x, y, z)] += 1;
+            let [rx, ry, rz] = self.cell_range(b);
+            let r = [
+                *rx.start(),
+                *ry.start(),
+                *rz.start(),
+                *rx.end(),
+                *ry.end(),
+                *rz.end(),
+            ];
+            ranges.push(Some(r));
+            total += u64::from(r[3] - r[0] + 1)
+                * u64::from(r[4] - r[1] + 1)
+                * u64::from(r[5] - r[2] + 1);
+            if total > u64::from(u32::MAX) {
+                return (ranges, count, u64::MAX);
+            }
+            for z in r[2] as usize..=r[5] as usize {
+                for y in r[1] as usize..=r[4] as usize {
+                    let row = z * nxy + y * nx;
+                    for c in &mut count[row + r[0] as usize..=row + r[3] as usize] {
+                        *c += 1;
                     }
                 }
             }
         }
-        (count, total)
+        (ranges, count, total)
     }
 
-    fn fill(&mut self, boxes: &[Aabb], count: Vec<u32>) {
+    fn fill(&mut self, ranges: &[Option<[u32; 6]>], count: Vec<u32>) {
         let mut starts = Vec::with_capacity(count.len() + 1);
         let mut sum = 0u32;
         starts.push(0);
@@ -167,16 +190,23 @@ impl Grid {
             sum += c;
             starts.push(sum);
         }
-        let mut next: Vec<u32> = starts[..count.len()].to_vec();
+        // `count` becomes each cell's next free slot.
+        let mut next = count;
+        let cells = next.len();
+        next.copy_from_slice(&starts[..cells]);
         let mut refs = vec![0u32; sum as usize];
-        for (i, b) in boxes.iter().enumerate().filter(|(_, b)| !b.is_empty()) {
-            let [rx, ry, rz] = self.cell_range(b);
-            for z in rz {
-                for y in ry.clone() {
-                    for x in rx.clone() {
-                        let c = self.cell_index(x, y, z);
-                        refs[next[c] as usize] = i as u32;
-                        next[c] += 1;
+        let (nx, nxy) = (
+            self.res[0] as usize,
+            self.res[0] as usize * self.res[1] as usize,
+        );
+        for (i, r) in ranges.iter().enumerate() {
+            let Some(r) = r else { continue };
+            for z in r[2] as usize..=r[5] as usize {
+                for y in r[1] as usize..=r[4] as usize {
+                    let row = z * nxy + y * nx;
+                    for c in &mut next[row + r[0] as usize..=row + r[3] as usize] {
+                        refs[*c as usize] = i as u32;
+                        *c += 1;
                     }
                 }
             }

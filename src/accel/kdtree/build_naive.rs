@@ -3,7 +3,7 @@
 //! makes the same splits as `build_fast` (same events, same sweep).
 
 use super::build_fast::Builder;
-use super::events::{Event, Side, classify, clip_box, push_events, sort_events};
+use super::events::{Event, LEFT, RIGHT, classify, clip_box, push_events, sort_events};
 use super::{Built, KdNode, KdParams};
 use crate::geom::Aabb;
 
@@ -41,19 +41,19 @@ fn node(b: &mut Builder, index: usize, cell: Aabb, tris: Vec<u32>, depth: usize)
         b.leaf(index, &cell, tris.into_iter());
         return;
     };
-    classify(&events[s.axis], &s, &mut b.side);
+    classify(&events[s.axis], &s, &mut b.side, &mut Vec::new());
     let (mut left_cell, mut right_cell) = (cell, cell);
     left_cell.max[s.axis] = s.pos;
     right_cell.min[s.axis] = s.pos;
     let left: Vec<u32> = tris
         .iter()
         .copied()
-        .filter(|&t| b.side[t as usize] != Side::Right)
+        .filter(|&t| b.side[t as usize] != RIGHT)
         .collect();
     let right: Vec<u32> = tris
         .iter()
         .copied()
-        .filter(|&t| b.side[t as usize] != Side::Left)
+        .filter(|&t| b.side[t as usize] != LEFT)
         .collect();
     drop((events, tris));
     let first = b.interior(index, &cell, &s);

@@ -3,6 +3,10 @@
 //! cell, gives a start and an end event on every axis (one planar event where it is flat);
 //! sorted by position and kind, one sweep counts the triangles left of, right of and in each
 //! candidate plane.
+//!
+//! An event is one `u64` key, `position (32 bits, order-preserving) | kind (2) | triangle (30)`,
+//! so that sorting the keys as integers sorts the events by position, then kind, and merging two
+//! sorted lists compares plain integers.
 
 use super::KdParams;
 use crate::geom::Aabb;
@@ -19,52 +23,71 @@ pub(super) enum Kind {
     Start = 2,
 }
 
-/// One event on one axis.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Event {
-    pub(super) pos: f32,
-    pub(super) tri: u32,
-    pub(super) kind: Kind,
+/// One event on one axis, packed (see the module's documentation).
+pub(super) type Event = u64;
+
+/// Bits of an event key below the position.
+const POS_SHIFT: u32 = 32;
+/// Bits of an event key below the kind.
+const KIND_SHIFT: u32 = 30;
+const TRI_MASK: u64 = (1 << KIND_SHIFT) - 1;
+
+/// The event of `tri` at `pos`. `-0.0` becomes `+0.0`, so that equal positions get equal keys.
+#[inline(always)]
+pub(super) fn event(pos: f32, kind: Kind, tri: u32) -> Event {
+    let bits = (pos + 0.0).to_bits();
+    // Order-preserving map of the float's bits: negatives flipped, positives above them.
+    let ord = if bits >> 31 == 1 {
+        !bits
+    } else {
+        bits | 0x8000_0000
+    };
+    (u64::from(ord) << POS_SHIFT) | (u64::from(kind as u8) << KIND_SHIFT) | u64::from(tri)
 }
 
-impl Event {
-    /// The sort order: by position, then end before planar before start.
-    #[inline]
-    pub(super) fn precedes(&self, o: &Event) -> bool {
-        (self.pos, self.kind as u8) < (o.pos, o.kind as u8)
-    }
+/// The key bits naming an event's position (equal for events at the same position).
+#[inline(always)]
+pub(super) fn pos_key(e: Event) -> u32 {
+    (e >> POS_SHIFT) as u32
 }
 
-/// Sorts events in place by [`Event::precedes`].
+/// An event's position.
+#[inline(always)]
+pub(super) fn pos_of(e: Event) -> f32 {
+    let ord = pos_key(e);
+    f32::from_bits(if ord >> 31 == 1 {
+        ord & 0x7fff_ffff
+    } else {
+        !ord
+    })
+}
+
+/// An event's kind, as its `Kind` number.
+#[inline(always)]
+pub(super) fn kind_of(e: Event) -> usize {
+    ((e >> KIND_SHIFT) & 3) as usize
+}
+
+/// An event's triangle.
+#[inline(always)]
+pub(super) fn tri_of(e: Event) -> u32 {
+    (e & TRI_MASK) as u32
+}
+
+/// Sorts events in place by position, then kind.
 pub(super) fn sort_events(events: &mut [Event]) {
-    events.sort_unstable_by(|a, b| {
-        a.pos
-            .total_cmp(&b.pos)
-            .then((a.kind as u8).cmp(&(b.kind as u8)))
-    });
+    events.sort_unstable();
 }
 
 /// Appends the events of triangle `tri`'s (clipped) box on `axis`.
-#[inline]
+#[inline(always)]
 pub(super) fn push_events(out: &mut Vec<Event>, b: &Aabb, axis: usize, tri: u32) {
     let (lo, hi) = (b.min[axis], b.max[axis]);
     if lo == hi {
-        out.push(Event {
-            pos: lo,
-            tri,
-            kind: Kind::Planar,
-        });
+        out.push(event(lo, Kind::Planar, tri));
     } else {
-        out.push(Event {
-            pos: lo,
-            tri,
-            kind: Kind::Start,
-        });
-        out.push(Event {
-            pos: hi,
-            tri,
-            kind: Kind::End,
-        });
+        out.push(event(lo, Kind::Start, tri));
+        out.push(event(hi, Kind::End, tri));
     }
 }
 
@@ -77,20 +100,6 @@ pub(super) struct Split {
     pub(super) planar_left: bool,
     /// Expected cost of splitting here, in the units of [`KdParams`].
     pub(super) cost: f64,
-}
-
-/// The SAH cost of a split with `pl`, `pr` the children's area over the node's and `nl`, `nr`
-/// their triangle counts; an empty child earns the empty-space bonus.
-#[inline]
-pub(super) fn split_cost(params: &KdParams, pl: f64, pr: f64, nl: usize, nr: usize) -> f64 {
-    let bonus = if nl == 0 || nr == 0 {
-        1.0 - f64::from(params.empty_bonus)
-    } else {
-        1.0
-    };
-    bonus
-        * (f64::from(params.traversal_cost)
-            + f64::from(params.intersection_cost) * (pl * nl as f64 + pr * nr as f64))
 }
 
 /// The cheapest split of `cell` among the planes of `events` (sorted, on `axis`) strictly inside
@@ -107,42 +116,69 @@ pub(super) fn best_split_on_axis(
         return None;
     }
     let (lo, hi) = (cell.min[axis], cell.max[axis]);
-    let mut best: Option<Split> = None;
+    // A child's half area is linear in its length along `axis`: the face across the axis plus
+    // the perimeter of that face times the length.
+    let e = cell.extent();
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let (eu, ev) = (f64::from(e[u]), f64::from(e[v]));
+    let (face, perim) = (eu * ev / area, (eu + ev) / area);
+    let (kt, ki) = (
+        f64::from(params.traversal_cost),
+        f64::from(params.intersection_cost),
+    );
+    let bonus = 1.0 - f64::from(params.empty_bonus);
+    // The bonus discounts the children's intersection cost only (as in pbrt), not the
+    // traversal: cutting empty space off a cell pays only where it saves triangle tests, so a
+    // leaf of one triangle is never cut down further.
+    let cost = |pl: f64, pr: f64, nl: usize, nr: usize| {
+        let c = ki * (pl * nl as f64 + pr * nr as f64);
+        kt + if nl == 0 || nr == 0 { bonus * c } else { c }
+    };
+    let (mut best_cost, mut best_pos, mut best_planar_left) = (f64::INFINITY, 0.0, true);
     let (mut nl, mut nr) = (0usize, n);
     let mut i = 0;
     while i < events.len() {
-        let pos = events[i].pos;
-        let mut count = [0usize; 3];
-        while i < events.len() && events[i].pos == pos {
-            count[events[i].kind as usize] += 1;
+        let key = pos_key(events[i]);
+        // Events at one position, counted by kind without branching on the kind.
+        let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
+        while let Some(&e) = events.get(i) {
+            if pos_key(e) != key {
+                break;
+            }
+            let k = kind_of(e);
+            ends += usize::from(k == 0);
+            planar += usize::from(k == 1);
+            starts += usize::from(k == 2);
             i += 1;
         }
-        let [ends, planar, starts] = count;
         nr -= planar + ends;
+        let pos = pos_of(events[i - 1]);
         if lo < pos && pos < hi {
-            let (mut left, mut right) = (*cell, *cell);
-            left.max[axis] = pos;
-            right.min[axis] = pos;
-            let (pl, pr) = (left.half_area_f64() / area, right.half_area_f64() / area);
-            let cost_left = split_cost(params, pl, pr, nl + planar, nr);
-            let cost_right = split_cost(params, pl, pr, nl, nr + planar);
-            let (cost, planar_left) = if cost_left <= cost_right {
+            let pl = face + perim * f64::from(pos - lo);
+            let pr = face + perim * f64::from(hi - pos);
+            let cost_left = cost(pl, pr, nl + planar, nr);
+            let (c, planar_left) = if planar == 0 {
                 (cost_left, true)
             } else {
-                (cost_right, false)
+                let cost_right = cost(pl, pr, nl, nr + planar);
+                if cost_left <= cost_right {
+                    (cost_left, true)
+                } else {
+                    (cost_right, false)
+                }
             };
-            if best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split {
-                    axis,
-                    pos,
-                    planar_left,
-                    cost,
-                });
+            if c < best_cost {
+                (best_cost, best_pos, best_planar_left) = (c, pos, planar_left);
             }
         }
         nl += starts + planar;
     }
-    best
+    best_cost.is_finite().then_some(Split {
+        axis,
+        pos: best_pos,
+        planar_left: best_planar_left,
+        cost: best_cost,
+    })
 }
 
 /// The cheapest split over the three axes' sorted events (the lowest axis on ties), if it
@@ -164,47 +200,100 @@ pub(super) fn choose_split(
 }
 
 /// `b` clipped to `cell` (the box the triangle has in that cell when splits are not perfect).
-#[inline]
+#[inline(always)]
 pub(super) fn clip_box(b: &Aabb, cell: &Aabb) -> Aabb {
     Aabb::new(b.min.max(cell.min), b.max.min(cell.max))
 }
 
-/// Which children a triangle goes to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub(super) enum Side {
-    Both = 0,
-    Left = 1,
-    Right = 2,
-}
+/// Which children a triangle goes to (a flag per triangle, indexed by its id).
+pub(super) const BOTH: u8 = 0;
+pub(super) const LEFT: u8 = 1;
+pub(super) const RIGHT: u8 = 2;
 
 /// Marks every triangle of the node's events on the split axis with its side (`side` is indexed
-/// by triangle id; only the node's triangles are written).
-pub(super) fn classify(events: &[Event], split: &Split, side: &mut [Side]) {
-    for e in events {
-        side[e.tri as usize] = Side::Both;
-    }
-    for e in events {
-        let s = &mut side[e.tri as usize];
-        match e.kind {
-            Kind::End if e.pos <= split.pos => *s = Side::Left,
-            Kind::Start if e.pos >= split.pos => *s = Side::Right,
-            Kind::Planar => {
-                *s = if e.pos < split.pos || (e.pos == split.pos && split.planar_left) {
-                    Side::Left
-                } else {
-                    Side::Right
+/// by triangle id; only the node's triangles are written), in one pass: a triangle's start
+/// event precedes its end event, so the start marks it right (at or past the plane) or both,
+/// and an end at or before the plane makes it left. The triangles left in both (they straddle
+/// the plane) are appended to `straddlers`; returns the triangle counts of the two children.
+pub(super) fn classify(
+    events: &[Event],
+    split: &Split,
+    side: &mut [u8],
+    straddlers: &mut Vec<u32>,
+) -> (usize, usize) {
+    let plane = pos_key(event(split.pos, Kind::End, 0));
+    let (mut left, mut right) = (0, 0);
+    let first = straddlers.len();
+    for &e in events {
+        let (key, t) = (pos_key(e), tri_of(e) as usize);
+        match kind_of(e) {
+            0 => {
+                if key <= plane {
+                    side[t] = LEFT;
+                    left += 1;
+                } else if side[t] == BOTH {
+                    straddlers.push(t as u32);
                 }
             }
-            _ => {}
+            1 => {
+                let s = if key < plane || (key == plane && split.planar_left) {
+                    LEFT
+                } else {
+                    RIGHT
+                };
+                side[t] = s;
+                if s == LEFT {
+                    left += 1;
+                } else {
+                    right += 1;
+                }
+            }
+            _ => {
+                if key >= plane {
+                    side[t] = RIGHT;
+                    right += 1;
+                } else {
+                    side[t] = BOTH;
+                }
+            }
         }
     }
+    let both = straddlers.len() - first;
+    (left + both, right + both)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use glam::Vec3;
+
+    #[test]
+    fn keys_sort_by_position_then_kind() {
+        let xs = [
+            -3.5f32,
+            -0.0,
+            0.0,
+            1e-30,
+            2.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ];
+        for &a in &xs {
+            assert_eq!(pos_of(event(a, Kind::Start, 7)), a + 0.0);
+            for &b in &xs {
+                let (ka, kb) = (event(a, Kind::End, 9), event(b, Kind::Start, 1));
+                assert_eq!(a < b, pos_key(ka) < pos_key(kb), "{a} {b}");
+                if a == b {
+                    assert!(ka < kb, "end before start at one position");
+                }
+            }
+        }
+        let e = event(1.0, Kind::Planar, (1 << 30) - 1);
+        assert_eq!(
+            (kind_of(e), tri_of(e)),
+            (Kind::Planar as usize, (1 << 30) - 1)
+        );
+    }
 
     #[test]
     fn sweep_counts_left_right_and_planar() {
@@ -223,9 +312,11 @@ mod tests {
         let params = KdParams::default();
         let s = best_split_on_axis(&ev, 0, 3, &cell, &params).unwrap();
         assert!(s.pos == 1.0 || s.pos == 2.0, "{s:?}");
-        let mut side = vec![Side::Both; 3];
-        classify(&ev, &s, &mut side);
-        assert_eq!(side[0], Side::Left);
-        assert_eq!(side[1], Side::Right);
+        let mut side = vec![BOTH; 3];
+        let mut straddlers = Vec::new();
+        assert_eq!(classify(&ev, &s, &mut side, &mut straddlers), (2, 1));
+        assert!(straddlers.is_empty());
+        assert_eq!(side[0], LEFT);
+        assert_eq!(side[1], RIGHT);
     }
 }
