@@ -390,11 +390,16 @@ fn generated_sizes(s: &str) -> Result<GeneratedSizes, String> {
 fn generated_files(sizes: &GeneratedSizes, limits: &Limits) -> Result<Vec<PathBuf>> {
     use dynbvh::anim::generate::{Kind, generate};
     let dir = std::env::temp_dir().join("dynbvh-bench-generated");
+    if !sizes.0.is_empty() {
+        std::fs::create_dir_all(&dir).map_err(|e| dynbvh::Error::io(&dir, e))?;
+    }
     let mut out = Vec::new();
     for &n in &sizes.0 {
         for kind in [Kind::Explode, Kind::Swap, Kind::Tube, Kind::Wave] {
-            limits.check_memory(&format!("--generated {n}"), n as u64 * 600)?;
-            std::fs::create_dir_all(&dir).map_err(|e| dynbvh::Error::io(&dir, e))?;
+            limits.check_memory(
+                &format!("--generated {n}"),
+                n as u64 * super::r#gen::bytes_per_triangle(kind),
+            )?;
             let path = dir.join(format!("{}_{}.glb", kind.name(), n));
             eprintln!("generating {} ...", path.display());
             let g = generate(kind, n, 1);

@@ -37,7 +37,7 @@ const MAX_JOINTS: u64 = 1 << 16;
 
 /// Peak bytes per triangle of generating `kind` (the scene, its animation and the GLB), with
 /// a margin over what was measured.
-fn bytes_per_triangle(kind: Kind) -> u64 {
+pub(super) fn bytes_per_triangle(kind: Kind) -> u64 {
     match kind {
         Kind::Orbit => 1000,
         Kind::Explode => 600,

@@ -15,6 +15,10 @@ use crate::geom::{Aabb, Ray};
 use std::fmt::Write as _;
 use std::time::Instant;
 
+/// Share of a fresh tree's cost a frame's refitted tree must have lost for the frame to say how
+/// much of the loss a rung wins back (below it, the recovered share is mostly rounding).
+pub const MIN_LOSS: f64 = 0.01;
+
 /// One rung.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum Rung {
@@ -117,7 +121,7 @@ pub struct RungRow {
     pub wall_with_collapse_ms: f64,
     /// Share of the SAH (and ray work) refitting lost that the rung won back (1: as a fresh
     /// build; negative: worse than the refitted tree); NaN (`null` in JSON) when no measured
-    /// frame had lost more than 1%.
+    /// frame had lost more than [`MIN_LOSS`] of the fresh tree's cost.
     pub sah_recovered: f64,
     pub work_recovered: f64,
     /// Wall time over a full rebuild's in the same frames (binary; with collapse).
@@ -244,10 +248,10 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
             let (s, w) = (f64::from(result.bvh().sah_cost()), work(&wide, &rays));
             let lost_sah = refit_sah - fresh_sah;
             let lost_work = refit_work - fresh_work;
-            if lost_sah > 0.01 * fresh_sah {
+            if lost_sah > MIN_LOSS * fresh_sah {
                 sah_rec[k].push((refit_sah - s) / lost_sah);
             }
-            if lost_work > 0.01 * fresh_work {
+            if lost_work > MIN_LOSS * fresh_work {
                 work_rec[k].push((refit_work - w) / lost_work);
             }
             let (mw, mwc) = (median(walls), median(walls_c));

@@ -186,7 +186,22 @@ impl Engine {
     ) -> f64 {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let pass = Instant::now();
-        let plan = self.begin_sample(rays.len());
+        // Nothing to sample (no mesh moved, or the batch ends before its first sampled ray):
+        // the plain pass.
+        let Some(plan) = self
+            .begin_sample(rays.len())
+            .filter(|p| p.first < rays.len())
+        else {
+            let this = &*self;
+            out.par_chunks_mut(RAY_CHUNK)
+                .zip(rays.par_chunks(RAY_CHUNK))
+                .for_each(|(o, r)| {
+                    for (o, r) in o.iter_mut().zip(r) {
+                        *o = plain(this, r);
+                    }
+                });
+            return 0.0;
+        };
         let (before, log) = self.open_log();
         let this = &*self;
         out.par_chunks_mut(RAY_CHUNK)
@@ -194,12 +209,6 @@ impl Engine {
             .enumerate()
             .for_each(|(c, (o, chunk))| {
                 let base = c * RAY_CHUNK;
-                let Some(plan) = plan.filter(|p| p.first < rays.len()) else {
-                    for (o, r) in o.iter_mut().zip(chunk) {
-                        *o = plain(this, r);
-                    }
-                    return;
-                };
                 let mut buf = TaskBuf::new(&log);
                 let start = Instant::now();
                 // A timed ray's time until its pair is complete: half the pairs time the plain
@@ -255,10 +264,6 @@ impl Engine {
                 buf.clock.pass_ns += start.elapsed().as_nanos() as f64;
             });
         let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
-        if plan.is_none() {
-            self.entries = log.entries;
-            return 0.0;
-        }
         let share = log.clock.share(log.sums.sampled());
         let model = self.config.prices.sample_ms(log.sums.sampled());
         self.close_log(log, before, model);
