@@ -43,6 +43,9 @@ enum Command {
     /// animation's largest deforming mesh: time, and how much of the quality lost to
     /// refitting each wins back.
     Rungs(cli::rungs::RungsArgs),
+    /// A tree built for the whole clip (from sampled poses) against one built at the first
+    /// frame, both refitted through an animation: SAH and ray work over fresh builds.
+    Clip(cli::clip::ClipArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -67,6 +70,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Gen(a)) => cli::r#gen::run(a),
         Some(Command::Render(a)) => cli::render::run(a),
         Some(Command::Rungs(a)) => cli::rungs::run(a),
+        Some(Command::Clip(a)) => cli::clip::run(a),
         None => cli::default_job::run(),
     }
 }

@@ -56,11 +56,26 @@ impl MeshBvh {
         params: &BuildParams,
         ws: &mut BuildWorkspace,
     ) {
+        self.rebuild_split::<super::build::clip::ClipAware<'_>>(
+            positions, indices, None, params, ws,
+        );
+    }
+
+    /// [`MeshBvh::rebuild_indexed`] with `splitter`, when given, in place of `params.method`'s.
+    pub(super) fn rebuild_split<S: super::build::Splitter>(
+        &mut self,
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        splitter: Option<&S>,
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) {
         let mesh = Indexed { positions, indices };
         // The triangles are bounded where the builder makes its references.
-        self.bvh.rebuild_from(
+        self.bvh.rebuild_split(
             mesh.len(),
             |refs, base| super::build::refs_from_corners(refs, base, |i| mesh.triangle_corners(i)),
+            splitter,
             params,
             ws,
         );
@@ -224,13 +239,13 @@ impl MeshBvh {
 }
 
 /// Borrowed positions and triangle indices.
-struct Indexed<'a> {
-    positions: &'a [Vec3],
-    indices: &'a [[u32; 3]],
+pub(super) struct Indexed<'a> {
+    pub(super) positions: &'a [Vec3],
+    pub(super) indices: &'a [[u32; 3]],
 }
 
 impl Indexed<'_> {
-    fn len(&self) -> usize {
+    pub(super) fn len(&self) -> usize {
         self.indices.len()
     }
 
@@ -246,7 +261,7 @@ impl Indexed<'_> {
     /// `+inf .. -inf` (sanitized as the empty axis `of_triangle` gives). Other targets take
     /// `of_triangle` itself.
     #[inline]
-    fn triangle_corners(&self, i: usize) -> (Vec3A, Vec3A) {
+    pub(super) fn triangle_corners(&self, i: usize) -> (Vec3A, Vec3A) {
         #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
         {
             let [a, b, c] = self.indices[i];

@@ -3,6 +3,7 @@
 pub mod args;
 pub mod bench;
 pub mod build_bench;
+pub mod clip;
 pub mod default_job;
 pub mod r#gen;
 pub mod info;

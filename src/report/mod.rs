@@ -4,6 +4,7 @@ pub mod accel_bench;
 pub mod all_pairs;
 pub mod build_bench;
 pub mod charts;
+pub mod clip;
 pub mod font;
 pub mod frame_bench;
 pub mod ray_sweep;

@@ -8,6 +8,7 @@
 //! binned builder packs each one-task subtree at the start of its slots and knows the count.)
 
 mod binned;
+pub mod clip;
 mod median;
 mod sweep;
 
@@ -365,6 +366,19 @@ impl Bvh {
         params: &BuildParams,
         ws: &mut BuildWorkspace,
     ) {
+        self.rebuild_split::<median::Median>(n, fill, None, params, ws);
+    }
+
+    /// [`Bvh::rebuild_from`] with `splitter`, when given, in place of `params.method`'s (the
+    /// clip-aware build, [`clip`]); `params` still gives the leaf size and the parallelism.
+    pub(crate) fn rebuild_split<S: Splitter>(
+        &mut self,
+        n: usize,
+        fill: impl Fn(&mut [PrimRef], usize) -> RangeBounds + Sync,
+        splitter: Option<&S>,
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) {
         // A threshold of 0 would ask for chunks of no element.
         let params = &BuildParams {
             parallel_threshold: params.parallel_threshold.max(1),
@@ -394,16 +408,17 @@ impl Bvh {
         grow_zeroed(slots, 2 * n - 1);
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         let (count, packed);
-        (root[0], count, packed) = match params.method {
-            Method::Binned => {
+        (root[0], count, packed) = match (splitter, params.method) {
+            (Some(s), _) => (build_range(s, params, refs, rb, desc), None, false),
+            (None, Method::Binned) => {
                 let (root, count, packed) = binned::build(params, refs, rb, desc);
                 (root, Some(count), packed)
             }
-            Method::Median => {
+            (None, Method::Median) => {
                 let m = median::Median(params.max_leaf_size as usize);
                 (build_range(&m, params, refs, rb, desc), None, false)
             }
-            Method::Sweep => (sweep::build(params, refs, desc), None, false),
+            (None, Method::Sweep) => (sweep::build(params, refs, desc), None, false),
         };
         if n >= params.parallel_threshold.saturating_mul(8) {
             // Written in place by parallel chunks.
