@@ -87,6 +87,11 @@ pub struct BenchArgs {
     /// top-level tree policy).
     #[arg(long)]
     no_tlas_compare: bool,
+    /// Build each deforming mesh's first tree for the whole clip from this many poses spread
+    /// over the frames (`MeshBvh::build_clip_aware`); 0: a plain build of frame 0. The
+    /// policies' rebuilds stay plain builds.
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=dynbvh::bvh::build::clip::MAX_POSES as u64))]
+    clip_aware: u64,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
     repeats: u64,
@@ -213,7 +218,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 a.limits
                     .check_frames(&format!("--fps {fps} over the animation's {d} s"), n)?;
             }
-            let mut src = GltfSource::new(&scene, anim, times)?;
+            let mut src =
+                GltfSource::new(&scene, anim, times)?.with_clip_aware(a.clip_aware as usize);
             run_frames(&mut src, range, &opts)?
         }
         (None, Some(n)) => {
@@ -470,7 +476,7 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
                 }
             }
             let mut src = match GltfSource::new(&scene, Some(anim), times) {
-                Ok(s) => s,
+                Ok(s) => s.with_clip_aware(a.clip_aware as usize),
                 Err(e) => {
                     eprintln!("{label}: FAILED: {e}");
                     failed.push(SweepFailure {

@@ -47,7 +47,7 @@ use super::{Engine, EngineConfig, InstanceId, MeshId, SceneHit};
 use crate::anim::{InstanceClass, Poser, Scene, TimeMode};
 use crate::error::Result;
 use crate::geom::TriMesh;
-use glam::Affine3A;
+use glam::{Affine3A, Vec3};
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -71,6 +71,8 @@ pub struct GltfSource<'s> {
     times: Vec<f32>,
     plan: Vec<Plan>,
     deforming: Vec<MeshId>,
+    /// Poses a deforming mesh's first tree is built for (0: a plain build of frame 0).
+    clip_poses: usize,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -142,7 +144,18 @@ impl<'s> GltfSource<'s> {
             times,
             plan: Vec::new(),
             deforming: Vec::new(),
+            clip_poses: 0,
         })
+    }
+
+    /// Builds each deforming mesh's first tree for the whole replay: from `poses` poses at
+    /// frame times spread evenly over it, first and last included ([`Engine::build_for_clip`];
+    /// at most [`crate::bvh::build::clip::MAX_POSES`] are used). 0 (the default): a plain build
+    /// of frame 0.
+    #[must_use]
+    pub fn with_clip_aware(mut self, poses: usize) -> Self {
+        self.clip_poses = poses;
+        self
     }
 
     /// Animation time of each frame (index 0 is the pose the engine is built at).
@@ -223,6 +236,30 @@ impl<'s> GltfSource<'s> {
     }
 }
 
+impl GltfSource<'_> {
+    /// Poses the deforming meshes `posed` (mesh, instance) at the clip's sampled frames and
+    /// rebuilds their trees for them; leaves the poser at `frame`.
+    fn build_for_clip(&mut self, engine: &mut Engine, posed: &[(MeshId, usize)], frame: usize) {
+        let last = self.times.len() - 1;
+        let k = self.clip_poses.min(crate::bvh::build::clip::MAX_POSES).min(last + 1);
+        let mut poses: Vec<Vec<Vec<Vec3>>> = vec![Vec::with_capacity(k); posed.len()];
+        for j in 0..k {
+            let f = if k == 1 { frame } else { j * last / (k - 1) };
+            self.poser.pose(self.times[f]);
+            for (p, &(_, i)) in poses.iter_mut().zip(posed) {
+                p.push(self.poser.positions(i).to_vec());
+            }
+        }
+        self.poser.pose(self.times[frame]);
+        for (p, &(mesh, _)) in poses.iter().zip(posed) {
+            let views: Vec<&[Vec3]> = p.iter().map(Vec::as_slice).collect();
+            // The poses come from the mesh's own instance: the counts agree.
+            let built = engine.build_for_clip(mesh, &views);
+            debug_assert!(built.is_ok(), "{built:?}");
+        }
+    }
+}
+
 impl FrameSource for GltfSource<'_> {
     fn name(&self) -> String {
         self.name.clone()
@@ -239,6 +276,7 @@ impl FrameSource for GltfSource<'_> {
         let mut shared: HashMap<usize, MeshId> = HashMap::new();
         self.plan.clear();
         self.deforming.clear();
+        let mut posed = Vec::new();
         for (i, inst) in scene.instances.iter().enumerate() {
             let class = self.poser.classes()[i];
             let positions = self.poser.positions(i);
@@ -255,11 +293,15 @@ impl FrameSource for GltfSource<'_> {
             self.plan.push(match class {
                 InstanceClass::Deforming => {
                     self.deforming.push(mesh);
+                    posed.push((mesh, i));
                     Plan::Deforming(mesh)
                 }
                 InstanceClass::Rigid => Plan::Rigid(id),
                 InstanceClass::Static => Plan::Static,
             });
+        }
+        if self.clip_poses > 0 && !posed.is_empty() {
+            self.build_for_clip(&mut engine, &posed, frame);
         }
         engine.update();
         engine

@@ -29,6 +29,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod batch;
+mod clip;
 mod edit;
 mod filter;
 mod mesh_update;

@@ -102,7 +102,7 @@ impl Engine {
         self.meshes.get(mesh.0 as usize).is_some_and(|m| !m.removed)
     }
 
-    fn check_mesh(&self, mesh: MeshId) -> Result<()> {
+    pub(super) fn check_mesh(&self, mesh: MeshId) -> Result<()> {
         if self.is_live_mesh(mesh) {
             Ok(())
         } else {
