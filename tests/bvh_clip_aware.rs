@@ -129,3 +129,26 @@ fn one_pose_or_no_extent_gives_a_valid_tree() {
     };
     check(&last, &t, "rebuilt at frame 3 from every pose");
 }
+
+#[test]
+fn the_engine_builds_a_mesh_for_its_clip_and_refuses_poses_of_another_mesh() {
+    use dynbvh::engine::Engine;
+    let (clip, indices) = clip_of("explode.glb", 30);
+    let mut e = Engine::new(EngineConfig::default());
+    let m = e.add_mesh(clip[0].clone(), indices.clone());
+    e.add_instance(m, glam::Affine3A::IDENTITY);
+    e.update();
+    let plain = e.mesh_stats(m).sah;
+    let poses: Vec<&[Vec3]> = [0, 10, 20, 29]
+        .iter()
+        .map(|&f| clip[f].as_slice())
+        .collect();
+    e.build_for_clip(m, &poses).unwrap();
+    e.update();
+    // The explosion's frame-0 tree is built for a compact pose; the clip's tree trades some of
+    // its cost at frame 0 for the later poses.
+    assert_ne!(e.mesh_stats(m).sah, plain);
+    let short = &clip[0][..clip[0].len() - 1];
+    let err = e.build_for_clip(m, &[short]).unwrap_err().to_string();
+    assert!(err.contains("pose 0") && err.contains("vertices"), "{err}");
+}

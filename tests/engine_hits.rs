@@ -226,7 +226,7 @@ fn check_animation(scene: &Scene, anim: Option<usize>, frames: usize, tally: &mu
             })
         })
         .collect();
-    check_configs(scene, anim, frames, &configs, Trace::Ms(0.01), tally);
+    check_configs(scene, anim, frames, &configs, Trace::Ms(0.01), 0, tally);
 }
 
 /// The trace time each engine records after each frame.
@@ -238,17 +238,21 @@ enum Trace {
     Rebuilds(f64),
 }
 
-/// Runs engines of `configs` in lockstep over `frames` frames of one animation and checks each
-/// frame; returns the mesh rebuilds and the reverts to replaced trees of each engine.
+/// Runs engines of `configs` in lockstep over `frames` frames of one animation (the deforming
+/// meshes' first trees built for `clip_poses` poses of it, 0: plainly) and checks each frame;
+/// returns the mesh rebuilds and the reverts to replaced trees of each engine.
 fn check_configs(
     scene: &Scene,
     anim: Option<usize>,
     frames: usize,
     configs: &[EngineConfig],
     trace: Trace,
+    clip_poses: usize,
     tally: &mut Tally,
 ) -> Vec<(u32, u32)> {
-    let mut src = GltfSource::new(scene, anim, FrameTimes::Count(frames)).unwrap();
+    let mut src = GltfSource::new(scene, anim, FrameTimes::Count(frames))
+        .unwrap()
+        .with_clip_aware(clip_poses);
     let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
     let mut done = vec![(0u32, 0u32); engines.len()];
     let trace_ms: Vec<f64> = engines
@@ -409,6 +413,37 @@ fn shipped_animations_match_brute_force_every_frame_every_policy() {
 /// trace above never takes): every frame still matches brute force. The 16x16 camera rays of
 /// `engine_policy.rs`'s revert test only compare with an always-refitted engine.
 #[test]
+fn clip_aware_first_trees_match_brute_force_every_frame() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("animations");
+    let configs: Vec<EngineConfig> = [Traversal::Binary, Traversal::Wide]
+        .into_iter()
+        .flat_map(|traversal| {
+            [Policy::Refit, Policy::DEFAULT]
+                .into_iter()
+                .map(move |policy| EngineConfig {
+                    policy,
+                    traversal,
+                    ..EngineConfig::default()
+                })
+        })
+        .collect();
+    for file in ["tube.glb", "swap.glb", "explode.glb"] {
+        let (scene, _) = Scene::load(dir.join(file)).unwrap();
+        let mut tally = Tally::default();
+        check_configs(
+            &scene,
+            Some(0),
+            20,
+            &configs,
+            Trace::Ms(0.01),
+            4,
+            &mut tally,
+        );
+        assert!(tally.rays > 0, "{file}: no ray checked");
+    }
+}
+
+#[test]
 fn default_config_matches_brute_force_through_rebuilds_and_reverts() {
     let timing = Timing::Modeled {
         refit_ns_per_tri: 17.0,
@@ -442,6 +477,7 @@ fn default_config_matches_brute_force_through_rebuilds_and_reverts() {
             frames,
             &[config, default],
             Trace::Rebuilds(k),
+            0,
             &mut tally,
         );
         let (rebuilds, reverts) = done[0];

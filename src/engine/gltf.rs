@@ -241,7 +241,10 @@ impl GltfSource<'_> {
     /// rebuilds their trees for them; leaves the poser at `frame`.
     fn build_for_clip(&mut self, engine: &mut Engine, posed: &[(MeshId, usize)], frame: usize) {
         let last = self.times.len() - 1;
-        let k = self.clip_poses.min(crate::bvh::build::clip::MAX_POSES).min(last + 1);
+        let k = self
+            .clip_poses
+            .min(crate::bvh::build::clip::MAX_POSES)
+            .min(last + 1);
         let mut poses: Vec<Vec<Vec<Vec3>>> = vec![Vec::with_capacity(k); posed.len()];
         for j in 0..k {
             let f = if k == 1 { frame } else { j * last / (k - 1) };

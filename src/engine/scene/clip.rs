@@ -41,6 +41,7 @@ impl Engine {
             &mut ClipPoses::default(),
         );
         m.sah = tree_sah(tree.bvh());
+        m.stats.sah = m.sah;
         if m.wide.is_some() {
             m.wide = Some(MeshBvh8::from_mesh_bvh(&tree));
         }
@@ -61,4 +62,3 @@ impl Engine {
         Ok(())
     }
 }
-
