@@ -36,6 +36,7 @@ fn policies() -> Vec<Policy> {
         Policy::Optimize(0.05),
         Policy::Partial(0.25),
         Policy::Ladder,
+        Policy::Async,
     ]);
     p
 }

@@ -64,6 +64,10 @@ pub enum Policy {
     /// cost once one of them has paid; each rung's cost and share of the degradation it
     /// recovers are learnt per mesh from what it did (see [`RungModel`]).
     Ladder,
+    /// [`Policy::Amortized`]'s rule with every rebuild run in the background
+    /// ([`Decision::Background`]): the old tree is refitted until the new one is built, then
+    /// the new one is refitted to the current pose and swapped in.
+    Async,
 }
 
 /// The optimisation budget of [`Policy::Ladder`]: a share of the interior nodes.
@@ -82,6 +86,9 @@ pub enum Decision {
     Partial(f32),
     /// Rebuild (possibly after a refit that measured the degradation).
     Rebuild,
+    /// Refit, and rebuild from this frame's positions on the background worker (refit only
+    /// while it is busy).
+    Background,
 }
 
 impl Decision {
@@ -152,6 +159,13 @@ impl Policy {
         )
     }
 
+    /// True when the policy's moves are not all the oracle's (rungs, or rebuilds that take
+    /// effect frames later), so that it may come out below it.
+    #[must_use]
+    pub fn beyond_oracle(self) -> bool {
+        self.uses_rungs() || self == Policy::Async
+    }
+
     /// True when the policy refits before deciding (so it has a SAH ratio to decide on).
     #[must_use]
     pub fn refits_first(self) -> bool {
@@ -177,6 +191,7 @@ impl fmt::Display for Policy {
             Policy::Optimize(b) => write!(f, "optimize:{b}"),
             Policy::Partial(b) => write!(f, "partial:{b}"),
             Policy::Ladder => f.write_str("ladder"),
+            Policy::Async => f.write_str("async"),
         }
     }
 }
@@ -197,12 +212,12 @@ impl FromStr for Policy {
     type Err = ParsePolicyError;
 
     /// `refit`, `rebuild`, `periodic:N` (N >= 1), `threshold:R` (R >= 1), `amortized`,
-    /// `amortized-plain`, `optimize:B` and `partial:F` (shares in (0, 1]) or `ladder`.
+    /// `amortized-plain`, `optimize:B` and `partial:F` (shares in (0, 1]), `ladder` or `async`.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let bad = |why: &str| {
             ParsePolicyError(format!(
                 "policy {s:?}: {why} (expected refit, rebuild, periodic:N, threshold:R, amortized, \
-                 amortized-plain, optimize:B, partial:F or ladder)"
+                 amortized-plain, optimize:B, partial:F, ladder or async)"
             ))
         };
         let s = s.trim();
@@ -216,6 +231,7 @@ impl FromStr for Policy {
             ("amortized", None) => Ok(Policy::Amortized),
             ("amortized-plain", None) => Ok(Policy::AmortizedPlain),
             ("ladder", None) => Ok(Policy::Ladder),
+            ("async", None) => Ok(Policy::Async),
             ("optimize" | "partial", Some(a)) => match a.parse::<f32>() {
                 Ok(b) if b > 0.0 && b <= 1.0 => Ok(if name.eq_ignore_ascii_case("optimize") {
                     Policy::Optimize(b)
@@ -235,9 +251,10 @@ impl FromStr for Policy {
             ("periodic" | "threshold" | "optimize" | "partial", None) => {
                 Err(bad("missing argument"))
             }
-            ("refit" | "rebuild" | "amortized" | "amortized-plain" | "ladder", Some(_)) => {
-                Err(bad("takes no argument"))
-            }
+            (
+                "refit" | "rebuild" | "amortized" | "amortized-plain" | "ladder" | "async",
+                Some(_),
+            ) => Err(bad("takes no argument")),
             _ => Err(bad("unknown policy")),
         }
     }
@@ -258,6 +275,12 @@ pub enum Action {
     Partial,
     /// Rebuilt (possibly after a refit that measured the degradation).
     Rebuild,
+    /// Refitted, and a rebuild started in the background.
+    #[serde(rename = "async-start")]
+    AsyncStart,
+    /// The background rebuild's tree swapped in and refitted.
+    #[serde(rename = "async-swap")]
+    AsyncSwap,
 }
 
 impl From<Decision> for Action {
@@ -267,6 +290,7 @@ impl From<Decision> for Action {
             Decision::Optimize(_) => Action::Optimize,
             Decision::Partial(_) => Action::Partial,
             Decision::Rebuild => Action::Rebuild,
+            Decision::Background => Action::AsyncStart,
         }
     }
 }
@@ -281,6 +305,8 @@ impl Action {
             Action::Optimize => "optimize",
             Action::Partial => "partial",
             Action::Rebuild => "rebuild",
+            Action::AsyncStart => "async-start",
+            Action::AsyncSwap => "async-swap",
         }
     }
 }
@@ -367,7 +393,8 @@ impl PolicyState {
             | Policy::AmortizedPlain
             | Policy::Optimize(_)
             | Policy::Partial(_)
-            | Policy::Ladder => None,
+            | Policy::Ladder
+            | Policy::Async => None,
         }
     }
 
@@ -376,7 +403,11 @@ impl PolicyState {
     pub fn needs_fresh_ratio(policy: Policy) -> bool {
         matches!(
             policy,
-            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder
+            Policy::Amortized
+                | Policy::Optimize(_)
+                | Policy::Partial(_)
+                | Policy::Ladder
+                | Policy::Async
         )
     }
 
@@ -398,7 +429,11 @@ impl PolicyState {
                 self.extra_ms += self.trace_share_ms * f64::from(ratio - 1.0).max(0.0);
                 rebuild_if(self.extra_ms > self.rebuild_ms)
             }
-            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder => {
+            Policy::Amortized
+            | Policy::Optimize(_)
+            | Policy::Partial(_)
+            | Policy::Ladder
+            | Policy::Async => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(fresh - 1.0).max(0.0);
                 self.extra_ms += fresh_ms * degradation;
@@ -435,7 +470,10 @@ impl PolicyState {
                 best = (d, net);
             }
         }
-        best.0
+        match (policy, best.0) {
+            (Policy::Async, Decision::Rebuild) => Decision::Background,
+            (_, d) => d,
+        }
     }
 
     /// [`PolicyState::after_refit`] under the ray-work measure, whose degradation `raw` is a
@@ -444,7 +482,11 @@ impl PolicyState {
     /// it were degradation. `judged` is what `threshold` compares.
     pub fn after_refit_sampled(&mut self, policy: Policy, judged: f32, raw: f32) -> Decision {
         match policy {
-            Policy::Amortized | Policy::Optimize(_) | Policy::Partial(_) | Policy::Ladder => {
+            Policy::Amortized
+            | Policy::Optimize(_)
+            | Policy::Partial(_)
+            | Policy::Ladder
+            | Policy::Async => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
                 self.extra_ms = (self.extra_ms + fresh_ms * degradation).max(0.0);
@@ -542,6 +584,8 @@ mod tests {
             Policy::Threshold(1.5),
             Policy::Amortized,
             Policy::AmortizedPlain,
+            Policy::Ladder,
+            Policy::Async,
         ] {
             assert_eq!(p.to_string().parse::<Policy>().unwrap(), p);
         }
@@ -563,6 +607,7 @@ mod tests {
             "periodic:x",
             "amortized-plain:2",
             "amortized_plain",
+            "async:1",
         ] {
             assert!(bad.parse::<Policy>().is_err(), "{bad:?} parsed");
         }

@@ -28,6 +28,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod background;
 mod batch;
 mod clip;
 mod edit;
@@ -361,6 +362,11 @@ pub struct Engine {
     sample_entries: Vec<u32>,
     /// Scratch of optimisations and partial rebuilds.
     restructure: Restructure,
+    /// The background rebuild's worker ([`Policy::Async`]).
+    background: background::Background,
+    /// The last sampled frame's trace cost (ms, modelled under [`Timing::Priced`]): how many
+    /// frames a background rebuild is given.
+    frame_trace_ms: f64,
 }
 
 impl Engine {
@@ -386,6 +392,8 @@ impl Engine {
             sample_work: Vec::new(),
             sample_entries: Vec::new(),
             restructure: Restructure::default(),
+            background: background::Background::default(),
+            frame_trace_ms: 0.0,
         }
     }
 
@@ -422,6 +430,16 @@ impl Engine {
         if self.probes() {
             for m in &mut self.meshes {
                 m.prev.reserve_like(&m.bvh);
+            }
+        }
+        if policy == Policy::Async {
+            for m in &self.meshes {
+                self.background.reserve(
+                    m.positions.len(),
+                    m.indices.len(),
+                    &m.bvh,
+                    m.wide.as_ref(),
+                );
             }
         }
     }
@@ -486,6 +504,10 @@ impl Engine {
         }
         if self.config.policy.uses_rungs() {
             self.restructure.warm_up(&bvh, &self.config.build);
+        }
+        if self.config.policy == Policy::Async {
+            self.background
+                .reserve(positions.len(), indices.len(), &bvh, wide.as_ref());
         }
         MeshEntry {
             positions,
@@ -698,8 +720,12 @@ impl Engine {
             entries: if replay { &self.entries } else { &[] },
             workspace: &mut self.workspace,
             restructure: &mut self.restructure,
+            background: &mut self.background,
+            frame: self.frame,
+            frame_trace_ms: self.frame_trace_ms,
         };
         let mut restructured = Action::None;
+        let mut background = Action::None;
         for (id, m) in self.meshes.iter_mut().enumerate() {
             m.moved = std::mem::take(&mut m.dirty);
             if !m.moved {
@@ -714,6 +740,16 @@ impl Engine {
             stats.reverts += u32::from(out.reverted);
             match m.stats.action {
                 Action::Rebuild => stats.rebuilds += 1,
+                Action::AsyncSwap => {
+                    stats.rebuilds += 1;
+                    background = Action::AsyncSwap;
+                }
+                Action::AsyncStart => {
+                    stats.refits += 1;
+                    if background == Action::None {
+                        background = Action::AsyncStart;
+                    }
+                }
                 a @ (Action::Optimize | Action::Partial) => {
                     stats.restructures += 1;
                     restructured = a;
@@ -726,7 +762,9 @@ impl Engine {
             stats.max_sah_ratio = stats.max_sah_ratio.max(m.stats.sah_ratio);
             stats.max_fresh_ratio = stats.max_fresh_ratio.max(m.stats.fresh_ratio);
         }
-        stats.action = if stats.rebuilds > 0 {
+        stats.action = if background != Action::None {
+            background
+        } else if stats.rebuilds > 0 {
             Action::Rebuild
         } else if stats.restructures > 0 {
             restructured
@@ -822,6 +860,7 @@ impl Engine {
         } else {
             self.stats.trace_ms
         };
+        self.frame_trace_ms = total;
         match self.config.cost {
             CostMeasure::Rays => {
                 for (k, m) in self.meshes.iter_mut().enumerate() {

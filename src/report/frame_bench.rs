@@ -870,7 +870,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             s.oracle_ratio_modelled = s.modelled_ms / modelled.total_ms;
             // The oracle schedules refits and rebuilds only: a policy with other actions may
             // beat it.
-            if s.modelled_ms < modelled.total_ms * (1.0 - 1e-9) && !p.uses_rungs() {
+            if s.modelled_ms < modelled.total_ms * (1.0 - 1e-9) && !p.beyond_oracle() {
                 below_oracle.push(format!(
                     "{}: modelled {:.6} ms below the oracle's {:.6} ms",
                     s.policy, s.modelled_ms, modelled.total_ms

@@ -35,6 +35,7 @@ impl Engine {
                 positions.len()
             )));
         }
+        self.background.cancel(mesh);
         let entry = self.new_mesh_entry(positions, indices);
         self.meshes[mesh.0 as usize] = entry;
         for inst in &mut self.instances {
@@ -76,6 +77,7 @@ impl Engine {
                 "remove_mesh({mesh:?}): instance {k} still places it"
             )));
         }
+        self.background.cancel(mesh);
         let m = &mut self.meshes[mesh.0 as usize];
         m.positions = Vec::new();
         m.indices = Vec::new();

@@ -2,6 +2,7 @@
 //! let the policy decide, act (rebuild, optimise, partial rebuild), and bring the wide tree
 //! along. What the policy weighs is in [`crate::engine::policy`]; this file only runs it.
 
+use super::background::Background;
 use super::{ESTIMATE_SHARE, MeshEntry, Probe, Timing, ms_since, probe_step, ratio, sample};
 use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
 pub(super) use crate::bvh::partial::PartialCut;
@@ -60,6 +61,10 @@ pub(super) struct FrameContext<'a> {
     pub entries: &'a [SampleEntry],
     pub workspace: &'a mut BuildWorkspace,
     pub restructure: &'a mut Restructure,
+    pub background: &'a mut Background,
+    /// The frame being updated, and the last sampled frame's trace cost (ms).
+    pub frame: u64,
+    pub frame_trace_ms: f64,
 }
 
 /// What one mesh's update did, for the frame's statistics.
@@ -81,6 +86,7 @@ impl MeshEntry {
         self.stats.measured_work_ratio = 0.0;
         self.stats.refit_ms = 0.0;
         self.stats.rebuild_ms = 0.0;
+        let swapped = self.swap_in_background_tree(id, cx);
         let early = self.state.before_refit(cx.policy);
         let (decision, raw_work_ratio) = match early {
             Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
@@ -93,14 +99,69 @@ impl MeshEntry {
             }
         };
         let refitted = early != Some(Decision::Rebuild);
+        let mut action = Action::from(decision);
         match decision {
             Decision::Refit => self.follow_wide(out.reverted, cx),
             Decision::Rebuild => self.rebuild(id, refitted, raw_work_ratio, cx),
             Decision::Optimize(_) | Decision::Partial(_) => self.restructure(id, decision, cx),
+            Decision::Background => {
+                self.follow_wide(out.reverted, cx);
+                let wide = self.wide.is_some();
+                // The frame the new tree is due: as many frames as the build (on one thread)
+                // takes of tracing, at the prices or the measured times.
+                let tris = self.indices.len();
+                let build_ms = cx.timing.build_ms(self.state.rebuild_ms, tris, &cx.prices)
+                    * rayon::current_num_threads() as f64;
+                let lag = if cx.frame_trace_ms > 0.0 {
+                    (build_ms / cx.frame_trace_ms)
+                        .ceil()
+                        .clamp(1.0, MAX_BACKGROUND_LAG)
+                } else {
+                    1.0
+                };
+                let due = cx.frame + lag as u64;
+                if cx
+                    .background
+                    .start(id, &self.positions, &self.indices, &cx.build, wide, due)
+                {
+                    self.stats.model_ms += cx.prices.rebuild_ms(self.indices.len());
+                    // The rebuild's cost is paid: the extra trace time counts afresh.
+                    self.state.restructured();
+                } else {
+                    action = Action::Refit;
+                }
+            }
         }
-        self.stats.action = Action::from(decision);
+        if swapped && action == Action::Refit {
+            action = Action::AsyncSwap;
+        }
+        self.stats.action = action;
         self.stats.sah = self.sah;
         out
+    }
+
+    /// Swaps in the tree the background worker finished for this mesh, if it has: its policy
+    /// state starts from the new tree (built at an earlier pose; the refit that follows brings
+    /// it to this frame's). True when it did.
+    fn swap_in_background_tree(&mut self, id: MeshId, cx: &mut FrameContext<'_>) -> bool {
+        let Some(mut job) = cx.background.take_due(id, cx.frame) else {
+            return false;
+        };
+        let tris = self.indices.len();
+        std::mem::swap(&mut self.bvh, &mut job.tree);
+        if let (Some(w), Some(jw)) = (&mut self.wide, &mut job.wide) {
+            std::mem::swap(w, jw);
+        }
+        self.sah = super::tree_sah(self.bvh.bvh());
+        let cost = match cx.timing {
+            Timing::Measured => job.build_ms,
+            t => t.build_ms(job.build_ms, tris, &cx.prices),
+        };
+        self.state.rebuilt(self.sah, 0.0, cost);
+        self.ray_base = 0.0;
+        self.ray_observed = 0.0;
+        cx.background.recycle(job);
+        true
     }
 
     /// Refits the tree (and a replaced tree on probation); true when the probation went back
@@ -376,7 +437,7 @@ impl MeshEntry {
                 cx.prices
                     .partial_ms(tris, st.cut as usize, st.rebuilt_tris as usize)
             }
-            Decision::Refit | Decision::Rebuild => 0.0,
+            Decision::Refit | Decision::Rebuild | Decision::Background => 0.0,
         };
         if let Some(w) = &mut self.wide {
             w.collapse_from(&self.bvh);
@@ -408,3 +469,6 @@ impl MeshEntry {
         self.stats.rebuild_ms = ms;
     }
 }
+
+/// The most frames a background rebuild is given before the engine waits for it.
+const MAX_BACKGROUND_LAG: f64 = 64.0;

@@ -1,0 +1,237 @@
+//! Background rebuild (Ize, Wald & Parker 2007, asynchronous BVH construction): a deforming
+//! mesh's tree is rebuilt on a worker thread from a snapshot of its positions while the frame
+//! loop keeps refitting the old tree; at the frame the build is due the new tree is swapped in
+//! and refitted to the current positions. The due frame is fixed when the build starts (from
+//! the build's price and the frame's trace cost), and the engine waits there if the build is
+//! late, so that the schedule is the same on every run whatever the machine's load.
+//!
+//! One worker per engine, one build at a time. The worker builds sequentially
+//! (`parallel_threshold` off): it runs beside the frame's rayon pool instead of queueing its
+//! tasks among the frame's tracing tasks, and the system shares the cores between them.
+
+use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
+use crate::engine::MeshId;
+use glam::Vec3;
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+/// A build's input and output, moved to the worker and back (its buffers kept from one build
+/// to the next).
+#[derive(Default)]
+pub(super) struct Job {
+    pub mesh: Option<MeshId>,
+    pub positions: Vec<Vec3>,
+    pub indices: Vec<[u32; 3]>,
+    pub tree: MeshBvh,
+    /// The 8-wide tree collapsed from it, when the engine traces wide trees.
+    pub wide: Option<MeshBvh8>,
+    ws: BuildWorkspace,
+    params: Option<BuildParams>,
+    /// Collapse `wide` after the build.
+    collapse: bool,
+    /// The build's wall time on the worker, ms.
+    pub build_ms: f64,
+}
+
+#[derive(Default)]
+struct Slot {
+    job: Option<Job>,
+    queued: bool,
+    done: bool,
+    quit: bool,
+}
+
+#[derive(Default)]
+struct Shared {
+    slot: Mutex<Slot>,
+    wake: Condvar,
+}
+
+/// The worker and the job it holds or will hold.
+#[derive(Default)]
+pub(super) struct Background {
+    shared: Arc<Shared>,
+    worker: Option<JoinHandle<()>>,
+    /// The job's buffers while no build runs.
+    idle: Option<Job>,
+    /// The mesh whose build runs or waits to be swapped in, and the frame it is due.
+    busy: Option<MeshId>,
+    due: u64,
+}
+
+impl Background {
+    /// Starts the worker and sizes the job's buffers for a mesh of `vertices` and `triangles`
+    /// (like `tree`, and `wide` when the engine traces wide trees), so that starting a build
+    /// allocates nothing. Allocates.
+    pub fn reserve(
+        &mut self,
+        vertices: usize,
+        triangles: usize,
+        tree: &MeshBvh,
+        wide: Option<&MeshBvh8>,
+    ) {
+        if self.worker.is_none() {
+            let shared = Arc::clone(&self.shared);
+            self.worker = Some(std::thread::spawn(move || work(&shared)));
+        }
+        let job = self.idle.get_or_insert_with(Job::default);
+        job.positions
+            .reserve(vertices.saturating_sub(job.positions.len()));
+        job.indices
+            .reserve(triangles.saturating_sub(job.indices.len()));
+        job.tree.reserve_like(tree);
+        if let (None, Some(w)) = (&job.wide, wide) {
+            job.wide = Some(w.clone());
+        }
+    }
+
+    /// Starts rebuilding `mesh` from these positions and triangles (copied), and collapsing
+    /// the 8-wide tree when `wide`; false (nothing started) while another build runs.
+    pub fn start(
+        &mut self,
+        mesh: MeshId,
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        params: &BuildParams,
+        wide: bool,
+        due: u64,
+    ) -> bool {
+        if self.busy.is_some() {
+            return false;
+        }
+        if self.worker.is_none() {
+            self.reserve(positions.len(), indices.len(), &MeshBvh::default(), None);
+        }
+        let mut job = self.idle.take().unwrap_or_default();
+        if wide && job.wide.is_none() {
+            job.wide = Some(MeshBvh8::default());
+        }
+        job.collapse = wide;
+        job.mesh = Some(mesh);
+        job.positions.clear();
+        job.positions.extend_from_slice(positions);
+        job.indices.clear();
+        job.indices.extend_from_slice(indices);
+        job.params = Some(BuildParams {
+            parallel_threshold: usize::MAX,
+            ..*params
+        });
+        let mut slot = self
+            .shared
+            .slot
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        slot.job = Some(job);
+        slot.queued = true;
+        slot.done = false;
+        drop(slot);
+        self.shared.wake.notify_one();
+        self.busy = Some(mesh);
+        self.due = due;
+        true
+    }
+
+    /// The build of `mesh` when it is due at `frame` (waiting for it if it is late); its
+    /// buffers come back with the next [`Background::recycle`].
+    pub fn take_due(&mut self, mesh: MeshId, frame: u64) -> Option<Job> {
+        if self.busy != Some(mesh) || frame < self.due {
+            return None;
+        }
+        let job = self.wait();
+        self.busy = None;
+        job
+    }
+
+    /// Waits for the running build and takes it.
+    fn wait(&mut self) -> Option<Job> {
+        let mut slot = self
+            .shared
+            .slot
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        while !slot.done {
+            slot = self
+                .shared
+                .wake
+                .wait(slot)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+        slot.done = false;
+        slot.job.take()
+    }
+
+    /// Keeps a finished job's buffers for the next build.
+    pub fn recycle(&mut self, job: Job) {
+        self.idle = Some(job);
+    }
+
+    /// Forgets a build of `mesh` (the mesh was replaced or removed): its result is dropped
+    /// when it arrives.
+    pub fn cancel(&mut self, mesh: MeshId) {
+        if self.busy == Some(mesh) {
+            // Wait for it: the worker holds the buffers until then.
+            let job = self.wait();
+            self.busy = None;
+            if let Some(job) = job {
+                self.idle = Some(job);
+            }
+        }
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        if let Some(w) = self.worker.take() {
+            self.shared
+                .slot
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .quit = true;
+            self.shared.wake.notify_all();
+            let _ = w.join();
+        }
+    }
+}
+
+/// The worker: waits for a queued job, builds it, hands it back.
+fn work(shared: &Shared) {
+    loop {
+        let mut slot = shared.slot.lock().unwrap_or_else(PoisonError::into_inner);
+        while !slot.queued && !slot.quit {
+            slot = shared
+                .wake
+                .wait(slot)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+        if slot.quit {
+            return;
+        }
+        slot.queued = false;
+        let Some(mut job) = slot.job.take() else {
+            continue;
+        };
+        drop(slot);
+        let t = Instant::now();
+        let params = job.params.unwrap_or(BuildParams::BINNED);
+        let Job {
+            positions,
+            indices,
+            tree,
+            wide,
+            ws,
+            collapse,
+            ..
+        } = &mut job;
+        tree.rebuild_indexed(positions, indices, &params, ws);
+        if let (true, Some(w)) = (*collapse, wide) {
+            w.collapse_from(tree);
+        }
+        job.build_ms = t.elapsed().as_secs_f64() * 1e3;
+        let mut slot = shared.slot.lock().unwrap_or_else(PoisonError::into_inner);
+        slot.job = Some(job);
+        slot.done = true;
+        drop(slot);
+        shared.wake.notify_all();
+    }
+}
