@@ -738,12 +738,13 @@ impl Engine {
             }
             let out = m.update(MeshId(id as u32), &mut cx);
             stats.reverts += u32::from(out.reverted);
+            if out.swapped {
+                stats.rebuilds += 1;
+                background = Action::AsyncSwap;
+            }
             match m.stats.action {
                 Action::Rebuild => stats.rebuilds += 1,
-                Action::AsyncSwap => {
-                    stats.rebuilds += 1;
-                    background = Action::AsyncSwap;
-                }
+                Action::AsyncSwap => stats.refits += 1,
                 Action::AsyncStart => {
                     stats.refits += 1;
                     if background == Action::None {

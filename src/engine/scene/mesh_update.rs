@@ -71,6 +71,8 @@ pub(super) struct FrameContext<'a> {
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct MeshOutcome {
     pub reverted: bool,
+    /// A background rebuild's tree was swapped in (a rebuild, whatever else the frame did).
+    pub swapped: bool,
 }
 
 impl MeshEntry {
@@ -87,6 +89,7 @@ impl MeshEntry {
         self.stats.refit_ms = 0.0;
         self.stats.rebuild_ms = 0.0;
         let swapped = self.swap_in_background_tree(id, cx);
+        out.swapped = swapped;
         let early = self.state.before_refit(cx.policy);
         let (decision, raw_work_ratio) = match early {
             Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
