@@ -38,7 +38,7 @@ pub fn framing_bounds(visit: impl Fn(&mut dyn FnMut(Vec3))) -> (Aabb, u64) {
     let mut k = 0usize;
     visit(&mut |p| {
         if p.is_finite() {
-            if k % stride == 0 {
+            if k.is_multiple_of(stride) {
                 sample.push(p);
             }
             k += 1;
@@ -85,7 +85,7 @@ fn keep_box(sample: &[Vec3]) -> Option<Aabb> {
         core.max[axis] = hi;
     }
     let margin = 2.0 * core.extent().max_element();
-    if !(margin > 0.0) || !margin.is_finite() {
+    if !(margin > 0.0 && margin.is_finite()) {
         return None;
     }
     let m = Vec3::splat(margin);

@@ -109,7 +109,7 @@ impl Camera {
         // Relative bounds only: a scene 1e-10 across is framed as one 1 across.
         let size = bounds.extent().length();
         let d = (d * 1.08).max(size * 0.05);
-        if !(d > 0.0) {
+        if !(d > 0.0 && d.is_finite()) {
             // A box that is one point: any distance sees it.
             let d = c.abs().max_element().max(1.0) * 1e-3;
             return Self::look_at(c + dir * d, c, Vec3::Y, projection);
