@@ -210,6 +210,19 @@ fn clips_with_key_times_up_to_3e38_render_and_bench_bounded() {
 }
 
 #[test]
+fn clips_of_1e7_and_1e9_seconds_render_a_bounded_number_of_frames_by_default() {
+    let d = tmp_dir("hostile", "long_defaults");
+    for (name, end) in [("1e7.gltf", 1e7f32), ("1e9.gltf", 1e9)] {
+        let f = write(&d, name, &clip(&[0.0, end]));
+        let out = d.join("frames");
+        let (_, err) = bounded(&["render", &s(&f), "--size", "16x12", "--out", &s(&out)]);
+        assert!(err.contains("rendering 300 frames"), "{name}: {err}");
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 300, "{name}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}
+
+#[test]
 fn hostile_frame_counts_and_rates_are_refused() {
     let d = tmp_dir("hostile", "frames");
     let f = small_scene(&d);
@@ -531,6 +544,10 @@ fn accessors_without_data_and_instanced_huge_meshes_are_bounded() {
     let huge = write(&d, "huge.gltf", &zeros_placed(16_777_216, 1));
     refused(
         &["info", &s(&huge)],
+        &["huge.gltf", "accessor 0", "without a buffer view"],
+    );
+    refused(
+        &bench(&s(&huge), &["--rays", "64"]),
         &["huge.gltf", "accessor 0", "without a buffer view"],
     );
 }
