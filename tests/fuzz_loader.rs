@@ -3,7 +3,8 @@
 //! (`tests/fuzz_corpus/`) is loaded as it is, then mutated (truncations, byte flips, inserted
 //! and deleted runs, JSON numbers replaced by hostile values, GLB chunk lengths changed) with a
 //! seeded generator, and each mutant is loaded, every animation posed at a few times, the
-//! scene flattened and a tree built over it and validated.
+//! scene flattened, a tree built over it, validated and traced, and the engine driven through
+//! a few frames of the first animations as `render` and `bench` drive it.
 //!
 //! A case may fail to load (a clean error) but must not panic, and must finish in bounded
 //! time: a case still running after [`HANG`] fails the test. The mutant of a failed case is
@@ -18,6 +19,8 @@ mod anim_util;
 
 use dynbvh::anim::{LoadOptions, Scene};
 use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::engine::EngineConfig;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::geom::{Ray, TriMesh};
 use glam::Vec3;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -344,8 +347,28 @@ fn exercise(path: &Path, bytes: &[u8]) -> Reached {
     } else {
         Vec3::ZERO
     };
-    for d in [Vec3::X, Vec3::Y, Vec3::NEG_Z, Vec3::new(0.3, -0.5, 0.8)] {
-        let _ = bvh.closest_hit(&Ray::new(c - d * 10.0, d));
+    let rays: Vec<Ray> = [Vec3::X, Vec3::Y, Vec3::NEG_Z, Vec3::new(0.3, -0.5, 0.8)]
+        .iter()
+        .map(|&d| Ray::new(c - d * 10.0, d))
+        .collect();
+    for r in &rays {
+        let _ = bvh.closest_hit(r);
+    }
+    // The frame loop render and bench run: the two-level engine built at the start of each
+    // animation, moved through a few frames (refits, the policy's rebuilds), traced.
+    for anim in (0..scene.animations.len().min(2)).map(Some).chain([None]) {
+        let Ok(mut src) = GltfSource::new(&scene, anim, FrameTimes::Count(3)) else {
+            continue;
+        };
+        let mut engine = src.engine(EngineConfig::default());
+        let mut hits = vec![None; rays.len()];
+        for step in 0..3 {
+            if src.set_time(&mut engine, 0.41 * step as f32).is_err() {
+                break;
+            }
+            engine.update();
+            engine.trace_closest(&rays, &mut hits);
+        }
     }
     Reached::Traced
 }
