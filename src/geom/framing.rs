@@ -6,26 +6,41 @@
 use super::Aabb;
 use glam::Vec3;
 
-/// Most points the quantiles are taken from (an even sample of the rest).
+/// Half the most points the quantiles are taken from (an even sample of the rest).
 const SAMPLE: usize = 1 << 16;
 
 /// Share of the points below the low quantile and above the high one, on each axis.
 const TAIL: f64 = 0.005;
 
-/// The bounds of the points `visit` hands over (it is called three times and must give the
-/// same points each time; points that are not finite are skipped), and how many of them were
-/// left out as far outliers.
+/// The bounds of the points `visit` hands over (it is called once, or twice when something is
+/// left out, and must give the same points each time; points that are not finite are
+/// skipped), and how many of them were left out as far outliers.
 ///
-/// On each axis the 0.5% and 99.5% quantiles of the points bound their core; a point is kept
-/// when it lies within twice the core's largest side of the core on every axis. Nothing is left out of
-/// a set of fewer than 200 points (its quantiles are its extremes), nor where the core is one
-/// point. An ordinary mesh keeps every vertex: its extremes lie far closer to its quantiles
-/// than that.
+/// On each axis the 0.5% and 99.5% quantiles of the points (of an even sample of at most
+/// about 128k of them) bound their core; a point is kept when it lies within twice the core's
+/// largest side of the core on every axis. Nothing is left out of a set of fewer than 200
+/// points (its quantiles are its extremes), nor where the core is one point. An ordinary
+/// mesh keeps every vertex: its extremes lie far closer to its quantiles than that.
 pub fn framing_bounds(visit: impl Fn(&mut dyn FnMut(Vec3))) -> (Aabb, u64) {
     let mut n = 0usize;
     let mut all = Aabb::EMPTY;
+    // Every `stride`-th point; when the sample fills up, every other one is dropped and the
+    // stride doubles, so it stays an even sample in one pass.
+    let mut sample = Vec::new();
+    let mut stride = 1usize;
     visit(&mut |p| {
         if p.is_finite() {
+            if n.is_multiple_of(stride) {
+                sample.push(p);
+                if sample.len() == 2 * SAMPLE {
+                    let mut k = 0;
+                    sample.retain(|_| {
+                        k += 1;
+                        k % 2 == 1
+                    });
+                    stride *= 2;
+                }
+            }
             n += 1;
             all = all.grow(p);
         }
@@ -33,20 +48,12 @@ pub fn framing_bounds(visit: impl Fn(&mut dyn FnMut(Vec3))) -> (Aabb, u64) {
     if n < 200 {
         return (all, 0);
     }
-    let stride = n.div_ceil(SAMPLE);
-    let mut sample = Vec::with_capacity(n / stride + 1);
-    let mut k = 0usize;
-    visit(&mut |p| {
-        if p.is_finite() {
-            if k.is_multiple_of(stride) {
-                sample.push(p);
-            }
-            k += 1;
-        }
-    });
     let Some(keep) = keep_box(&sample) else {
         return (all, 0);
     };
+    if all.min.cmpge(keep.min).all() && all.max.cmple(keep.max).all() {
+        return (all, 0);
+    }
     let mut kept = Aabb::EMPTY;
     let mut left_out = 0u64;
     visit(&mut |p| {
@@ -134,6 +141,16 @@ mod tests {
                 "{far}"
             );
         }
+    }
+
+    #[test]
+    fn large_sets_are_sampled_evenly() {
+        // 300k points: the sample is thinned twice; the far point is still found.
+        let mut pts = grid(550);
+        pts[1000] = Vec3::new(0.0, -1e20, 0.0);
+        let (b, out) = frame(&pts);
+        assert_eq!(out, 1);
+        assert_eq!(b, Aabb::new(Vec3::ZERO, Vec3::new(549.0, 549.0, 0.0)));
     }
 
     #[test]
