@@ -83,6 +83,29 @@ fn all_centroids_in_one_point() {
 }
 
 #[test]
+fn triangles_that_are_one_point_get_a_balanced_tree() {
+    // Every box is the same point, so every split costs the same (nothing): the builders must
+    // still halve the list, not peel one triangle off per level (which made the full sweep
+    // over millions of such triangles run for minutes).
+    let n = 20_000;
+    let mesh = TriMesh {
+        positions: vec![Vec3::new(0.5, -2.0, 7.0)],
+        indices: vec![[0, 0, 0]; n],
+    };
+    let balanced = (n as f32).log2().ceil() as usize + 2;
+    for params in builders() {
+        let bvh = MeshBvh::build(&mesh, &params);
+        bvh.validate(&mesh).unwrap();
+        assert!(
+            bvh.bvh().depth() <= balanced,
+            "{}: depth {} over {n} point triangles",
+            params.name(),
+            bvh.bvh().depth()
+        );
+    }
+}
+
+#[test]
 fn identical_triangles() {
     let t = [
         Vec3::new(-1.0, -1.0, 0.0),

@@ -210,6 +210,19 @@ fn clips_with_key_times_up_to_3e38_render_and_bench_bounded() {
 }
 
 #[test]
+fn clips_of_1e7_and_1e9_seconds_render_a_bounded_number_of_frames_by_default() {
+    let d = tmp_dir("hostile", "long_defaults");
+    for (name, end) in [("1e7.gltf", 1e7f32), ("1e9.gltf", 1e9)] {
+        let f = write(&d, name, &clip(&[0.0, end]));
+        let out = d.join("frames");
+        let (_, err) = bounded(&["render", &s(&f), "--size", "16x12", "--out", &s(&out)]);
+        assert!(err.contains("rendering 300 frames"), "{name}: {err}");
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 300, "{name}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}
+
+#[test]
 fn hostile_frame_counts_and_rates_are_refused() {
     let d = tmp_dir("hostile", "frames");
     let f = small_scene(&d);
@@ -533,6 +546,43 @@ fn accessors_without_data_and_instanced_huge_meshes_are_bounded() {
         &["info", &s(&huge)],
         &["huge.gltf", "accessor 0", "without a buffer view"],
     );
+    refused(
+        &bench(&s(&huge), &["--rays", "64"]),
+        &["huge.gltf", "accessor 0", "without a buffer view"],
+    );
+}
+
+#[test]
+fn millions_of_zero_indices_end_quickly() {
+    // 16,777,215 indices without a buffer view (all zero): 5.6M triangles that are one point,
+    // from a few hundred bytes.
+    let d = tmp_dir("hostile", "zero_indices");
+    let (_, data) = clip_parts(&[0.0, 1.0]);
+    let mut doc = clip(&[0.0, 1.0]);
+    doc["meshes"][0]["primitives"][0]["indices"] = json!(3);
+    doc["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"componentType": 5125, "count": 16_777_215, "type": "SCALAR"}));
+    assert!(!data.is_empty());
+    let f = write(&d, "zidx.gltf", &doc);
+    let f = s(&f);
+    let start = Instant::now();
+    refused(
+        &["build-bench", &f],
+        &["zidx.gltf", "5592405 triangles", "degenerate"],
+    );
+    refused(
+        &bench(&f, &["--rays", "64"]),
+        &["zidx.gltf", "5592405 triangles", "--max-memory"],
+    );
+    bounded(&["render", &f, "--bench", "--frames", "1", "--size", "64x48"]);
+    bounded(&["info", &f]);
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "{:?} for the four runs",
+        start.elapsed()
+    );
 }
 
 #[test]
@@ -658,4 +708,142 @@ fn a_far_vertex_does_not_collapse_the_tree() {
             "work with one vertex at {p}: {with_far}, without it {plain}"
         );
     }
+}
+
+/// `glb` with vertex `k` of mesh 0's positions moved to `p` (its accessor's bounds widened).
+fn with_vertex_at(glb: &[u8], k: usize, p: [f32; 3]) -> Vec<u8> {
+    let u32_at = |o: usize| u32::from_le_bytes(glb[o..o + 4].try_into().unwrap()) as usize;
+    let json_len = u32_at(12);
+    let mut doc: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let mut bin = glb[20 + json_len + 8..].to_vec();
+    let acc = doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+        .as_u64()
+        .unwrap() as usize;
+    let view = doc["accessors"][acc]["bufferView"].as_u64().unwrap() as usize;
+    let v = &doc["bufferViews"][view];
+    let stride = v["byteStride"].as_u64().unwrap_or(12) as usize;
+    let at = v["byteOffset"].as_u64().unwrap_or(0) as usize
+        + doc["accessors"][acc]["byteOffset"].as_u64().unwrap_or(0) as usize
+        + k * stride;
+    for (a, x) in p.iter().enumerate() {
+        bin[at + 4 * a..at + 4 * a + 4].copy_from_slice(&x.to_le_bytes());
+        let lo = doc["accessors"][acc]["min"][a]
+            .as_f64()
+            .unwrap()
+            .min(f64::from(*x));
+        let hi = doc["accessors"][acc]["max"][a]
+            .as_f64()
+            .unwrap()
+            .max(f64::from(*x));
+        doc["accessors"][acc]["min"][a] = json!(lo);
+        doc["accessors"][acc]["max"][a] = json!(hi);
+    }
+    let mut json = serde_json::to_vec(&doc).unwrap();
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let mut out = Vec::new();
+    out.extend(b"glTF");
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend((json.len() as u32).to_le_bytes());
+    out.extend(0x4E4F_534Au32.to_le_bytes());
+    out.extend(json);
+    out.extend((bin.len() as u32).to_le_bytes());
+    out.extend(0x004E_4942u32.to_le_bytes());
+    out.extend(bin);
+    out
+}
+
+/// Mean counted work (nodes visited plus triangles tested) per ray of each policy's frames,
+/// from `bench --json`.
+fn bench_work(file: &str, traversal: &str) -> Vec<(String, f64)> {
+    let prices = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/prices.json");
+    let args = [
+        "bench",
+        file,
+        "-p",
+        "refit",
+        "-p",
+        "rebuild",
+        "--no-oracle",
+        "--no-builders",
+        "--no-tlas-compare",
+        "--frames",
+        "6",
+        "--rays",
+        "4096",
+        "--repeats",
+        "1",
+        "--traversal",
+        traversal,
+        "--prices",
+        prices,
+        "--json",
+    ];
+    let (out, _) = bounded(&args);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let mut sums: Vec<(String, f64, f64)> = Vec::new();
+    for row in report["per_frame"].as_array().unwrap() {
+        let policy = row["policy"].as_str().unwrap().to_string();
+        let work = row["nodes_per_ray"].as_f64().unwrap() + row["tris_per_ray"].as_f64().unwrap();
+        match sums.iter_mut().find(|s| s.0 == policy) {
+            Some(s) => {
+                s.1 += work;
+                s.2 += 1.0;
+            }
+            None => sums.push((policy, work, 1.0)),
+        }
+    }
+    sums.into_iter().map(|(p, w, n)| (p, w / n)).collect()
+}
+
+#[test]
+fn a_far_vertex_costs_the_bench_and_render_little() {
+    // A 44k-triangle morphing grid (150 x 150 vertices), and the same with its middle vertex
+    // at 1e30: through `bench` (both traversals, refitted and rebuilt trees, the engine's two
+    // levels) the rays' counted work stays within 3x, and `render` still shows the grid.
+    let d = tmp_dir("hostile", "far_vertex");
+    let plain = d.join("wave.glb");
+    bounded(&["gen", "wave", "--triangles", "44000", "--out", &s(&plain)]);
+    let glb = std::fs::read(&plain).unwrap();
+    let far = d.join("far.glb");
+    std::fs::write(&far, with_vertex_at(&glb, 75 * 150 + 75, [1e30; 3])).unwrap();
+    for traversal in ["wide", "binary"] {
+        let base = bench_work(&s(&plain), traversal);
+        let with_far = bench_work(&s(&far), traversal);
+        assert_eq!(base.len(), 2);
+        for ((p, w), (q, wf)) in base.iter().zip(&with_far) {
+            assert_eq!(p, q);
+            assert!(
+                *wf <= 3.0 * w,
+                "{traversal} {p}: {wf:.1} nodes+triangles per ray with the far vertex, {w:.1} without"
+            );
+        }
+    }
+    let pixels = |f: &Path, name: &str| {
+        let out = d.join(name);
+        let (said, _) = bounded(&[
+            "render",
+            &s(f),
+            "--frames",
+            "1",
+            "--size",
+            "64x48",
+            "--out",
+            &s(&out),
+        ]);
+        let img = image::open(out.join("frame_0000.png")).unwrap().to_rgb8();
+        let n = img
+            .pixels()
+            .filter(|p| i32::from(p[0]) > i32::from(p[2]) + 40)
+            .count();
+        (n, said)
+    };
+    let (n_plain, _) = pixels(&plain, "plain");
+    let (n_far, note) = pixels(&far, "far");
+    assert!(n_plain > 64 * 48 / 10, "{n_plain}");
+    assert!(
+        n_far.abs_diff(n_plain) * 10 <= n_plain,
+        "the grid covers {n_far} pixels with the far vertex, {n_plain} without"
+    );
+    assert!(note.contains("far outside the rest"), "{note}");
 }

@@ -17,6 +17,19 @@ use std::path::{Path, PathBuf};
 /// rays), so that a default run on a small mesh takes seconds rather than minutes.
 const DEFAULT_RAY_BUDGET: u64 = 1 << 15;
 
+/// True when the triangle has finite vertices and a non-zero area (its edges' cross product
+/// taken in f64, which neither overflows nor underflows for f32 coordinates).
+fn has_area(t: &[glam::Vec3; 3]) -> bool {
+    if !t.iter().all(|p| p.is_finite()) {
+        return false;
+    }
+    let [a, b, c] = t.map(|p| p.as_dvec3());
+    (b - a).cross(c - a) != glam::DVec3::ZERO
+}
+
+/// Triangle tests the brute-force check may spend per ray set.
+const CHECK_WORK: usize = 1 << 28;
+
 /// Arguments of `build-bench`.
 #[derive(Args, Debug)]
 pub struct BuildBenchArgs {
@@ -133,6 +146,16 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         (mesh.len() as u64).saturating_mul(args::BUILD_BYTES_PER_TRIANGLE),
     )?;
     mesh.check().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    // A mesh of degenerate triangles only (a few bytes of glTF can ask for millions of
+    // repeated zero indices) has nothing a ray can hit, and every tree over it is one point
+    // that every ray through it must search whole.
+    if !mesh.is_empty() && !(0..mesh.len()).any(|i| has_area(&mesh.triangle(i))) {
+        bail!(
+            "{name}: all {} triangles are degenerate (no area, or a vertex that is not finite): \
+             no ray can hit them, nothing to benchmark",
+            mesh.len()
+        );
+    }
     let (methods, structures) = if args.methods.is_empty() {
         (build_bench::default_methods(), Vec::new())
     } else {
@@ -148,7 +171,13 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
     };
     let budget = args.ray_budget as usize;
     let sets = if args.ray_files.is_empty() {
-        let b = mesh.bounds();
+        // The mesh's box less far outliers: what the camera and the random rays cover.
+        let (b, _) = dynbvh::geom::framing_bounds(|f| {
+            mesh.indices
+                .iter()
+                .flatten()
+                .for_each(|&v| f(mesh.positions[v as usize]))
+        });
         let side = (budget as f64).sqrt().floor().max(1.0) as usize;
         vec![
             RaySet {
@@ -177,8 +206,12 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
     };
     let threads = rayon::current_num_threads();
     eprintln!("{name}: {} triangles, {threads} thread(s)", mesh.len());
+    // Brute force tests every triangle for every checked ray: on a huge mesh fewer rays are
+    // checked (at least 16 per set), so the check stays a few seconds.
+    let check_rays = (CHECK_WORK / mesh.len().max(1)).clamp(16, Options::default().check_rays);
     let opts = Options {
         build_runs: args.runs as usize,
+        check_rays,
         ..Options::default()
     };
     let samples = build_bench::brute_force_samples(&mesh, &sets, opts.check_rays);

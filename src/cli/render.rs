@@ -10,7 +10,7 @@ use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{Action, Engine, EngineConfig, Policy, Traversal};
 use dynbvh::render::{
     Camera, EngineShading, FrameCounts, GltfCamera, PacketUse, Renderer, Settings, Stage,
-    animation_bounds, font, gltf_cameras,
+    animation_view, font, gltf_cameras,
 };
 use dynbvh::report::or_dash;
 use image::RgbImage;
@@ -432,7 +432,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
 
     // The camera: the file's own, else framed on the whole animation (the same for every
     // range, so that split runs join up).
-    let bounds = animation_bounds(&scene, anim, pipes[0].src.times())?;
+    let (bounds, left_out) = animation_view(&scene, anim, pipes[0].src.times())?;
     let file_camera: Option<GltfCamera> = if a.auto_camera {
         None
     } else {
@@ -450,6 +450,9 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
             "the file's camera {} (node {})",
             c.name.as_deref().unwrap_or("(unnamed)"),
             c.node
+        ),
+        None if left_out > 0 => format!(
+            "framed on the animation's bounds, less {left_out} vertex use(s) far outside the rest"
         ),
         None => "framed on the animation's bounds".to_string(),
     };

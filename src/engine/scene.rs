@@ -819,10 +819,10 @@ impl Engine {
             m.weight = 0.0;
             m.world_area = 0.0;
         }
-        let root_area = f64::from(self.tlas.bounds().half_area());
+        let root_area = self.tlas.bounds().half_area_f64();
         let mut top = 0.0f64;
         for n in self.tlas.nodes() {
-            top += f64::from(n.bounds().half_area()) * f64::from(n.count.max(1));
+            top += n.bounds().half_area_f64() * f64::from(n.count.max(1));
         }
         let (mut weighted, mut total) = (0.0f64, 0.0f64);
         for (&k, b) in self.tlas_instances.iter().zip(&self.tlas_boxes) {
@@ -831,8 +831,8 @@ impl Engine {
                 continue;
             }
             let m = &mut self.meshes[inst.mesh as usize];
-            let w = f64::from(b.half_area()) * f64::from(m.sah);
-            m.world_area += f64::from(b.half_area());
+            let w = b.half_area_f64() * f64::from(m.sah);
+            m.world_area += b.half_area_f64();
             m.weight += w;
             total += w;
             weighted += w * f64::from(m.stats.sah_ratio);
@@ -959,6 +959,22 @@ impl Engine {
         self.tlas.bounds()
     }
 
+    /// The box a camera should frame: the instances' triangle vertices in world space, less
+    /// far outliers ([`crate::geom::framing_bounds`]), and how many vertex uses were left out.
+    #[must_use]
+    pub fn view_bounds(&self) -> (Aabb, u64) {
+        crate::geom::framing_bounds(|f| {
+            for inst in self.instances.iter().filter(|i| !i.removed) {
+                let m = &self.meshes[inst.mesh as usize];
+                for t in &m.indices {
+                    for &v in t {
+                        f(inst.transform.transform_point3(m.positions[v as usize]));
+                    }
+                }
+            }
+        })
+    }
+
     /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
     #[must_use]
     #[inline]
@@ -1066,7 +1082,7 @@ impl Engine {
     /// ([`expected_work`]), as [`Engine::closest_hit_counted`] counts. Allocates nothing.
     #[must_use]
     pub fn predicted_work(&self) -> (f64, f64) {
-        let root = f64::from(self.tlas.bounds().half_area());
+        let root = self.tlas.bounds().half_area_f64();
         if root <= 0.0 {
             return (0.0, 0.0);
         }
@@ -1074,7 +1090,7 @@ impl Engine {
             .tlas
             .nodes()
             .iter()
-            .map(|n| f64::from(n.bounds().half_area()))
+            .map(|n| n.bounds().half_area_f64())
             .sum::<f64>()
             / root;
         let mut tris = 0.0;
@@ -1161,17 +1177,41 @@ fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing, prices: &Prices) 
 fn set_transform(inst: &mut InstanceEntry, transform: Affine3A) {
     inst.transform = transform;
     inst.identity = transform == Affine3A::IDENTITY;
-    let det = transform.matrix3.determinant();
-    inst.inverse = if det != 0.0 && det.is_finite() {
-        transform.inverse()
-    } else {
-        Affine3A::IDENTITY
-    };
-    inst.visible = det != 0.0
-        && det.is_finite()
-        && inst.inverse.matrix3.is_finite()
-        && inst.inverse.translation.is_finite();
+    let inverse = invert(&transform);
+    inst.inverse = inverse.unwrap_or(Affine3A::IDENTITY);
+    inst.visible = inverse.is_some();
     inst.dirty = true;
+}
+
+/// The inverse of `t`, or `None` when it has none in f32 (a zero or non-finite scale). Where
+/// the determinant is a normal number the plain inverse; where it overflows or underflows
+/// (a scale of 1e15 has a determinant of 1e45) the inverse of the matrix divided by its
+/// largest entry, divided by that entry again.
+fn invert(t: &Affine3A) -> Option<Affine3A> {
+    let det = t.matrix3.determinant();
+    let inv = if det.is_normal() {
+        t.inverse()
+    } else {
+        let big = t
+            .matrix3
+            .abs()
+            .to_cols_array()
+            .into_iter()
+            .fold(0.0f32, f32::max);
+        if !(big > 0.0 && big.is_finite()) {
+            return None;
+        }
+        let m = t.matrix3 * (1.0 / big);
+        if !m.determinant().is_normal() {
+            return None;
+        }
+        let linear = m.inverse() * (1.0 / big);
+        Affine3A {
+            matrix3: linear,
+            translation: -(linear * t.translation),
+        }
+    };
+    (inv.matrix3.is_finite() && inv.translation.is_finite()).then_some(inv)
 }
 
 /// The ray in the instance's space over `[ray.tmin, tmax)`; `t` keeps its meaning.
@@ -1206,12 +1246,12 @@ pub fn expected_work(bvh: &Bvh) -> (f64, f64) {
     let Some(root) = nodes.first() else {
         return (0.0, 0.0);
     };
-    let a = f64::from(root.bounds().half_area());
+    let a = root.bounds().half_area_f64();
     if a <= 0.0 {
         return (1.0, f64::from(root.count));
     }
     let (n, t) = nodes.iter().fold((0.0, 0.0), |(n, t), x: &Node| {
-        let ar = f64::from(x.bounds().half_area());
+        let ar = x.bounds().half_area_f64();
         (n + ar, t + ar * f64::from(x.count))
     });
     (n / a, t / a)
@@ -1230,7 +1270,7 @@ pub fn expected_work_wide<const K: usize>(w: &WideBvh<K>) -> (f64, f64) {
         return (0.0, 0.0);
     };
     let blocks = w.blocks();
-    let a = f64::from(root.bounds().half_area());
+    let a = root.bounds().half_area_f64();
     // Area sums over the children (interior and leaf lanes) and over leaf lanes times their
     // triangles; and the plain counts, for a root of no area.
     let (mut n, mut t, mut lanes, mut tris) = (0.0, 0.0, 0.0, 0.0);
@@ -1238,14 +1278,13 @@ pub fn expected_work_wide<const K: usize>(w: &WideBvh<K>) -> (f64, f64) {
         for k in 0..K {
             let (count, area) = match node.child(k) {
                 Child::Empty => continue,
-                Child::Node(_) => (0.0, node.lane_bounds(k).half_area()),
+                Child::Node(_) => (0.0, node.lane_bounds(k).half_area_f64()),
                 Child::Leaf { first, count } => {
                     let run = &blocks[first as usize..(first + count) as usize];
                     let used = run.iter().flat_map(|b| b.prims).filter(|&p| p != NO_PRIM);
-                    (used.count() as f64, node.lane_bounds(k).half_area())
+                    (used.count() as f64, node.lane_bounds(k).half_area_f64())
                 }
             };
-            let area = f64::from(area);
             n += area;
             t += area * count;
             lanes += 1.0;
@@ -1266,7 +1305,7 @@ pub fn tree_sah(bvh: &Bvh) -> f32 {
     if nodes.len() < 1 << 16 {
         return bvh.sah_cost();
     }
-    let a = nodes[0].bounds().half_area();
+    let a = nodes[0].bounds().half_area_f64();
     if !(a > 0.0 && a.is_finite()) {
         return bvh.sah_cost();
     }
@@ -1274,11 +1313,11 @@ pub fn tree_sah(bvh: &Bvh) -> f32 {
         .par_chunks(1 << 14)
         .map(|c| {
             c.iter()
-                .map(|n| f64::from(n.bounds().half_area()) * f64::from(n.count.max(1)))
+                .map(|n| n.bounds().half_area_f64() * f64::from(n.count.max(1)))
                 .sum::<f64>()
         })
         .sum();
-    (sum / f64::from(a)) as f32
+    (sum / a) as f32
 }
 
 fn ratio(sah: f32, base: f32) -> f32 {

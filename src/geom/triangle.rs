@@ -98,11 +98,28 @@ pub fn intersect_triangle(
     // The range test uses the divided t, the very value reported, so that which of two nearly
     // equal hits is the closest never depends on the order they were tested in.
     let rcp = 1.0 / det;
-    let t = t_scaled * rcp;
+    let t = if t_scaled.is_finite() {
+        t_scaled * rcp
+    } else {
+        // The scaled distance is a cube of the coordinates: past about 7e12 it overflows f32
+        // although the distance does not. Redone in f64, where it cannot.
+        scaled_t_f64(u, v, w, det, [az, bz, cz])
+    };
     if !(t >= ray.tmin && t < tmax) {
         return None;
     }
     Some((t, v * rcp, w * rcp))
+}
+
+/// `(u az + v bz + w cz) / det` in f64, rounded to f32 once: the distance of a hit whose
+/// scaled distance overflows f32 (coordinates of the order of 1e13 and more).
+#[cold]
+#[inline(never)]
+pub(crate) fn scaled_t_f64(u: f32, v: f32, w: f32, det: f32, z: [f32; 3]) -> f32 {
+    let t = f64::from(u) * f64::from(z[0])
+        + f64::from(v) * f64::from(z[1])
+        + f64::from(w) * f64::from(z[2]);
+    (t / f64::from(det)) as f32
 }
 
 #[cfg(test)]
@@ -126,6 +143,21 @@ mod tests {
         assert!(hit(Vec3::new(0.75, 0.75, 1.0), -Vec3::Z, tri).is_none());
         // Behind the origin.
         assert!(hit(Vec3::new(0.25, 0.25, 1.0), Vec3::Z, tri).is_none());
+    }
+
+    #[test]
+    fn far_and_huge_triangles_report_their_distance() {
+        // At 1e15 the scaled distance (a cube of the coordinates) overflows f32; at 1e-10 it
+        // is of the order of 1e-30. Both report the distance.
+        for s in [1e-10f32, 1.0, 1e13, 1e15, 1e18] {
+            let tri = [Vec3::ZERO, Vec3::X * s, Vec3::Y * s];
+            let (t, u, v) = hit(Vec3::new(0.25, 0.25, 3.0) * s, -Vec3::Z, tri).unwrap();
+            assert!((t / (3.0 * s) - 1.0).abs() < 1e-6, "scale {s}: t = {t}");
+            assert!(
+                (u - 0.25).abs() < 1e-5 && (v - 0.25).abs() < 1e-5,
+                "scale {s}"
+            );
+        }
     }
 
     #[test]

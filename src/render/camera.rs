@@ -78,7 +78,8 @@ impl Camera {
         }
         let c = bounds.center();
         let dir = AUTO_VIEW_DIR.normalize();
-        let cam = Self::look_at(c + dir, c, Vec3::Y, projection);
+        // The view's axes only (at the origin: `c + dir` would round to `c` far from it).
+        let cam = Self::look_at(dir, Vec3::ZERO, Vec3::Y, projection);
         let tan_y = (yfov * 0.5).tan();
         let tan_x = tan_y * aspect.max(1e-3);
         // Distance from the centre such that each corner projects inside the frustum:
@@ -105,8 +106,14 @@ impl Camera {
             let (x, y, z) = (p.dot(cam.right), p.dot(cam.up), p.dot(cam.forward));
             d = d.max(x.abs() / tan_x - z).max(y.abs() / tan_y - z);
         }
-        let size = bounds.extent().length().max(1e-6);
+        // Relative bounds only: a scene 1e-10 across is framed as one 1 across.
+        let size = bounds.extent().length();
         let d = (d * 1.08).max(size * 0.05);
+        if !(d > 0.0 && d.is_finite()) {
+            // A box that is one point: any distance sees it.
+            let d = c.abs().max_element().max(1.0) * 1e-3;
+            return Self::look_at(c + dir * d, c, Vec3::Y, projection);
+        }
         Self::look_at(c + dir * d, c, Vec3::Y, projection)
     }
 

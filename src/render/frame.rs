@@ -245,11 +245,11 @@ fn see(stage: &Stage, ray: &Ray, hit: Option<Surface>) -> Seen {
     if let Some((p, fade, tile)) = ground {
         Seen::Ground { p, fade, tile }
     } else if let Some(h) = hit {
-        let mut ng = h.geometric.normalize_or_zero();
+        let mut ng = super::trace::unit_or_zero(h.geometric);
         if ng.dot(d) > 0.0 {
             ng = -ng;
         }
-        let mut n = h.shading.normalize_or_zero();
+        let mut n = super::trace::unit_or_zero(h.shading);
         if n.dot(ng) < 0.0 {
             n = -n;
         }

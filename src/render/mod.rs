@@ -59,25 +59,33 @@ use glam::Affine3A;
 /// Box of every instance's triangles over the poses of animation `anim` at `times` (the
 /// rest pose when `times` is empty): the automatic camera frames it, so that it does not
 /// move from frame to frame, and every process rendering a part of the sequence frames the
-/// same view.
+/// same view. Far outliers are left out ([`animation_view`]).
 pub fn animation_bounds(scene: &Scene, anim: Option<usize>, times: &[f32]) -> Result<Aabb> {
+    Ok(animation_view(scene, anim, times)?.0)
+}
+
+/// [`animation_bounds`] and the most vertex uses one pose left out of it as far outliers
+/// ([`crate::geom::framing_bounds`], pose by pose): a stray vertex at 1e30 does not put the
+/// camera 1e30 away.
+pub fn animation_view(scene: &Scene, anim: Option<usize>, times: &[f32]) -> Result<(Aabb, u64)> {
     let mut poser = scene.poser(anim)?;
     let mut b = Aabb::EMPTY;
+    let mut most_left_out = 0;
     let rest = [0.0];
     let times = if times.is_empty() { &rest[..] } else { times };
     for &t in times {
         poser.pose(t);
-        for i in 0..scene.instances.len() {
-            let m = Affine3A::from_mat4(poser.transform(i));
-            let used = poser.indices(i).iter().flatten();
-            let pos = poser.positions(i);
-            for &v in used {
-                let p = m.transform_point3(pos[v as usize]);
-                if p.is_finite() {
-                    b = b.grow(p);
+        let (pose_box, left_out) = crate::geom::framing_bounds(|f| {
+            for i in 0..scene.instances.len() {
+                let m = Affine3A::from_mat4(poser.transform(i));
+                let pos = poser.positions(i);
+                for &v in poser.indices(i).iter().flatten() {
+                    f(m.transform_point3(pos[v as usize]));
                 }
             }
-        }
+        });
+        b = b.union(pose_box);
+        most_left_out = most_left_out.max(left_out);
     }
-    Ok(b)
+    Ok((b, most_left_out))
 }

@@ -60,8 +60,14 @@ impl Stage {
         let right = flat(camera.right).unwrap_or_else(|| back.cross(Vec3::Y));
         let light = (Vec3::Y * 1.5 - right * 0.8 + back * 0.7).normalize();
         let ok = !bounds.is_empty() && bounds.is_finite();
+        // Relative to the scene's size, whatever its scale (a point gets a size of its own).
         let size = if ok {
-            bounds.extent().length().max(1e-6)
+            let s = bounds.extent().length();
+            if s > 0.0 {
+                s
+            } else {
+                bounds.center().abs().max_element().max(1.0) * 1e-3
+            }
         } else {
             1.0
         };

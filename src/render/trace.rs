@@ -68,7 +68,21 @@ pub fn vertex_normals(positions: &[Vec3], indices: &[[u32; 3]], out: &mut Vec<Ve
         }
     }
     for n in out.iter_mut() {
-        *n = n.normalize_or_zero();
+        *n = unit_or_zero(*n);
+    }
+}
+
+/// `v` scaled to unit length, or zero when it is zero or not finite. Divided by its largest
+/// component first, so that the squared length neither overflows (a cross product of edges
+/// 1e15 long is 1e30) nor underflows (edges 1e-10 long give 1e-20).
+#[must_use]
+#[inline]
+pub fn unit_or_zero(v: Vec3) -> Vec3 {
+    let m = v.abs().max_element();
+    if m > 0.0 && m.is_finite() {
+        (v / m).normalize_or_zero()
+    } else {
+        Vec3::ZERO
     }
 }
 
@@ -150,6 +164,15 @@ impl EngineShading {
             self.normal_mats.push(if m == Mat3A::IDENTITY {
                 None
             } else {
+                // Only the normals' directions matter: the matrix divided by its largest entry
+                // has the same inverse transpose up to a factor, and a determinant that does
+                // not overflow or underflow at scales of 1e15 or 1e-10.
+                let big = m.abs().to_cols_array().into_iter().fold(0.0f32, f32::max);
+                let m = if big > 0.0 && big.is_finite() {
+                    m * (1.0 / big)
+                } else {
+                    m
+                };
                 let det = m.determinant();
                 (det != 0.0 && det.is_finite()).then(|| m.inverse().transpose())
             });

@@ -766,7 +766,8 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         prices: opts.prices,
         timing: Timing::Priced,
     };
-    let bounds = src.build(0, config(Policy::Refit)).bounds();
+    // The first frame's box, less far outliers: what the camera and the lidar look at.
+    let (bounds, _) = src.build(0, config(Policy::Refit)).view_bounds();
     let rays_per_frame = opts.rays.rays(&bounds).len();
     let deforming = src.deforming().len();
 

@@ -19,7 +19,7 @@ pub struct RaySet {
 pub fn camera_rays(bounds: &Aabb, w: usize, h: usize) -> Vec<Ray> {
     let c = bounds.center();
     let half_diag = bounds.extent().length() * 0.5;
-    let eye = c + Vec3::new(0.45, 0.35, 1.0).normalize() * 2.0 * half_diag.max(1e-6);
+    let eye = c + Vec3::new(0.45, 0.35, 1.0).normalize() * 2.0 * reach(bounds, half_diag);
     let fwd = (c - eye).normalize();
     let right = fwd.cross(Vec3::Y).normalize();
     let up = right.cross(fwd);
@@ -35,8 +35,24 @@ pub fn camera_rays(bounds: &Aabb, w: usize, h: usize) -> Vec<Ray> {
     rays
 }
 
+/// `size` where it is positive; for a box that is one point (every triangle degenerate in
+/// one place), a size of its own, relative to its coordinates, so that the rays do not all
+/// start inside every box of the tree.
+fn reach(bounds: &Aabb, size: f32) -> f32 {
+    if size > 0.0 {
+        size
+    } else {
+        let c = bounds.center();
+        if c.is_finite() {
+            c.abs().max_element().max(1.0) * 1e-3
+        } else {
+            1.0
+        }
+    }
+}
+
 /// `n` rays with origins uniform in `bounds` and directions uniform on the sphere
-/// (deterministic for a given `seed`).
+/// (deterministic for a given `seed`; a box that is one point gets a small cube around it).
 #[must_use]
 pub fn random_rays(bounds: &Aabb, n: usize, seed: u64) -> Vec<Ray> {
     let mut state = seed;
@@ -48,9 +64,16 @@ pub fn random_rays(bounds: &Aabb, n: usize, seed: u64) -> Vec<Ray> {
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
     };
+    // A box that is one point is widened to a cube around it (see `reach`).
+    let (lo, ext) = if bounds.extent().max_element() > 0.0 {
+        (bounds.min, bounds.extent())
+    } else {
+        let r = reach(bounds, 0.0);
+        (bounds.min - Vec3::splat(r), Vec3::splat(2.0 * r))
+    };
     (0..n)
         .map(|_| {
-            let o = bounds.min + Vec3::new(next(), next(), next()) * bounds.extent();
+            let o = lo + Vec3::new(next(), next(), next()) * ext;
             let z = 2.0 * next() - 1.0;
             let phi = std::f32::consts::TAU * next();
             let s = (1.0 - z * z).max(0.0).sqrt();

@@ -11,7 +11,7 @@ use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8, TraversalStats}
 use crate::cputime::CpuClock;
 use crate::engine::source::FrameSource;
 use crate::engine::{EngineConfig, Policy};
-use crate::geom::{Aabb, Ray};
+use crate::geom::Ray;
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -205,7 +205,9 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
             continue;
         }
         frames.push(f);
-        let b = Aabb::from_points(&pos);
+        let (b, _) = crate::geom::framing_bounds(|f| {
+            indices.iter().flatten().for_each(|&v| f(pos[v as usize]))
+        });
         let rays = crate::report::rays::camera_rays(&b, opts.rays.0, opts.rays.1);
         wide.collapse_from(&refitted);
         let (refit_sah, refit_work) = (f64::from(refitted.bvh().sah_cost()), work(&wide, &rays));

@@ -60,7 +60,8 @@ impl Default for RayLanes {
 pub struct TriHits {
     /// Lanes hit within `[tmin, tmax)` (among those asked).
     pub hit: u32,
-    /// Lanes with an edge function of exactly zero: repeat them with the scalar test.
+    /// Lanes with an edge function of exactly zero or an overflowing scaled distance: repeat
+    /// them with the scalar test.
     pub redo: u32,
     /// The lanes of a hit as a vector mask: exactly `hit` when `exact` is true.
     pub mask: F,
@@ -165,13 +166,17 @@ impl RayLanes {
         let t_scaled = u * az + v * bz + w * cz;
         let rcp = F::splat(1.0) / det;
         let t = t_scaled * rcp;
-        let ok = det.simd_ne(zero) & det.is_finite() & t.simd_ge(self.tmin) & t.simd_lt(self.tmax);
+        let det_ok = det.simd_ne(zero) & det.is_finite();
+        let ok = det_ok & t.simd_ge(self.tmin) & t.simd_lt(self.tmax);
         let mask = ok & !outside;
         let all = mask.to_bitmask();
         let hit = all & inside;
+        // A scaled distance that overflows f32 (coordinates past about 7e12) gives no hit
+        // here (its t is not finite); the scalar test redoes it in f64.
+        let overflow = (det_ok & !t_scaled.is_finite()).to_bitmask() & inside;
         TriHits {
             hit,
-            redo,
+            redo: redo | overflow,
             mask,
             exact: all == hit,
             t,

@@ -143,7 +143,9 @@ impl Ctx<'_> {
                 let r = &self.refs[list[i - 1] as usize];
                 acc.grow(r.lo(), r.hi());
                 let cost = acc.half_area() * i as f32 + areas[i] * (n - i) as f32;
-                if cost < best.0 {
+                // Of equal costs the most even split: where every box is one point (all costs
+                // 0) the first position would peel one primitive off per level.
+                if cost < best.0 || (cost == best.0 && i.abs_diff(n / 2) < best.2.abs_diff(n / 2)) {
                     best = (cost, axis, i);
                 }
             }

@@ -227,8 +227,8 @@ pub(super) enum BlockHit {
     /// Lane `.0` is hit at `t = .1` with barycentrics `.2`, `.3`: the nearest, and the first
     /// lane among equally near ones.
     Hit(usize, f32, f32, f32),
-    /// Some edge function is exactly zero: the caller must use the scalar test (which
-    /// redoes such edges in f64) on every lane, in order.
+    /// Some edge function is exactly zero, or a scaled distance overflows: the caller must use
+    /// the scalar test (which redoes such edges and distances in f64) on every lane, in order.
     Scalar,
 }
 
@@ -270,6 +270,11 @@ pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
     let rcp = f32x4::splat(1.0) / det;
     let t = t_scaled * rcp;
     let in_range = (t.simd_ge(f32x4::splat(r.tmin)) & t.simd_lt(f32x4::splat(tmax))).to_bitmask();
+    // A scaled distance that overflows f32 (coordinates past about 7e12) is redone in f64 by
+    // the scalar test.
+    if (!t_scaled.is_finite()).to_bitmask() & !(neg & pos) & !bad_det != 0 {
+        return BlockHit::Scalar;
+    }
     let mut mask = in_range & !(neg & pos) & !bad_det;
     if mask == 0 {
         return BlockHit::None;
