@@ -446,3 +446,30 @@ fn edits_keep_ids_and_answers() {
     );
     assert!(e.closest_point(Vec3::new(0.5, 0.5, 3.0), 4.9).is_none());
 }
+
+/// From the centre of a sphere every subtree is about as near as the nearest triangle, so the
+/// best-first search holds more pending subtrees than it keeps and walks the rest depth first:
+/// the answer must still be brute force's, on a fresh and a refitted tree.
+#[test]
+fn closest_point_from_a_sphere_centre() {
+    let mut mesh = dynbvh::geom::shapes::icosphere(5);
+    let rest = mesh.positions.clone();
+    let mut refitted = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    for phase in [0.0, 0.7] {
+        dynbvh::geom::shapes::sine_deform(&rest, &mut mesh.positions, 0.02, phase);
+        refitted.refit(&mesh);
+        let fresh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let centre = Aabb::from_points(&mesh.positions).center();
+        for p in [centre, centre + Vec3::new(0.01, -0.02, 0.005), Vec3::ZERO] {
+            let want = brute_force_closest_point(&mesh, p, f32::INFINITY).map(|h| h.distance);
+            assert_eq!(
+                fresh.closest_point(p, f32::INFINITY).map(|h| h.distance),
+                want
+            );
+            assert_eq!(
+                refitted.closest_point(p, f32::INFINITY).map(|h| h.distance),
+                want
+            );
+        }
+    }
+}
