@@ -6,8 +6,8 @@
 
 use dynbvh::anim::Scene;
 use dynbvh::bvh::{
-    BuildParams, MeshBvh, brute_force_all_hits, brute_force_closest_point, brute_force_overlap_box,
-    brute_force_overlap_sphere,
+    BuildParams, MeshBvh, MeshBvh8, brute_force_all_hits, brute_force_closest_point,
+    brute_force_overlap_box, brute_force_overlap_sphere,
 };
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{
@@ -131,6 +131,36 @@ fn check_mesh_queries(mesh: &TriMesh, bvh: &MeshBvh, probe: &mut Probe, what: &s
     }
 }
 
+/// The wide tree's queries against brute force (the same probes as the binary tree's).
+fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: &str) {
+    let bounds = Aabb::from_points(&mesh.positions);
+    let diag = bounds.extent().length();
+    for k in 0..40 {
+        let p = if k % 2 == 0 {
+            probe.point(&bounds, 1.5)
+        } else {
+            probe.near_surface(mesh, 0.02 * diag)
+        };
+        for max_dist in [f32::INFINITY, 0.01 * diag, 0.1 * diag] {
+            let want = brute_force_closest_point(mesh, p, max_dist);
+            let have = wide.closest_point(p, max_dist);
+            assert_eq!(
+                have.map(|h| h.distance),
+                want.map(|h| h.distance),
+                "{what}: wide closest point of {p} within {max_dist}"
+            );
+            if let Some(h) = have {
+                let [a, b, c] = mesh.indices[h.prim as usize].map(|i| mesh.positions[i as usize]);
+                assert_eq!(
+                    closest_point_on_triangle(p, a, b, c),
+                    h.point,
+                    "{what}: wide point"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn mesh_queries_match_brute_force_every_frame() {
     for file in FILES {
@@ -140,13 +170,27 @@ fn mesh_queries_match_brute_force_every_frame() {
         let mut flat = TriMesh::default();
         src.flatten_into(&mut flat);
         let mut refitted = MeshBvh::build(&flat, &BuildParams::BINNED);
+        let mut wide_refitted = MeshBvh8::from_mesh_bvh(&refitted);
         let mut probe = Probe(7);
         for f in 0..=FRAMES {
             let mut e = src.build(f, EngineConfig::default());
             src.advance(&mut e, f);
             src.flatten_into(&mut flat);
             refitted.refit(&flat);
+            wide_refitted.refit(&flat);
             let fresh = MeshBvh::build(&flat, &BuildParams::BINNED);
+            check_wide_queries(
+                &flat,
+                &MeshBvh8::from_mesh_bvh(&fresh),
+                &mut probe,
+                &format!("{file} frame {f} wide fresh"),
+            );
+            check_wide_queries(
+                &flat,
+                &wide_refitted,
+                &mut probe,
+                &format!("{file} frame {f} wide refit"),
+            );
             check_mesh_queries(
                 &flat,
                 &fresh,
@@ -449,15 +493,18 @@ fn edits_keep_ids_and_answers() {
 
 /// From the centre of a sphere every subtree is about as near as the nearest triangle, so the
 /// best-first search holds more pending subtrees than it keeps and walks the rest depth first:
-/// the answer must still be brute force's, on a fresh and a refitted tree.
+/// the answer must still be brute force's, on fresh and refitted binary and wide trees.
 #[test]
 fn closest_point_from_a_sphere_centre() {
     let mut mesh = dynbvh::geom::shapes::icosphere(5);
     let rest = mesh.positions.clone();
     let mut refitted = MeshBvh::build(&mesh, &BuildParams::BINNED);
-    for phase in [0.0, 0.7] {
-        dynbvh::geom::shapes::sine_deform(&rest, &mut mesh.positions, 0.02, phase);
+    let mut wide_refitted = MeshBvh8::from_mesh_bvh(&refitted);
+    // The round sphere first (every triangle nearly as near), then two deformations of it.
+    for (amplitude, phase) in [(0.0, 0.0), (0.02, 0.0), (0.02, 0.7)] {
+        dynbvh::geom::shapes::sine_deform(&rest, &mut mesh.positions, amplitude, phase);
         refitted.refit(&mesh);
+        wide_refitted.refit(&mesh);
         let fresh = MeshBvh::build(&mesh, &BuildParams::BINNED);
         let centre = Aabb::from_points(&mesh.positions).center();
         for p in [centre, centre + Vec3::new(0.01, -0.02, 0.005), Vec3::ZERO] {

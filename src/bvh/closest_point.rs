@@ -19,37 +19,41 @@ pub struct PointHit {
 }
 
 /// Subtrees the best-first search keeps pending before it walks further ones depth first.
-const PENDING: usize = 128;
+pub(crate) const PENDING: usize = 128;
 
 /// A pending subtree as one sortable word: its lower bound's bits (a non-negative `f32`
 /// orders as its bits do) above its node index, so the smallest word is the nearest subtree
 /// (and of equally near ones the first in node order).
 #[inline(always)]
-fn key(lower: f32, node: u32) -> u64 {
+pub(crate) fn key(lower: f32, node: u32) -> u64 {
     (u64::from(lower.to_bits()) << 32) | u64::from(node)
 }
 
 /// The subtrees a best-first search has yet to expand, unsorted, with the smallest key.
-struct Pending {
+pub(crate) struct Pending {
     keys: [u64; PENDING],
     len: usize,
+    /// Most keys held (`PENDING`; less in the tests of the depth-first fallback).
+    limit: usize,
     /// The smallest key held, `u64::MAX` when none.
-    nearest: u64,
+    pub(crate) nearest: u64,
 }
 
 impl Pending {
-    fn new() -> Self {
+    /// Holding at most `limit` keys (at most [`PENDING`]).
+    pub(crate) fn new(limit: usize) -> Self {
         Self {
             keys: [0; PENDING],
             len: 0,
+            limit: limit.min(PENDING),
             nearest: u64::MAX,
         }
     }
 
     /// Adds a key; false when full.
     #[inline(always)]
-    fn push(&mut self, k: u64) -> bool {
-        if self.len == PENDING {
+    pub(crate) fn push(&mut self, k: u64) -> bool {
+        if self.len == self.limit {
             return false;
         }
         self.keys[self.len] = k;
@@ -61,7 +65,7 @@ impl Pending {
     /// Removes and returns the nearest subtree's node below the squared distance `best`,
     /// dropping every subtree at or beyond it; keeps the next nearest key.
     #[inline(always)]
-    fn pop(&mut self, best: f32) -> Option<u32> {
+    pub(crate) fn pop(&mut self, best: f32) -> Option<u32> {
         let passed = u64::from(best.to_bits()) << 32;
         let (mut first, mut second, mut at) = (u64::MAX, u64::MAX, 0);
         let mut i = 0;
@@ -110,7 +114,18 @@ impl Bvh {
         &self,
         lower: impl Fn(&Node) -> f32,
         bound: f32,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+    ) -> Option<(usize, f32)> {
+        self.nearest_slot_pending(lower, bound, test, PENDING)
+    }
+
+    /// [`Bvh::nearest_slot`] keeping at most `limit` subtrees pending.
+    fn nearest_slot_pending(
+        &self,
+        lower: impl Fn(&Node) -> f32,
+        bound: f32,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
+        limit: usize,
     ) -> Option<(usize, f32)> {
         let nodes = self.nodes.as_slice();
         let root = nodes.first()?;
@@ -118,7 +133,7 @@ impl Bvh {
             return None;
         }
         let mut best = (None, bound);
-        let mut pending = Pending::new();
+        let mut pending = Pending::new(limit);
         let mut node = 0u32;
         loop {
             let n = &nodes[node as usize];
@@ -319,4 +334,47 @@ pub fn brute_force_closest_point(mesh: &TriMesh, p: Vec3, max_dist: f32) -> Opti
         }
     }
     hit
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::BuildParams;
+    use crate::geom::shapes;
+
+    /// With room for one or two pending subtrees nearly every subtree is searched depth first
+    /// on the spot: the answers stay brute force's.
+    #[test]
+    fn depth_first_fallback_is_exact() {
+        let mut mesh = shapes::icosphere(3);
+        let rest = mesh.positions.clone();
+        shapes::sine_deform(&rest, &mut mesh.positions, 0.05, 0.3);
+        let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let mut seed = 1u32;
+        let mut f = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 3.0 - 1.5
+        };
+        for _ in 0..200 {
+            let p = Vec3::new(f(), f(), f());
+            let want = brute_force_closest_point(&mesh, p, f32::INFINITY).map(|h| h.distance);
+            for limit in [1, 2, PENDING] {
+                let tris = bvh.tris.as_slice();
+                let got = bvh
+                    .bvh
+                    .nearest_slot_pending(
+                        |n| box_distance_squared(p, n.bounds()),
+                        f32::INFINITY,
+                        |slot, best| {
+                            let [a, b, c] = tris[slot];
+                            let d2 = closest_point_on_triangle(p, a, b, c).distance_squared(p);
+                            (d2 < best).then_some(d2)
+                        },
+                        limit,
+                    )
+                    .map(|(_, d2)| d2.sqrt());
+                assert_eq!(got, want, "{p} with {limit} pending");
+            }
+        }
+    }
 }

@@ -1,5 +1,5 @@
 //! The SIMD kernels of the wide tree: the slab test of one ray against all `K` child boxes of a
-//! node at once, and the union of a node's child boxes. Written with the `wide` crate (AVX or
+//! node at once, the distance of a point to all of them, and the union of a node's child boxes. Written with the `wide` crate (AVX or
 //! SSE when the target has them, plain arrays otherwise), so there is no `unsafe` here.
 
 use crate::geom::{Aabb, FAR_SCALE, Ray};
@@ -130,6 +130,83 @@ fn fmax(a: f32, b: f32) -> f32 {
 #[inline(always)]
 fn fmin(a: f32, b: f32) -> f32 {
     if a < b { a } else { b }
+}
+
+/// Per-query constants of the box distance of [`box_distance_lanes`]: the query point moved
+/// up (`above`) and down (`below`) by the margin of
+/// [`box_distance_squared`](crate::geom::box_distance_squared) taken with the root box's
+/// coordinates, which bound every node's, so one margin serves the whole tree.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DistanceLanes {
+    above: [f32; 3],
+    below: [f32; 3],
+}
+
+impl DistanceLanes {
+    #[inline(always)]
+    pub(super) fn new(p: Vec3, root: &Aabb) -> Self {
+        let pad = (root.min.abs().max(root.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+        Self {
+            above: (p + pad).into(),
+            below: (p - pad).into(),
+        }
+    }
+}
+
+/// The squared distances from the query point of `d` to the `K` boxes `bounds` (rows min x,
+/// y, z, max x, y, z), each a lower bound of the distance of a triangle inside, into `dist`;
+/// returns the mask of lanes nearer than `best`. An empty lane is infinitely far. The query
+/// point must be finite.
+#[inline(always)]
+pub(super) fn box_distance_lanes<const K: usize>(
+    bounds: &[[f32; K]; 6],
+    d: &DistanceLanes,
+    best: f32,
+    dist: &mut [f32; K],
+) -> u32 {
+    if K == 8 {
+        let row = |i: usize| -> f32x8 {
+            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
+            f32x8::from(*a)
+        };
+        let gap = |a: usize| {
+            let lo = row(a) - f32x8::splat(d.above[a]);
+            let hi = f32x8::splat(d.below[a]) - row(a + 3);
+            lo.fast_max(hi).fast_max(f32x8::ZERO)
+        };
+        let (x, y, z) = (gap(0), gap(1), gap(2));
+        let d2 = x * x + y * y + z * z;
+        dist.as_mut_slice().copy_from_slice(&d2.to_array());
+        d2.simd_lt(f32x8::splat(best)).to_bitmask()
+    } else if K == 4 {
+        let row = |i: usize| -> f32x4 {
+            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
+            f32x4::from(*a)
+        };
+        let gap = |a: usize| {
+            let lo = row(a) - f32x4::splat(d.above[a]);
+            let hi = f32x4::splat(d.below[a]) - row(a + 3);
+            lo.fast_max(hi).fast_max(f32x4::ZERO)
+        };
+        let (x, y, z) = (gap(0), gap(1), gap(2));
+        let d2 = x * x + y * y + z * z;
+        dist.as_mut_slice().copy_from_slice(&d2.to_array());
+        d2.simd_lt(f32x4::splat(best)).to_bitmask()
+    } else {
+        let mut mask = 0;
+        for i in 0..K {
+            let gap = |a: usize| {
+                fmax(
+                    fmax(bounds[a][i] - d.above[a], d.below[a] - bounds[a + 3][i]),
+                    0.0,
+                )
+            };
+            let (x, y, z) = (gap(0), gap(1), gap(2));
+            dist[i] = x * x + y * y + z * z;
+            mask |= u32::from(dist[i] < best) << i;
+        }
+        mask
+    }
 }
 
 /// The union of a node's `K` child boxes (empty lanes hold the empty box).

@@ -1,7 +1,8 @@
 //! Proximity, overlap and multi-hit queries through the two-level scene. The top-level tree
-//! prunes instances by their world boxes; inside an instance the mesh's binary tree (kept in
-//! every [`super::Traversal`], refitted or rebuilt by every update) is walked with its node
-//! boxes carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
+//! prunes instances by their world boxes; inside an instance placed by the identity the
+//! closest point walks the mesh's 8-wide tree when there is one ([`super::Traversal::Wide`]);
+//! otherwise the mesh's binary tree (kept in every [`super::Traversal`], refitted or rebuilt by
+//! every update) is walked with its node boxes carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
 //! triangles' vertices transformed as `transform_point3` rounds them, so distances and
 //! overlaps are world-space ones even under scaled instances. Rays are carried into instance
 //! space as the ray queries carry them, so `t` keeps its meaning. Removed and hidden instances
@@ -53,7 +54,11 @@ impl Engine {
             crate::bvh::squared_bound(max_dist),
             |slot, best| {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
-                let (point, d2, prim) = bvh.closest_point_placed(p, best, placement(inst))?;
+                let wide = self.meshes[inst.mesh as usize].wide.as_ref();
+                let (point, d2, prim) = match (placement(inst), wide) {
+                    (None, Some(w)) => w.closest_point_below(p, best)?,
+                    (place, _) => bvh.closest_point_placed(p, best, place)?,
+                };
                 found = Some(ScenePoint {
                     point,
                     distance: d2.sqrt(),
