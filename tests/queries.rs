@@ -131,10 +131,11 @@ fn check_mesh_queries(mesh: &TriMesh, bvh: &MeshBvh, probe: &mut Probe, what: &s
     }
 }
 
-/// The wide tree's queries against brute force (the same probes as the binary tree's).
+/// The wide tree's closest point, all hits and hit counts against brute force.
 fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: &str) {
     let bounds = Aabb::from_points(&mesh.positions);
     let diag = bounds.extent().length();
+    let mut hits = Vec::new();
     for k in 0..40 {
         let p = if k % 2 == 0 {
             probe.point(&bounds, 1.5)
@@ -157,6 +158,24 @@ fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: 
                     "{what}: wide point"
                 );
             }
+        }
+        let ray = probe.ray(&bounds);
+        let want = brute_force_all_hits(mesh, &ray);
+        wide.all_hits(&ray, usize::MAX, &mut hits);
+        assert_eq!(hits, want, "{what}: wide all hits of {ray:?}");
+        assert_eq!(
+            wide.count_hits(&ray) as usize,
+            want.len(),
+            "{what}: wide count"
+        );
+        for max in [1, 2] {
+            wide.all_hits(&ray, max, &mut hits);
+            let ts: Vec<f32> = want.iter().take(max).map(|h| h.t).collect();
+            assert_eq!(
+                hits.iter().map(|h| h.t).collect::<Vec<_>>(),
+                ts,
+                "{what}: wide {max} hits"
+            );
         }
     }
 }

@@ -309,11 +309,27 @@ pub(super) enum BlockHit {
     Scalar,
 }
 
+/// Every lane of a block hit closer than `tmax`.
+pub(super) enum BlockHits {
+    /// No lane is hit closer than `tmax`.
+    None,
+    /// The lanes in `mask` (bit `l` for lane `l`) are hit, lane `l` at `t[l]` with
+    /// barycentrics `u[l]`, `v[l]`.
+    Lanes {
+        mask: u32,
+        t: [f32; 4],
+        u: [f32; 4],
+        v: [f32; 4],
+    },
+    /// Some edge function is exactly zero: as [`BlockHit::Scalar`].
+    Scalar,
+}
+
 /// The watertight test of [`intersect_triangle`](crate::geom::intersect_triangle) on four
 /// triangles at once, lane by lane the same operations in the same order, so every distance and
-/// barycentric is bit for bit the scalar test's.
+/// barycentric is bit for bit the scalar test's: every lane hit closer than `tmax`.
 #[inline(always)]
-pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
+pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits {
     let row = |i: usize| f32x4::from(b.rows[i]);
     let o = |a: usize| f32x4::splat(r.origin[a]);
     let [kx, ky, kz] = r.k;
@@ -337,7 +353,7 @@ pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
     let w = bx * ay - by * ax;
     let zero = f32x4::ZERO;
     if (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask() != 0 {
-        return BlockHit::Scalar;
+        return BlockHits::Scalar;
     }
     let neg = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero)).to_bitmask();
     let pos = (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero)).to_bitmask();
@@ -347,22 +363,38 @@ pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
     let rcp = f32x4::splat(1.0) / det;
     let t = t_scaled * rcp;
     let in_range = (t.simd_ge(f32x4::splat(r.tmin)) & t.simd_lt(f32x4::splat(tmax))).to_bitmask();
-    let mut mask = in_range & !(neg & pos) & !bad_det;
+    let mask = in_range & !(neg & pos) & !bad_det;
     if mask == 0 {
-        return BlockHit::None;
+        return BlockHits::None;
     }
-    let t = t.to_array();
-    let mut best = mask.trailing_zeros() as usize;
-    mask &= mask - 1;
-    while mask != 0 {
-        let l = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        if t[l] < t[best] {
-            best = l;
+    BlockHits::Lanes {
+        mask,
+        t: t.to_array(),
+        u: (v * rcp).to_array(),
+        v: (w * rcp).to_array(),
+    }
+}
+
+/// The nearest lane of a block hit closer than `tmax` ([`intersect4_all`]'s nearest, the
+/// first lane among equally near ones).
+#[inline(always)]
+pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
+    match intersect4_all(b, r, tmax) {
+        BlockHits::None => BlockHit::None,
+        BlockHits::Scalar => BlockHit::Scalar,
+        BlockHits::Lanes { mut mask, t, u, v } => {
+            let mut best = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            while mask != 0 {
+                let l = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if t[l] < t[best] {
+                    best = l;
+                }
+            }
+            BlockHit::Hit(best, t[best], u[best], v[best])
         }
     }
-    let (bu, bv) = ((v * rcp).to_array(), (w * rcp).to_array());
-    BlockHit::Hit(best, t[best], bu[best], bv[best])
 }
 
 /// The box of the triangles in `blocks`, skipping NaN coordinates (`if p < lo { p } else { lo }`

@@ -1,0 +1,138 @@
+//! Every hit along a ray on the wide tree: the closest-hit traversal (children nearest first,
+//! one SIMD slab test per node) with a limit that only shrinks once `max` hits are held, and a
+//! block test that reports every lane it hits ([`intersect4_all`]), bit for bit the scalar
+//! test's distances, so the hits are exactly the binary tree's and brute force's.
+
+use super::lanes::{BlockHits, RayLanes, TriLanes, intersect4_all, slab};
+use super::traverse::{BIG_STACK, SMALL_STACK};
+use super::{LEAF_BIT, WideBvh, leaf_range};
+use crate::bvh::keep_nearest;
+use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
+
+impl<const K: usize> WideBvh<K> {
+    /// The first `max` hits along `ray` in `[ray.tmin, ray.tmax)`, sorted by `t` (then by
+    /// triangle), into `out` (cleared first): exactly
+    /// [`MeshBvh::all_hits`](crate::bvh::MeshBvh::all_hits).
+    pub fn all_hits(&self, ray: &Ray, max: usize, out: &mut Vec<Hit>) {
+        out.clear();
+        if max == 0 {
+            return;
+        }
+        self.for_each_hit(ray, ray.tmax, |h| {
+            out.push(h);
+            keep_nearest(out, 0, max, |h| h.t)
+        });
+        out.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.prim.cmp(&b.prim)));
+        out.truncate(max);
+    }
+
+    /// How many triangles `ray` hits in `[ray.tmin, ray.tmax)`, each triangle once: exactly
+    /// [`MeshBvh::count_hits`](crate::bvh::MeshBvh::count_hits).
+    #[must_use]
+    pub fn count_hits(&self, ray: &Ray) -> u32 {
+        let mut n = 0;
+        self.for_each_hit(ray, ray.tmax, |_| {
+            n += 1;
+            ray.tmax
+        });
+        n
+    }
+
+    /// Calls `on_hit` with every hit along `ray` in `[ray.tmin, limit)`, `limit` starting at
+    /// `tmax` and replaced by what `on_hit` returns when that is nearer (the rest of the walk
+    /// then looks only nearer than it).
+    pub(crate) fn for_each_hit(&self, ray: &Ray, tmax: f32, on_hit: impl FnMut(Hit) -> f32) {
+        if self.stack_need < SMALL_STACK {
+            self.hits_walk::<SMALL_STACK>(ray, tmax, on_hit);
+        } else {
+            self.hits_walk::<BIG_STACK>(ray, tmax, on_hit);
+        }
+    }
+
+    /// [`WideBvh::for_each_hit`] on a stack of `N` entries.
+    #[inline(always)]
+    fn hits_walk<const N: usize>(&self, ray: &Ray, tmax: f32, mut on_hit: impl FnMut(Hit) -> f32) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let lanes = RayLanes::new(ray);
+        let tri_lanes = TriLanes::new(ray);
+        let pre = RayTriPrecomp::new(ray.dir);
+        let mut limit = tmax;
+        let mut stack = [(0u32, 0f32); N];
+        let mut sp = 0usize;
+        let mut dist = [0f32; K];
+        let mut cur = 0u32;
+        loop {
+            if cur & LEAF_BIT != 0 {
+                let (first, count) = leaf_range(cur);
+                let first = first as usize;
+                for block in &self.blocks[first..first + count as usize] {
+                    match intersect4_all(block, &tri_lanes, limit) {
+                        BlockHits::None => {}
+                        BlockHits::Lanes { mut mask, t, u, v } => {
+                            while mask != 0 {
+                                let l = mask.trailing_zeros() as usize;
+                                mask &= mask - 1;
+                                // A lane beyond a limit an earlier lane set is left out, as
+                                // the binary tree's test with that limit would.
+                                if t[l] < limit {
+                                    let h = Hit {
+                                        t: t[l],
+                                        u: u[l],
+                                        v: v[l],
+                                        prim: block.prims[l],
+                                    };
+                                    limit = limit.min(on_hit(h));
+                                }
+                            }
+                        }
+                        BlockHits::Scalar => {
+                            for l in 0..4 {
+                                let [p, q, r] = block.get(l);
+                                if let Some((t, u, v)) =
+                                    intersect_triangle(ray, &pre, p, q, r, limit)
+                                {
+                                    let prim = block.prims[l];
+                                    limit = limit.min(on_hit(Hit { t, u, v, prim }));
+                                }
+                            }
+                        }
+                    }
+                }
+            } else {
+                let node = &self.nodes[cur as usize];
+                let mut mask = slab(&node.bounds, &lanes, limit, &mut dist);
+                if lanes.nonfinite {
+                    mask &= node.occupied();
+                }
+                // Hit lanes sorted by entry distance, farthest first, onto the stack.
+                let base = sp;
+                while mask != 0 {
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let e = (node.child[k], dist[k]);
+                    let mut j = sp;
+                    while j > base && stack[j - 1].1 < e.1 {
+                        stack[j] = stack[j - 1];
+                        j -= 1;
+                    }
+                    stack[j] = e;
+                    sp += 1;
+                }
+            }
+            // Pop the next subtree that may still hold a hit below the limit.
+            loop {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                let (c, tnear) = stack[sp];
+                if tnear <= limit * FAR_SCALE {
+                    cur = c;
+                    break;
+                }
+            }
+        }
+    }
+}
