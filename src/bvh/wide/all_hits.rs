@@ -18,7 +18,15 @@ impl<const K: usize> WideBvh<K> {
         if max == 0 {
             return;
         }
-        self.for_each_hit(ray, ray.tmax, |h| {
+        let walk = |on_hit| {
+            // Nothing shortens an unbounded walk: it may take the children in any order.
+            if max == usize::MAX {
+                self.hits_any_order(ray, ray.tmax, on_hit);
+            } else {
+                self.for_each_hit(ray, ray.tmax, on_hit);
+            }
+        };
+        walk(&mut |h| {
             out.push(h);
             keep_nearest(out, 0, max, |h| h.t)
         });
@@ -31,7 +39,7 @@ impl<const K: usize> WideBvh<K> {
     #[must_use]
     pub fn count_hits(&self, ray: &Ray) -> u32 {
         let mut n = 0;
-        self.for_each_hit(ray, ray.tmax, |_| {
+        self.hits_any_order(ray, ray.tmax, |_| {
             n += 1;
             ray.tmax
         });
@@ -43,15 +51,31 @@ impl<const K: usize> WideBvh<K> {
     /// then looks only nearer than it).
     pub(crate) fn for_each_hit(&self, ray: &Ray, tmax: f32, on_hit: impl FnMut(Hit) -> f32) {
         if self.stack_need < SMALL_STACK {
-            self.hits_walk::<SMALL_STACK>(ray, tmax, on_hit);
+            self.hits_walk::<true, SMALL_STACK>(ray, tmax, on_hit);
         } else {
-            self.hits_walk::<BIG_STACK>(ray, tmax, on_hit);
+            self.hits_walk::<true, BIG_STACK>(ray, tmax, on_hit);
         }
     }
 
-    /// [`WideBvh::for_each_hit`] on a stack of `N` entries.
+    /// [`WideBvh::for_each_hit`] for callers that never shorten the walk: the children are
+    /// taken in lane order, unsorted.
+    pub(crate) fn hits_any_order(&self, ray: &Ray, tmax: f32, on_hit: impl FnMut(Hit) -> f32) {
+        if self.stack_need < SMALL_STACK {
+            self.hits_walk::<false, SMALL_STACK>(ray, tmax, on_hit);
+        } else {
+            self.hits_walk::<false, BIG_STACK>(ray, tmax, on_hit);
+        }
+    }
+
+    /// [`WideBvh::for_each_hit`] on a stack of `N` entries; `ORDERED` visits the hit children
+    /// nearest first.
     #[inline(always)]
-    fn hits_walk<const N: usize>(&self, ray: &Ray, tmax: f32, mut on_hit: impl FnMut(Hit) -> f32) {
+    fn hits_walk<const ORDERED: bool, const N: usize>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        mut on_hit: impl FnMut(Hit) -> f32,
+    ) {
         if self.nodes.is_empty() {
             return;
         }
@@ -106,14 +130,16 @@ impl<const K: usize> WideBvh<K> {
                 if lanes.nonfinite {
                     mask &= node.occupied();
                 }
-                // Hit lanes sorted by entry distance, farthest first, onto the stack.
+                // Hit lanes onto the stack (sorted by entry distance, farthest first, when
+                // ordered), each asked for from memory.
                 let base = sp;
                 while mask != 0 {
                     let k = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     let e = (node.child[k], dist[k]);
+                    self.prefetch(e.0);
                     let mut j = sp;
-                    while j > base && stack[j - 1].1 < e.1 {
+                    while ORDERED && j > base && stack[j - 1].1 < e.1 {
                         stack[j] = stack[j - 1];
                         j -= 1;
                     }

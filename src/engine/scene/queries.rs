@@ -150,6 +150,8 @@ impl Engine {
                     limit
                 };
                 match &self.meshes[inst.mesh as usize].wide {
+                    // Nothing shortens an unbounded walk: any order will do.
+                    Some(w) if max == usize::MAX => w.hits_any_order(&local, below, on_hit),
                     Some(w) => w.for_each_hit(&local, below, on_hit),
                     None => bvh.for_each_hit(&local, below, on_hit),
                 }
@@ -181,7 +183,7 @@ impl Engine {
                     ray.tmax
                 };
                 match &self.meshes[inst.mesh as usize].wide {
-                    Some(w) => w.for_each_hit(&local, ray.tmax, on_hit),
+                    Some(w) => w.hits_any_order(&local, ray.tmax, on_hit),
                     None => bvh.for_each_hit(&local, ray.tmax, on_hit),
                 }
                 None
