@@ -46,7 +46,7 @@ impl<const K: usize> WideBvh<K> {
     fn closest_point_pending(&self, p: Vec3, bound: f32, limit: usize) -> Option<(Vec3, f32, u32)> {
         // A non-finite point is at no finite distance from anything (brute force finds
         // nothing either).
-        if self.nodes.is_empty() || !(bound > 0.0) || !p.is_finite() {
+        if self.nodes.is_empty() || bound.is_nan() || bound <= 0.0 || !p.is_finite() {
             return None;
         }
         let lanes = DistanceLanes::new(p, &self.bounds());
