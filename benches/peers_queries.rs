@@ -14,7 +14,7 @@
 mod timing;
 
 use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8};
-use dynbvh::geom::{Aabb, TriMesh};
+use dynbvh::geom::{Aabb, TriMesh, closest_point_on_triangle};
 use dynbvh::glam::Vec3;
 use dynbvh::io::read_tri;
 use parry3d::query::PointQuery;
@@ -52,6 +52,94 @@ fn near_surface(mesh: &TriMesh, share: f32, n: usize, seed: u64) -> Vec<Vec3> {
             a + (b - a) * u + (c - a) * v + d * (rng.f() * share * diag)
         })
         .collect()
+}
+
+/// Work per query: child boxes whose distance was computed and triangles tested.
+#[derive(Clone, Copy, Default)]
+struct Work {
+    boxes: u64,
+    tris: u64,
+}
+
+/// Counts the work of the closest-point queries on a binary tree three ways: dynbvh's
+/// best-first search ([`dynbvh::bvh::Bvh::nearest_slot`], counted through its closures), the
+/// depth-first walk it replaced (nearer child first, written out here), and that walk with
+/// the bound seeded just above the answer (the least any walk on these boxes must do).
+fn count_work(bvh: &MeshBvh, mesh: &TriMesh, points: &[Vec3]) -> [Work; 3] {
+    let tree = bvh.bvh();
+    let nodes = tree.nodes();
+    let tris: Vec<[Vec3; 3]> = tree
+        .prim_indices()
+        .iter()
+        .map(|&k| mesh.indices[k as usize].map(|i| mesh.positions[i as usize]))
+        .collect();
+    let r = tree.bounds();
+    let mut work = [Work::default(); 3];
+    for &p in points {
+        let pad = (r.min.abs().max(r.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+        let lower = |n: &dynbvh::bvh::Node| {
+            let lo = Vec3::from(n.min) - (p + pad);
+            let hi = (p - pad) - Vec3::from(n.max);
+            lo.max(hi).max(Vec3::ZERO).length_squared()
+        };
+        let dist = |slot: usize| {
+            let [a, b, c] = tris[slot];
+            closest_point_on_triangle(p, a, b, c).distance_squared(p)
+        };
+        let boxes = std::cell::Cell::new(0u64);
+        let mut tested = 0u64;
+        let (_, answer) = tree
+            .nearest_slot(
+                |n| {
+                    boxes.set(boxes.get() + 1);
+                    lower(n)
+                },
+                f32::INFINITY,
+                |slot, best| {
+                    tested += 1;
+                    let d2 = dist(slot);
+                    (d2 < best).then_some(d2)
+                },
+            )
+            .expect("a nearest triangle");
+        // The root's own test is not a child's.
+        work[0].boxes += boxes.get() - 1;
+        work[0].tris += tested;
+        for (w, start) in work[1..].iter_mut().zip([f32::INFINITY, answer.next_up()]) {
+            let mut best = start;
+            let mut stack = Vec::new();
+            let mut node = &nodes[0];
+            loop {
+                if node.is_leaf() {
+                    for slot in node.first as usize..(node.first + node.count) as usize {
+                        w.tris += 1;
+                        best = best.min(dist(slot));
+                    }
+                } else {
+                    let (l, r) = (node.first as usize, node.first as usize + 1);
+                    let (dl, dr) = (lower(&nodes[l]), lower(&nodes[r]));
+                    w.boxes += 2;
+                    let (near, dn, far, df) = if dl <= dr {
+                        (l, dl, r, dr)
+                    } else {
+                        (r, dr, l, dl)
+                    };
+                    if dn < best {
+                        if df < best {
+                            stack.push((far, df));
+                        }
+                        node = &nodes[near];
+                        continue;
+                    }
+                }
+                match std::iter::from_fn(|| stack.pop()).find(|&(_, d)| d < best) {
+                    Some((i, _)) => node = &nodes[i],
+                    None => break,
+                }
+            }
+        }
+    }
+    work
 }
 
 /// parry's mesh: the same vertices (welded as the file gives them) and triangles.
@@ -210,5 +298,20 @@ fn main() {
             );
         }
         black_box((sa, sb, sc, sd));
+
+        println!("\nwork per query on the binary trees (sphere_1m_def, the same points): child boxes, triangles");
+        let n = QUERIES as f64;
+        for (name, tree) in [("fresh build", &fresh), ("refitted", &refitted)] {
+            let w = count_work(tree, &def, &points);
+            println!(
+                "{name:<12} best first {:>6.1} {:>5.1} | depth first {:>6.1} {:>5.1} | depth first from the answer {:>6.1} {:>5.1}",
+                w[0].boxes as f64 / n,
+                w[0].tris as f64 / n,
+                w[1].boxes as f64 / n,
+                w[1].tris as f64 / n,
+                w[2].boxes as f64 / n,
+                w[2].tris as f64 / n
+            );
+        }
     });
 }
