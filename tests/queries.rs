@@ -539,3 +539,30 @@ fn closest_point_from_a_sphere_centre() {
         }
     }
 }
+
+/// The engine's queries with one instance placed by the identity (whose closest point walks the
+/// wide tree under the wide traversal) and one scaled, turned and moved (walked in place on the
+/// binary tree), against brute force over their world triangles.
+#[test]
+fn engine_queries_on_placed_and_identity_instances() {
+    for traversal in [Traversal::Wide, Traversal::Binary] {
+        let sphere = dynbvh::geom::shapes::icosphere(3);
+        let mut e = Engine::new(EngineConfig {
+            traversal,
+            ..EngineConfig::default()
+        });
+        let mesh = e.add_mesh(sphere.positions.clone(), sphere.indices.clone());
+        e.add_instance(mesh, Affine3A::IDENTITY);
+        let moved = e.add_instance(
+            mesh,
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5),
+                dynbvh::glam::Quat::from_rotation_y(0.3),
+                Vec3::new(1.6, 0.2, 0.0),
+            ),
+        );
+        e.set_instance_mask(moved, 2);
+        e.update();
+        check_engine_queries(&e, &mut Probe(5), &format!("two spheres, {traversal}"));
+    }
+}

@@ -162,3 +162,59 @@ impl<const K: usize> WideBvh<K> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::bvh::{BuildParams, MeshBvh4, MeshBvh8, brute_force_all_hits};
+    use crate::geom::{Ray, shapes};
+    use glam::Vec3;
+
+    /// Both widths, fresh and refitted, every hit and the first two against brute force on
+    /// rays through a deformed sphere (two hits or more each when they hit).
+    #[test]
+    fn all_hits_match_brute_force_at_both_widths() {
+        let mut mesh = shapes::icosphere(3);
+        let rest = mesh.positions.clone();
+        let mut refit4 = MeshBvh4::build(&mesh, &BuildParams::BINNED);
+        let mut refit8 = MeshBvh8::build(&mesh, &BuildParams::BINNED);
+        shapes::sine_deform(&rest, &mut mesh.positions, 0.05, 0.3);
+        refit4.refit(&mesh);
+        refit8.refit(&mesh);
+        let fresh4 = MeshBvh4::build(&mesh, &BuildParams::BINNED);
+        let fresh8 = MeshBvh8::build(&mesh, &BuildParams::BINNED);
+        let mut seed = 7u32;
+        let mut f = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+        };
+        let mut hits = Vec::new();
+        let mut hitting = 0;
+        for _ in 0..300 {
+            let o = Vec3::new(f(), f(), f()) * 3.0;
+            let ray = Ray::new(o, Vec3::new(f(), f(), f()) * 0.8 - o);
+            let want = brute_force_all_hits(&mesh, &ray);
+            hitting += usize::from(!want.is_empty());
+            for max in [usize::MAX, 1, 2] {
+                let expect: Vec<f32> = want.iter().take(max).map(|h| h.t).collect();
+                let check = |hits: &Vec<crate::geom::Hit>, what: &str| {
+                    assert_eq!(
+                        hits.iter().map(|h| h.t).collect::<Vec<_>>(),
+                        expect,
+                        "{what}, {max} hits of {ray:?}"
+                    );
+                };
+                fresh4.all_hits(&ray, max, &mut hits);
+                check(&hits, "4 wide");
+                refit4.all_hits(&ray, max, &mut hits);
+                check(&hits, "4 wide refitted");
+                fresh8.all_hits(&ray, max, &mut hits);
+                check(&hits, "8 wide");
+                refit8.all_hits(&ray, max, &mut hits);
+                check(&hits, "8 wide refitted");
+            }
+            assert_eq!(fresh4.count_hits(&ray) as usize, want.len());
+            assert_eq!(refit8.count_hits(&ray) as usize, want.len());
+        }
+        assert!(hitting > 100, "most rays aim at the sphere");
+    }
+}

@@ -195,12 +195,13 @@ impl<const K: usize> WideBvh<K> {
 
 #[cfg(test)]
 mod tests {
-    use crate::bvh::{BuildParams, MeshBvh8, brute_force_closest_point};
+    use crate::bvh::{BuildParams, MeshBvh4, MeshBvh8, brute_force_closest_point};
     use crate::geom::shapes;
     use glam::Vec3;
 
     /// With room for one or two pending subtrees nearly every subtree is searched depth first
-    /// on the spot: the answers stay brute force's, on a fresh and a refitted tree.
+    /// on the spot: the answers stay brute force's, on fresh and refitted 8-wide trees and a
+    /// 4-wide one.
     #[test]
     fn depth_first_fallback_is_exact() {
         let mut mesh = shapes::icosphere(3);
@@ -209,6 +210,7 @@ mod tests {
         shapes::sine_deform(&rest, &mut mesh.positions, 0.05, 0.3);
         refitted.refit(&mesh);
         let fresh = MeshBvh8::build(&mesh, &BuildParams::BINNED);
+        let fresh4 = MeshBvh4::build(&mesh, &BuildParams::BINNED);
         let mut seed = 1u32;
         let mut f = || {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -224,6 +226,10 @@ mod tests {
                         .map(|(_, d2, _)| d2.sqrt());
                     assert_eq!(got, want, "{p} with {limit} pending");
                 }
+                let got = fresh4
+                    .closest_point_pending(p, f32::INFINITY, limit)
+                    .map(|(_, d2, _)| d2.sqrt());
+                assert_eq!(got, want, "{p} with {limit} pending, 4 wide");
             }
         }
     }
