@@ -149,8 +149,12 @@ impl Bvh {
                 } else {
                     (r, dr, l, dl)
                 };
-                if df < best.1 && !pending.push(key(df, far)) {
-                    self.nearest_depth_first(far, &lower, &mut best, &mut test);
+                if df < best.1 {
+                    if pending.push(key(df, far)) {
+                        prefetch_children(nodes, far);
+                    } else {
+                        self.nearest_depth_first(far, &lower, &mut best, &mut test);
+                    }
                 }
                 if dn < best.1 {
                     let k = key(dn, near);
@@ -158,7 +162,9 @@ impl Bvh {
                         node = near;
                         continue;
                     }
-                    if !pending.push(k) {
+                    if pending.push(k) {
+                        prefetch_children(nodes, near);
+                    } else {
                         self.nearest_depth_first(near, &lower, &mut best, &mut test);
                     }
                 }
@@ -216,6 +222,18 @@ impl Bvh {
                 }
             }
         }
+    }
+}
+
+/// Asks for the cache line of a pending node's children (or a leaf's first slot is not asked
+/// for: its primitives live with the caller), which its expansion reads.
+#[inline(always)]
+fn prefetch_children(nodes: &[Node], node: u32) {
+    let n = &nodes[node as usize];
+    if !n.is_leaf()
+        && let Some(c) = nodes.get(n.first as usize)
+    {
+        crate::simd::prefetch_all(c);
     }
 }
 

@@ -100,8 +100,8 @@ impl<const K: usize> WideBvh<K> {
         }
     }
 
-    /// Puts a child (its key) among the pending ones, or searches it depth first now when
-    /// they are full.
+    /// Puts a child (its key) among the pending ones and asks for its memory, or searches it
+    /// depth first now when they are full.
     #[inline(always)]
     fn wait(
         &self,
@@ -111,12 +111,12 @@ impl<const K: usize> WideBvh<K> {
         lanes: &DistanceLanes,
         best: &mut Nearest,
     ) {
-        if !pending.push(key) {
-            if self.stack_need < SMALL_STACK {
-                self.nearest_depth_first::<SMALL_STACK>(key as u32, p, lanes, best);
-            } else {
-                self.nearest_depth_first::<BIG_STACK>(key as u32, p, lanes, best);
-            }
+        if pending.push(key) {
+            self.prefetch(key as u32);
+        } else if self.stack_need < SMALL_STACK {
+            self.nearest_depth_first::<SMALL_STACK>(key as u32, p, lanes, best);
+        } else {
+            self.nearest_depth_first::<BIG_STACK>(key as u32, p, lanes, best);
         }
     }
 
