@@ -225,8 +225,9 @@ impl Bvh {
     }
 }
 
-/// Asks for the cache line of a pending node's children (or a leaf's first slot is not asked
-/// for: its primitives live with the caller), which its expansion reads.
+/// Asks for the cache line holding a pending interior node's two children, which its
+/// expansion reads, likely after the walk has been elsewhere (a leaf's triangles are the
+/// caller's data: not asked for).
 #[inline(always)]
 fn prefetch_children(nodes: &[Node], node: u32) {
     let n = &nodes[node as usize];
