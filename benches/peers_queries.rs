@@ -1,9 +1,10 @@
-//! Closest-point queries of dynbvh against parry3d's point projection on the same mesh, one
-//! thread, interleaved repeat by repeat in one run: `sphere_1m` (1,003,520 triangles) from the
-//! shared benchmark inputs (`../shared/bench-inputs/gen.rs`), query points within 1% of the
-//! box diagonal of the surface (a random point of a random triangle moved by a random offset
-//! up to that length). Then the deformed mesh (`sphere_1m_def`): dynbvh's tree refitted from
-//! the rest mesh against a fresh build on the deformed one. Every answer's distance is checked
+//! Closest-point queries of dynbvh (binary and 8-wide trees) against parry3d's point
+//! projection on the same mesh, one thread, interleaved repeat by repeat in one run:
+//! `sphere_1m` (1,003,520 triangles) from the shared benchmark inputs
+//! (`../shared/bench-inputs/gen.rs`), query points within 1% of the box diagonal of the
+//! surface (a random point of a random triangle moved by a random offset up to that length).
+//! Then the deformed mesh (`sphere_1m_def`): dynbvh's trees refitted from the rest mesh against
+//! fresh builds on the deformed one, each kind against its own. Every answer's distance is checked
 //! against parry's (the same nearest distance to within rounding) before timing.
 //!
 //! `DYNBVH_BENCH_INPUTS=DIR cargo bench --features peers --bench peers_queries` (default
@@ -12,8 +13,8 @@
 #[path = "common/timing.rs"]
 mod timing;
 
-use dynbvh::bvh::{BuildParams, MeshBvh};
-use dynbvh::geom::{Aabb, TriMesh};
+use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8};
+use dynbvh::geom::{Aabb, TriMesh, closest_point_on_triangle};
 use dynbvh::glam::Vec3;
 use dynbvh::io::read_tri;
 use parry3d::query::PointQuery;
@@ -53,6 +54,94 @@ fn near_surface(mesh: &TriMesh, share: f32, n: usize, seed: u64) -> Vec<Vec3> {
         .collect()
 }
 
+/// Work per query: child boxes whose distance was computed and triangles tested.
+#[derive(Clone, Copy, Default)]
+struct Work {
+    boxes: u64,
+    tris: u64,
+}
+
+/// Counts the work of the closest-point queries on a binary tree three ways: dynbvh's
+/// best-first search ([`dynbvh::bvh::Bvh::nearest_slot`], counted through its closures), the
+/// depth-first walk it replaced (nearer child first, written out here), and that walk with
+/// the bound seeded just above the answer (the least any walk on these boxes must do).
+fn count_work(bvh: &MeshBvh, mesh: &TriMesh, points: &[Vec3]) -> [Work; 3] {
+    let tree = bvh.bvh();
+    let nodes = tree.nodes();
+    let tris: Vec<[Vec3; 3]> = tree
+        .prim_indices()
+        .iter()
+        .map(|&k| mesh.indices[k as usize].map(|i| mesh.positions[i as usize]))
+        .collect();
+    let r = tree.bounds();
+    let mut work = [Work::default(); 3];
+    for &p in points {
+        let pad = (r.min.abs().max(r.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+        let lower = |n: &dynbvh::bvh::Node| {
+            let lo = Vec3::from(n.min) - (p + pad);
+            let hi = (p - pad) - Vec3::from(n.max);
+            lo.max(hi).max(Vec3::ZERO).length_squared()
+        };
+        let dist = |slot: usize| {
+            let [a, b, c] = tris[slot];
+            closest_point_on_triangle(p, a, b, c).distance_squared(p)
+        };
+        let boxes = std::cell::Cell::new(0u64);
+        let mut tested = 0u64;
+        let (_, answer) = tree
+            .nearest_slot(
+                |n| {
+                    boxes.set(boxes.get() + 1);
+                    lower(n)
+                },
+                f32::INFINITY,
+                |slot, best| {
+                    tested += 1;
+                    let d2 = dist(slot);
+                    (d2 < best).then_some(d2)
+                },
+            )
+            .expect("a nearest triangle");
+        // The root's own test is not a child's.
+        work[0].boxes += boxes.get() - 1;
+        work[0].tris += tested;
+        for (w, start) in work[1..].iter_mut().zip([f32::INFINITY, answer.next_up()]) {
+            let mut best = start;
+            let mut stack = Vec::new();
+            let mut node = &nodes[0];
+            loop {
+                if node.is_leaf() {
+                    for slot in node.first as usize..(node.first + node.count) as usize {
+                        w.tris += 1;
+                        best = best.min(dist(slot));
+                    }
+                } else {
+                    let (l, r) = (node.first as usize, node.first as usize + 1);
+                    let (dl, dr) = (lower(&nodes[l]), lower(&nodes[r]));
+                    w.boxes += 2;
+                    let (near, dn, far, df) = if dl <= dr {
+                        (l, dl, r, dr)
+                    } else {
+                        (r, dr, l, dl)
+                    };
+                    if dn < best {
+                        if df < best {
+                            stack.push((far, df));
+                        }
+                        node = &nodes[near];
+                        continue;
+                    }
+                }
+                match std::iter::from_fn(|| stack.pop()).find(|&(_, d)| d < best) {
+                    Some((i, _)) => node = &nodes[i],
+                    None => break,
+                }
+            }
+        }
+    }
+    work
+}
+
 /// parry's mesh: the same vertices (welded as the file gives them) and triangles.
 fn parry_mesh(mesh: &TriMesh) -> parry3d::shape::TriMesh {
     let v = mesh
@@ -88,11 +177,13 @@ fn main() {
     pool.install(|| {
         let points = near_surface(&rest, 0.01, QUERIES, 3);
         let ours = MeshBvh::build(&rest, &BuildParams::BINNED);
+        let ours8 = MeshBvh8::from_mesh_bvh(&ours);
         let theirs = parry_mesh(&rest);
         // Agreement first.
         let mut worst = 0.0f32;
         for p in points.iter().take(2000) {
             let a = ours.closest_point(*p, f32::INFINITY).unwrap().distance;
+            assert_eq!(ours8.closest_point(*p, f32::INFINITY).unwrap().distance, a);
             let q = theirs.project_local_point(parry3d::math::Vector::new(p.x, p.y, p.z), false);
             let b = (Vec3::new(q.point.x, q.point.y, q.point.z) - *p).length();
             worst = worst.max((a - b).abs());
@@ -103,7 +194,7 @@ fn main() {
             .iter()
             .map(|p| parry3d::math::Vector::new(p.x, p.y, p.z))
             .collect();
-        let (mut sa, mut sb) = (0.0f64, 0.0f64);
+        let (mut sa, mut sb, mut sc, mut sd) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let t = interleaved(
             REPEATS,
             &mut [
@@ -111,6 +202,12 @@ fn main() {
                     sa = points
                         .iter()
                         .map(|p| f64::from(ours.closest_point(*p, f32::INFINITY).unwrap().distance))
+                        .sum();
+                },
+                &mut || {
+                    sc = points
+                        .iter()
+                        .map(|p| f64::from(ours8.closest_point(*p, f32::INFINITY).unwrap().distance))
                         .sum();
                 },
                 &mut || {
@@ -130,27 +227,32 @@ fn main() {
         );
         println!("{:<34} {:>10} {:>10} {:>12} {:>8}", "method", "wall ms", "CPU ms", "Mq/s CPU", "speed");
         let rate = |k: usize| QUERIES as f64 / (t[k].cpu_ms * 1e3);
-        for (k, name) in ["dynbvh MeshBvh::closest_point", "parry3d TriMesh::project_point"].iter().enumerate() {
+        for (k, name) in ["dynbvh MeshBvh::closest_point", "dynbvh MeshBvh8::closest_point", "parry3d TriMesh::project_point"].iter().enumerate() {
             println!(
                 "{name:<34} {:>10.2} {:>10.2} {:>12.3} {:>8.2}",
                 t[k].wall_ms,
                 t[k].cpu_ms,
                 rate(k),
-                rate(k) / rate(1)
+                rate(k) / rate(2)
             );
         }
-        println!("(sums of distances: {:.6} vs {:.6}; worst difference on 2000 checked: {worst:.3e})", black_box(sa), black_box(sb));
+        println!("(sums of distances: {:.6}, {:.6} vs {:.6}; worst difference on 2000 checked: {worst:.3e})", black_box(sa), black_box(sc), black_box(sb));
 
         // Refitted after deformation against a fresh tree.
+        // The wide trees as the engine keeps them: the refitted one collapsed from the rest
+        // mesh's tree and refitted since, the fresh one collapsed from the fresh build.
         let mut refitted = ours;
         refitted.refit(&def);
+        let mut refitted8 = ours8;
+        refitted8.refit(&def);
         let fresh = MeshBvh::build(&def, &BuildParams::BINNED);
+        let fresh8 = MeshBvh8::from_mesh_bvh(&fresh);
         let points = near_surface(&def, 0.01, QUERIES, 4);
         for p in points.iter().take(2000) {
-            assert_eq!(
-                refitted.closest_point(*p, f32::INFINITY).map(|h| h.distance),
-                fresh.closest_point(*p, f32::INFINITY).map(|h| h.distance)
-            );
+            let want = fresh.closest_point(*p, f32::INFINITY).map(|h| h.distance);
+            assert_eq!(refitted.closest_point(*p, f32::INFINITY).map(|h| h.distance), want);
+            assert_eq!(fresh8.closest_point(*p, f32::INFINITY).map(|h| h.distance), want);
+            assert_eq!(refitted8.closest_point(*p, f32::INFINITY).map(|h| h.distance), want);
         }
         let t = interleaved(
             REPEATS,
@@ -167,19 +269,49 @@ fn main() {
                         .map(|p| f64::from(refitted.closest_point(*p, f32::INFINITY).unwrap().distance))
                         .sum();
                 },
+                &mut || {
+                    sc = points
+                        .iter()
+                        .map(|p| f64::from(fresh8.closest_point(*p, f32::INFINITY).unwrap().distance))
+                        .sum();
+                },
+                &mut || {
+                    sd = points
+                        .iter()
+                        .map(|p| f64::from(refitted8.closest_point(*p, f32::INFINITY).unwrap().distance))
+                        .sum();
+                },
             ],
         );
         println!("\nclosest point, sphere_1m_def: tree refitted from sphere_1m against a fresh build, 1 thread");
         println!("{:<34} {:>10} {:>10} {:>12} {:>8}", "tree", "wall ms", "CPU ms", "Mq/s CPU", "time");
-        for (k, name) in ["fresh build", "refitted"].iter().enumerate() {
+        let names = ["binary, fresh build", "binary, refitted", "8-wide, fresh build", "8-wide, refitted"];
+        for (k, name) in names.iter().enumerate() {
+            // Each refitted tree against the fresh one of its kind.
+            let base = t[k & !1].cpu_ms;
             println!(
                 "{name:<34} {:>10.2} {:>10.2} {:>12.3} {:>8.2}",
                 t[k].wall_ms,
                 t[k].cpu_ms,
                 QUERIES as f64 / (t[k].cpu_ms * 1e3),
-                t[k].cpu_ms / t[0].cpu_ms
+                t[k].cpu_ms / base
             );
         }
-        black_box((sa, sb));
+        black_box((sa, sb, sc, sd));
+
+        println!("\nwork per query on the binary trees (sphere_1m_def, the same points): child boxes, triangles");
+        let n = QUERIES as f64;
+        for (name, tree) in [("fresh build", &fresh), ("refitted", &refitted)] {
+            let w = count_work(tree, &def, &points);
+            println!(
+                "{name:<12} best first {:>6.1} {:>5.1} | depth first {:>6.1} {:>5.1} | depth first from the answer {:>6.1} {:>5.1}",
+                w[0].boxes as f64 / n,
+                w[0].tris as f64 / n,
+                w[1].boxes as f64 / n,
+                w[1].tris as f64 / n,
+                w[2].boxes as f64 / n,
+                w[2].tris as f64 / n
+            );
+        }
     });
 }

@@ -4,7 +4,8 @@
 //!   segments (a filter that admits every instance but the viewer: the filter's overhead; and
 //!   one that masks half the instances out);
 //! - all-hits and hit counting against the closest hit on camera rays (the shipped
-//!   `lidar_cloth.glb` through the engine, and a 100k-triangle bumpy sphere's binary tree).
+//!   `lidar_cloth.glb` through the engine, and a 100k-triangle bumpy sphere's binary and 8-wide
+//!   trees, each tree against its own closest hit), with the work per ray behind the ratio.
 //!
 //! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh]` (figures in
 //! `docs/library.md`).
@@ -13,7 +14,7 @@
 mod timing;
 
 use dynbvh::anim::Scene;
-use dynbvh::bvh::{BuildParams, MeshBvh};
+use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8, TraversalStats};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{Engine, EngineConfig, FrameSource, InstanceId, QueryFilter, SceneHit};
 use dynbvh::geom::{Ray, shapes};
@@ -23,6 +24,9 @@ use std::hint::black_box;
 use timing::interleaved;
 
 const REPEATS: usize = 15;
+/// Times the all-hits benches trace their camera rays in each repeat: a repeat of one pass
+/// takes a few milliseconds, near the granularity of the CPU clock.
+const PASSES: usize = 8;
 
 /// splitmix64 in [0, 1).
 struct Rng(u64);
@@ -151,25 +155,26 @@ fn all_hits_engine() {
     src.advance(&mut e, 2);
     e.update();
     let rays = camera_rays(&e.bounds(), 256, 256);
+    let traced = rays.repeat(PASSES);
     let mut buf: Vec<SceneHit> = Vec::new();
     let (mut a, mut b, mut c) = (0usize, 0usize, 0usize);
     let t = interleaved(
         REPEATS,
         &mut [
-            &mut || a = rays.iter().filter(|r| e.closest_hit(r).is_some()).count(),
+            &mut || a = traced.iter().filter(|r| e.closest_hit(r).is_some()).count(),
             &mut || {
                 b = 0;
-                for r in &rays {
+                for r in &traced {
                     e.all_hits(r, usize::MAX, &mut buf);
                     b += buf.len();
                 }
             },
-            &mut || c = rays.iter().map(|r| e.count_hits(r) as usize).sum(),
+            &mut || c = traced.iter().map(|r| e.count_hits(r) as usize).sum(),
         ],
     );
     report(
         "all-hits, engine: lidar_cloth.glb frame 2 of 4, 256x256 camera rays",
-        &rays,
+        &traced,
         &t,
         &[a, b, c],
     );
@@ -178,36 +183,74 @@ fn all_hits_engine() {
 fn all_hits_mesh() {
     let mesh = shapes::bumpy_sphere(100_000);
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let wide = MeshBvh8::from_mesh_bvh(&bvh);
     let rays = camera_rays(&dynbvh::geom::Aabb::from_points(&mesh.positions), 256, 256);
-    let mut buf = Vec::new();
-    let (mut a, mut b, mut c) = (0usize, 0usize, 0usize);
+    let traced = rays.repeat(PASSES);
+    let (mut buf, mut buf8) = (Vec::new(), Vec::new());
+    let (mut n0, mut n1, mut n2, mut n3, mut n4, mut n5) = (0, 0, 0, 0, 0, 0);
     let t = interleaved(
         REPEATS,
         &mut [
-            &mut || a = rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count(),
             &mut || {
-                b = 0;
-                for r in &rays {
+                n0 = traced
+                    .iter()
+                    .filter(|r| bvh.closest_hit(r).is_some())
+                    .count()
+            },
+            &mut || {
+                n1 = 0;
+                for r in &traced {
                     bvh.all_hits(r, usize::MAX, &mut buf);
-                    b += buf.len();
+                    n1 += buf.len();
                 }
             },
-            &mut || c = rays.iter().map(|r| bvh.count_hits(r) as usize).sum(),
+            &mut || n2 = traced.iter().map(|r| bvh.count_hits(r) as usize).sum(),
+            &mut || {
+                n3 = traced
+                    .iter()
+                    .filter(|r| wide.closest_hit(r).is_some())
+                    .count()
+            },
+            &mut || {
+                n4 = 0;
+                for r in &traced {
+                    wide.all_hits(r, usize::MAX, &mut buf8);
+                    n4 += buf8.len();
+                }
+            },
+            &mut || n5 = traced.iter().map(|r| wide.count_hits(r) as usize).sum(),
         ],
     );
-    report(
-        &format!(
-            "all-hits, binary tree: bumpy sphere {} triangles, 256x256 camera rays",
-            mesh.indices.len()
-        ),
-        &rays,
-        &t,
-        &[a, b, c],
+    let n = [n0, n1, n2, n3, n4, n5];
+    assert_eq!((n[0], n[1], n[2]), (n[3], n[4], n[5]), "the trees agree");
+    let title = format!(
+        "all-hits: bumpy sphere {} triangles, 256x256 camera rays",
+        mesh.indices.len()
+    );
+    report(&format!("{title}, binary tree"), &traced, &t[..3], &n[..3]);
+    report(&format!("{title}, 8-wide tree"), &traced, &t[3..], &n[3..]);
+    // The work behind the ratio, on the binary tree: what the closest hit walks against the
+    // walk that finds every hit (nothing pruned behind the first).
+    let (mut closest, mut every) = (TraversalStats::default(), TraversalStats::default());
+    for r in &rays {
+        let _ = bvh.closest_hit_counted(r, &mut closest);
+        let _ = bvh.bvh().closest_slot(r, |_, _| None, &mut every);
+    }
+    let per = |v: u64| v as f64 / rays.len() as f64;
+    println!(
+        "hitting rays {}, hits per hitting ray {:.2}; per ray, closest hit: {:.1} nodes {:.1} triangles, all hits: {:.1} nodes {:.1} triangles",
+        n[0] / PASSES,
+        n[1] as f64 / n[0].max(1) as f64,
+        per(closest.nodes),
+        per(closest.prims),
+        per(every.nodes),
+        per(every.prims)
     );
 }
 
-fn report(title: &str, rays: &[Ray], t: &[timing::Timed], counts: &[usize]) {
-    println!("\n{title}, 1 thread");
+/// Prints the rates of `t` over `traced` rays and the counts of one pass.
+fn report(title: &str, traced: &[Ray], t: &[timing::Timed], counts: &[usize]) {
+    println!("\n{title}, 1 thread, {PASSES} passes a repeat");
     println!(
         "{:<22} {:>10} {:>10} {:>12} {:>8} {:>10}",
         "query", "wall ms", "CPU ms", "Mrays/s CPU", "ratio", "hits"
@@ -216,15 +259,15 @@ fn report(title: &str, rays: &[Ray], t: &[timing::Timed], counts: &[usize]) {
         .iter()
         .enumerate()
     {
-        let rate = rays.len() as f64 / (t[k].cpu_ms * 1e3);
-        let base = rays.len() as f64 / (t[0].cpu_ms * 1e3);
+        let rate = traced.len() as f64 / (t[k].cpu_ms * 1e3);
+        let base = traced.len() as f64 / (t[0].cpu_ms * 1e3);
         println!(
             "{name:<22} {:>10.3} {:>10.3} {:>12.2} {:>8.3} {:>10}",
             t[k].wall_ms,
             t[k].cpu_ms,
             rate,
             rate / base,
-            black_box(counts[k])
+            black_box(counts[k]) / PASSES
         );
     }
 }

@@ -6,8 +6,8 @@
 
 use dynbvh::anim::Scene;
 use dynbvh::bvh::{
-    BuildParams, MeshBvh, brute_force_all_hits, brute_force_closest_point, brute_force_overlap_box,
-    brute_force_overlap_sphere,
+    BuildParams, MeshBvh, MeshBvh8, brute_force_all_hits, brute_force_closest_point,
+    brute_force_overlap_box, brute_force_overlap_sphere,
 };
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{
@@ -131,6 +131,55 @@ fn check_mesh_queries(mesh: &TriMesh, bvh: &MeshBvh, probe: &mut Probe, what: &s
     }
 }
 
+/// The wide tree's closest point, all hits and hit counts against brute force.
+fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: &str) {
+    let bounds = Aabb::from_points(&mesh.positions);
+    let diag = bounds.extent().length();
+    let mut hits = Vec::new();
+    for k in 0..40 {
+        let p = if k % 2 == 0 {
+            probe.point(&bounds, 1.5)
+        } else {
+            probe.near_surface(mesh, 0.02 * diag)
+        };
+        for max_dist in [f32::INFINITY, 0.01 * diag, 0.1 * diag] {
+            let want = brute_force_closest_point(mesh, p, max_dist);
+            let have = wide.closest_point(p, max_dist);
+            assert_eq!(
+                have.map(|h| h.distance),
+                want.map(|h| h.distance),
+                "{what}: wide closest point of {p} within {max_dist}"
+            );
+            if let Some(h) = have {
+                let [a, b, c] = mesh.indices[h.prim as usize].map(|i| mesh.positions[i as usize]);
+                assert_eq!(
+                    closest_point_on_triangle(p, a, b, c),
+                    h.point,
+                    "{what}: wide point"
+                );
+            }
+        }
+        let ray = probe.ray(&bounds);
+        let want = brute_force_all_hits(mesh, &ray);
+        wide.all_hits(&ray, usize::MAX, &mut hits);
+        assert_eq!(hits, want, "{what}: wide all hits of {ray:?}");
+        assert_eq!(
+            wide.count_hits(&ray) as usize,
+            want.len(),
+            "{what}: wide count"
+        );
+        for max in [1, 2] {
+            wide.all_hits(&ray, max, &mut hits);
+            let ts: Vec<f32> = want.iter().take(max).map(|h| h.t).collect();
+            assert_eq!(
+                hits.iter().map(|h| h.t).collect::<Vec<_>>(),
+                ts,
+                "{what}: wide {max} hits"
+            );
+        }
+    }
+}
+
 #[test]
 fn mesh_queries_match_brute_force_every_frame() {
     for file in FILES {
@@ -140,13 +189,27 @@ fn mesh_queries_match_brute_force_every_frame() {
         let mut flat = TriMesh::default();
         src.flatten_into(&mut flat);
         let mut refitted = MeshBvh::build(&flat, &BuildParams::BINNED);
+        let mut wide_refitted = MeshBvh8::from_mesh_bvh(&refitted);
         let mut probe = Probe(7);
         for f in 0..=FRAMES {
             let mut e = src.build(f, EngineConfig::default());
             src.advance(&mut e, f);
             src.flatten_into(&mut flat);
             refitted.refit(&flat);
+            wide_refitted.refit(&flat);
             let fresh = MeshBvh::build(&flat, &BuildParams::BINNED);
+            check_wide_queries(
+                &flat,
+                &MeshBvh8::from_mesh_bvh(&fresh),
+                &mut probe,
+                &format!("{file} frame {f} wide fresh"),
+            );
+            check_wide_queries(
+                &flat,
+                &wide_refitted,
+                &mut probe,
+                &format!("{file} frame {f} wide refit"),
+            );
             check_mesh_queries(
                 &flat,
                 &fresh,
@@ -445,4 +508,61 @@ fn edits_keep_ids_and_answers() {
         5.0
     );
     assert!(e.closest_point(Vec3::new(0.5, 0.5, 3.0), 4.9).is_none());
+}
+
+/// From the centre of a sphere every subtree is about as near as the nearest triangle, so the
+/// best-first search holds more pending subtrees than it keeps and walks the rest depth first:
+/// the answer must still be brute force's, on fresh and refitted binary and wide trees.
+#[test]
+fn closest_point_from_a_sphere_centre() {
+    let mut mesh = dynbvh::geom::shapes::icosphere(5);
+    let rest = mesh.positions.clone();
+    let mut refitted = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let mut wide_refitted = MeshBvh8::from_mesh_bvh(&refitted);
+    // The round sphere first (every triangle nearly as near), then two deformations of it.
+    for (amplitude, phase) in [(0.0, 0.0), (0.02, 0.0), (0.02, 0.7)] {
+        dynbvh::geom::shapes::sine_deform(&rest, &mut mesh.positions, amplitude, phase);
+        refitted.refit(&mesh);
+        wide_refitted.refit(&mesh);
+        let fresh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let centre = Aabb::from_points(&mesh.positions).center();
+        for p in [centre, centre + Vec3::new(0.01, -0.02, 0.005), Vec3::ZERO] {
+            let want = brute_force_closest_point(&mesh, p, f32::INFINITY).map(|h| h.distance);
+            assert_eq!(
+                fresh.closest_point(p, f32::INFINITY).map(|h| h.distance),
+                want
+            );
+            assert_eq!(
+                refitted.closest_point(p, f32::INFINITY).map(|h| h.distance),
+                want
+            );
+        }
+    }
+}
+
+/// The engine's queries with one instance placed by the identity (whose closest point walks the
+/// wide tree under the wide traversal) and one scaled, turned and moved (walked in place on the
+/// binary tree), against brute force over their world triangles.
+#[test]
+fn engine_queries_on_placed_and_identity_instances() {
+    for traversal in [Traversal::Wide, Traversal::Binary] {
+        let sphere = dynbvh::geom::shapes::icosphere(3);
+        let mut e = Engine::new(EngineConfig {
+            traversal,
+            ..EngineConfig::default()
+        });
+        let mesh = e.add_mesh(sphere.positions.clone(), sphere.indices.clone());
+        e.add_instance(mesh, Affine3A::IDENTITY);
+        let moved = e.add_instance(
+            mesh,
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5),
+                dynbvh::glam::Quat::from_rotation_y(0.3),
+                Vec3::new(1.6, 0.2, 0.0),
+            ),
+        );
+        e.set_instance_mask(moved, 2);
+        e.update();
+        check_engine_queries(&e, &mut Probe(5), &format!("two spheres, {traversal}"));
+    }
 }

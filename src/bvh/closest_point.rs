@@ -1,8 +1,7 @@
 //! Nearest-surface queries: the point of a mesh closest to a query point, within a distance.
-//! Depth-first, nearer child first, pruning a subtree when a lower bound of its distance (the
-//! box distance, [`box_distance_squared`]) is no smaller than the best so far; the same
-//! best-first branch-and-bound as the ray queries, with the box distance for the entry
-//! distance.
+//! Branch and bound on a lower bound of each subtree's distance (the box distance,
+//! [`box_distance_squared`]), the nearest pending subtree expanded first and a subtree pruned
+//! once its bound is no smaller than the best distance so far.
 
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{TriMesh, box_distance_squared, closest_point_on_triangle};
@@ -19,36 +18,180 @@ pub struct PointHit {
     pub prim: u32,
 }
 
+/// Subtrees the best-first search keeps pending before it walks further ones depth first.
+pub(crate) const PENDING: usize = 128;
+
+/// A pending subtree as one sortable word: its lower bound's bits (a non-negative `f32`
+/// orders as its bits do) above its node index, so the smallest word is the nearest subtree
+/// (and of equally near ones the first in node order).
+#[inline(always)]
+pub(crate) fn key(lower: f32, node: u32) -> u64 {
+    (u64::from(lower.to_bits()) << 32) | u64::from(node)
+}
+
+/// The subtrees a best-first search has yet to expand, unsorted, with the smallest key.
+pub(crate) struct Pending {
+    keys: [u64; PENDING],
+    len: usize,
+    /// Most keys held (`PENDING`; less in the tests of the depth-first fallback).
+    limit: usize,
+    /// The smallest key held, `u64::MAX` when none.
+    pub(crate) nearest: u64,
+}
+
+impl Pending {
+    /// Holding at most `limit` keys (at most [`PENDING`]).
+    pub(crate) fn new(limit: usize) -> Self {
+        Self {
+            keys: [0; PENDING],
+            len: 0,
+            limit: limit.min(PENDING),
+            nearest: u64::MAX,
+        }
+    }
+
+    /// Adds a key; false when full.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, k: u64) -> bool {
+        if self.len == self.limit {
+            return false;
+        }
+        self.keys[self.len] = k;
+        self.len += 1;
+        self.nearest = self.nearest.min(k);
+        true
+    }
+
+    /// Removes and returns the nearest subtree's node below the squared distance `best`,
+    /// dropping every subtree at or beyond it; keeps the next nearest key.
+    #[inline(always)]
+    pub(crate) fn pop(&mut self, best: f32) -> Option<u32> {
+        let passed = u64::from(best.to_bits()) << 32;
+        let (mut first, mut second, mut at) = (u64::MAX, u64::MAX, 0);
+        let mut i = 0;
+        while i < self.len {
+            let k = self.keys[i];
+            if k >= passed {
+                self.len -= 1;
+                self.keys[i] = self.keys[self.len];
+                continue;
+            }
+            if k < first {
+                second = first;
+                first = k;
+                at = i;
+            } else if k < second {
+                second = k;
+            }
+            i += 1;
+        }
+        if self.len == 0 {
+            self.nearest = u64::MAX;
+            return None;
+        }
+        self.len -= 1;
+        self.keys[at] = self.keys[self.len];
+        self.nearest = second;
+        Some(first as u32)
+    }
+}
+
 impl Bvh {
     /// The slot whose primitive is nearest, by squared distances below `bound`: `lower(node)`
-    /// is a lower bound of the squared distance of every primitive under `node`, and
-    /// `test(slot, best)` the primitive's squared distance when it is below `best`. Returns the
-    /// slot and squared distance found, `None` when nothing is below `bound`.
+    /// is a non-negative lower bound of the squared distance of every primitive under `node`,
+    /// and `test(slot, best)` the primitive's squared distance when it is below `best`.
+    /// Returns the slot and squared distance found, `None` when nothing is below `bound`.
+    ///
+    /// Best first (Hjaltason & Samet, "Distance browsing in spatial databases", 1999): the
+    /// pending subtree with the smallest bound is expanded next, so the best distance shrinks
+    /// as fast as the bounds allow, which matters on refitted trees whose overlapping boxes
+    /// make a depth-first walk settle on a far leaf first. The nearer child is entered at once
+    /// when no pending subtree is nearer (the walk then stays depth first, in cache order,
+    /// while that is also best first); the pending ones sit in a small unsorted array (a scan
+    /// finds the nearest and drops those the best distance has passed). Should it fill up, a
+    /// further subtree is searched depth first on the spot.
     pub fn nearest_slot(
         &self,
         lower: impl Fn(&Node) -> f32,
         bound: f32,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+    ) -> Option<(usize, f32)> {
+        self.nearest_slot_pending(lower, bound, test, PENDING)
+    }
+
+    /// [`Bvh::nearest_slot`] keeping at most `limit` subtrees pending.
+    fn nearest_slot_pending(
+        &self,
+        lower: impl Fn(&Node) -> f32,
+        bound: f32,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
+        limit: usize,
     ) -> Option<(usize, f32)> {
         let nodes = self.nodes.as_slice();
         let root = nodes.first()?;
-        let mut best_d2 = bound;
-        let d = lower(root);
-        if d.partial_cmp(&best_d2) != Some(std::cmp::Ordering::Less) {
+        if lower(root).partial_cmp(&bound) != Some(std::cmp::Ordering::Less) {
             return None;
         }
-        let mut best = None;
-        let mut stack = [(0u32, 0f32); MAX_DEPTH];
-        let mut sp = 0;
-        let mut node = root;
+        let mut best = (None, bound);
+        let mut pending = Pending::new(limit);
+        let mut node = 0u32;
         loop {
-            if node.is_leaf() {
-                for slot in node.first as usize..(node.first + node.count) as usize {
-                    if let Some(d2) = test(slot, best_d2) {
-                        best_d2 = d2;
-                        best = Some((slot, d2));
+            let n = &nodes[node as usize];
+            if n.is_leaf() {
+                test_leaf(n, &mut best, &mut test);
+            } else {
+                let (l, r) = (n.first, n.first + 1);
+                let dl = lower(&nodes[l as usize]);
+                let dr = lower(&nodes[r as usize]);
+                debug_assert!(!(dl < 0.0 || dr < 0.0), "lower bounds are non-negative");
+                let (near, dn, far, df) = if dl <= dr {
+                    (l, dl, r, dr)
+                } else {
+                    (r, dr, l, dl)
+                };
+                if df < best.1 {
+                    if pending.push(key(df, far)) {
+                        prefetch_children(nodes, far);
+                    } else {
+                        self.nearest_depth_first(far, &lower, &mut best, &mut test);
                     }
                 }
+                if dn < best.1 {
+                    let k = key(dn, near);
+                    if k <= pending.nearest {
+                        node = near;
+                        continue;
+                    }
+                    if pending.push(k) {
+                        prefetch_children(nodes, near);
+                    } else {
+                        self.nearest_depth_first(near, &lower, &mut best, &mut test);
+                    }
+                }
+            }
+            match pending.pop(best.1) {
+                Some(next) => node = next,
+                None => return best.0.map(|slot| (slot, best.1)),
+            }
+        }
+    }
+
+    /// [`Bvh::nearest_slot`] below `best` within the subtree at `start`, depth first, nearer
+    /// child first, on a fixed stack: `best` (slot, squared distance) is updated in place.
+    fn nearest_depth_first(
+        &self,
+        start: u32,
+        lower: &impl Fn(&Node) -> f32,
+        best: &mut (Option<usize>, f32),
+        test: &mut impl FnMut(usize, f32) -> Option<f32>,
+    ) {
+        let nodes = self.nodes.as_slice();
+        let mut stack = [(0u32, 0f32); MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = &nodes[start as usize];
+        loop {
+            if node.is_leaf() {
+                test_leaf(node, best, test);
             } else {
                 let (l, r) = (node.first, node.first + 1);
                 let dl = lower(&nodes[l as usize]);
@@ -58,8 +201,8 @@ impl Bvh {
                 } else {
                     (r, dr, l, dl)
                 };
-                if dn < best_d2 {
-                    if df < best_d2 {
+                if dn < best.1 {
+                    if df < best.1 {
                         stack[sp] = (far, df);
                         sp += 1;
                     }
@@ -69,15 +212,42 @@ impl Bvh {
             }
             loop {
                 if sp == 0 {
-                    return best;
+                    return;
                 }
                 sp -= 1;
                 let (i, d) = stack[sp];
-                if d < best_d2 {
+                if d < best.1 {
                     node = &nodes[i as usize];
                     break;
                 }
             }
+        }
+    }
+}
+
+/// Asks for the cache line holding a pending interior node's two children, which its
+/// expansion reads, likely after the walk has been elsewhere (a leaf's triangles are the
+/// caller's data: not asked for).
+#[inline(always)]
+fn prefetch_children(nodes: &[Node], node: u32) {
+    let n = &nodes[node as usize];
+    if !n.is_leaf()
+        && let Some(c) = nodes.get(n.first as usize)
+    {
+        crate::simd::prefetch_all(c);
+    }
+}
+
+/// Tests a leaf's primitives below `best` (slot, squared distance), keeping the nearest.
+#[inline(always)]
+fn test_leaf(
+    leaf: &Node,
+    best: &mut (Option<usize>, f32),
+    test: &mut impl FnMut(usize, f32) -> Option<f32>,
+) {
+    for slot in leaf.first as usize..(leaf.first + leaf.count) as usize {
+        if let Some(d2) = test(slot, best.1) {
+            *best = (Some(slot), d2);
         }
     }
 }
@@ -183,4 +353,47 @@ pub fn brute_force_closest_point(mesh: &TriMesh, p: Vec3, max_dist: f32) -> Opti
         }
     }
     hit
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::BuildParams;
+    use crate::geom::shapes;
+
+    /// With room for one or two pending subtrees nearly every subtree is searched depth first
+    /// on the spot: the answers stay brute force's.
+    #[test]
+    fn depth_first_fallback_is_exact() {
+        let mut mesh = shapes::icosphere(3);
+        let rest = mesh.positions.clone();
+        shapes::sine_deform(&rest, &mut mesh.positions, 0.05, 0.3);
+        let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let mut seed = 1u32;
+        let mut f = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 * 3.0 - 1.5
+        };
+        for _ in 0..200 {
+            let p = Vec3::new(f(), f(), f());
+            let want = brute_force_closest_point(&mesh, p, f32::INFINITY).map(|h| h.distance);
+            for limit in [1, 2, PENDING] {
+                let tris = bvh.tris.as_slice();
+                let got = bvh
+                    .bvh
+                    .nearest_slot_pending(
+                        |n| box_distance_squared(p, n.bounds()),
+                        f32::INFINITY,
+                        |slot, best| {
+                            let [a, b, c] = tris[slot];
+                            let d2 = closest_point_on_triangle(p, a, b, c).distance_squared(p);
+                            (d2 < best).then_some(d2)
+                        },
+                        limit,
+                    )
+                    .map(|(_, d2)| d2.sqrt());
+                assert_eq!(got, want, "{p} with {limit} pending");
+            }
+        }
+    }
 }

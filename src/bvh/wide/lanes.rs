@@ -1,5 +1,5 @@
 //! The SIMD kernels of the wide tree: the slab test of one ray against all `K` child boxes of a
-//! node at once, and the union of a node's child boxes. Written with the `wide` crate (AVX or
+//! node at once, the distance of a point to all of them, and the union of a node's child boxes. Written with the `wide` crate (AVX or
 //! SSE when the target has them, plain arrays otherwise), so there is no `unsafe` here.
 
 use crate::geom::{Aabb, FAR_SCALE, Ray};
@@ -132,6 +132,83 @@ fn fmin(a: f32, b: f32) -> f32 {
     if a < b { a } else { b }
 }
 
+/// Per-query constants of the box distance of [`box_distance_lanes`]: the query point moved
+/// up (`above`) and down (`below`) by the margin of
+/// [`box_distance_squared`](crate::geom::box_distance_squared) taken with the root box's
+/// coordinates, which bound every node's, so one margin serves the whole tree.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DistanceLanes {
+    above: [f32; 3],
+    below: [f32; 3],
+}
+
+impl DistanceLanes {
+    #[inline(always)]
+    pub(super) fn new(p: Vec3, root: &Aabb) -> Self {
+        let pad = (root.min.abs().max(root.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+        Self {
+            above: (p + pad).into(),
+            below: (p - pad).into(),
+        }
+    }
+}
+
+/// The squared distances from the query point of `d` to the `K` boxes `bounds` (rows min x,
+/// y, z, max x, y, z), each a lower bound of the distance of a triangle inside, into `dist`;
+/// returns the mask of lanes nearer than `best`. An empty lane is infinitely far. The query
+/// point must be finite.
+#[inline(always)]
+pub(super) fn box_distance_lanes<const K: usize>(
+    bounds: &[[f32; K]; 6],
+    d: &DistanceLanes,
+    best: f32,
+    dist: &mut [f32; K],
+) -> u32 {
+    if K == 8 {
+        let row = |i: usize| -> f32x8 {
+            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
+            f32x8::from(*a)
+        };
+        let gap = |a: usize| {
+            let lo = row(a) - f32x8::splat(d.above[a]);
+            let hi = f32x8::splat(d.below[a]) - row(a + 3);
+            lo.fast_max(hi).fast_max(f32x8::ZERO)
+        };
+        let (x, y, z) = (gap(0), gap(1), gap(2));
+        let d2 = x * x + y * y + z * z;
+        dist.as_mut_slice().copy_from_slice(&d2.to_array());
+        d2.simd_lt(f32x8::splat(best)).to_bitmask()
+    } else if K == 4 {
+        let row = |i: usize| -> f32x4 {
+            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
+            f32x4::from(*a)
+        };
+        let gap = |a: usize| {
+            let lo = row(a) - f32x4::splat(d.above[a]);
+            let hi = f32x4::splat(d.below[a]) - row(a + 3);
+            lo.fast_max(hi).fast_max(f32x4::ZERO)
+        };
+        let (x, y, z) = (gap(0), gap(1), gap(2));
+        let d2 = x * x + y * y + z * z;
+        dist.as_mut_slice().copy_from_slice(&d2.to_array());
+        d2.simd_lt(f32x4::splat(best)).to_bitmask()
+    } else {
+        let mut mask = 0;
+        for i in 0..K {
+            let gap = |a: usize| {
+                fmax(
+                    fmax(bounds[a][i] - d.above[a], d.below[a] - bounds[a + 3][i]),
+                    0.0,
+                )
+            };
+            let (x, y, z) = (gap(0), gap(1), gap(2));
+            dist[i] = x * x + y * y + z * z;
+            mask |= u32::from(dist[i] < best) << i;
+        }
+        mask
+    }
+}
+
 /// The union of a node's `K` child boxes (empty lanes hold the empty box).
 #[inline(always)]
 pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
@@ -232,11 +309,27 @@ pub(super) enum BlockHit {
     Scalar,
 }
 
+/// Every lane of a block hit closer than `tmax`.
+pub(super) enum BlockHits {
+    /// No lane is hit closer than `tmax`.
+    None,
+    /// The lanes in `mask` (bit `l` for lane `l`) are hit, lane `l` at `t[l]` with
+    /// barycentrics `u[l]`, `v[l]`.
+    Lanes {
+        mask: u32,
+        t: [f32; 4],
+        u: [f32; 4],
+        v: [f32; 4],
+    },
+    /// Some edge function is exactly zero: as [`BlockHit::Scalar`].
+    Scalar,
+}
+
 /// The watertight test of [`intersect_triangle`](crate::geom::intersect_triangle) on four
 /// triangles at once, lane by lane the same operations in the same order, so every distance and
-/// barycentric is bit for bit the scalar test's.
+/// barycentric is bit for bit the scalar test's: every lane hit closer than `tmax`.
 #[inline(always)]
-pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
+pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits {
     let row = |i: usize| f32x4::from(b.rows[i]);
     let o = |a: usize| f32x4::splat(r.origin[a]);
     let [kx, ky, kz] = r.k;
@@ -260,7 +353,7 @@ pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
     let w = bx * ay - by * ax;
     let zero = f32x4::ZERO;
     if (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask() != 0 {
-        return BlockHit::Scalar;
+        return BlockHits::Scalar;
     }
     let neg = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero)).to_bitmask();
     let pos = (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero)).to_bitmask();
@@ -273,24 +366,40 @@ pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
     // A scaled distance that overflows f32 (coordinates past about 7e12) is redone in f64 by
     // the scalar test.
     if (!t_scaled.is_finite()).to_bitmask() & !(neg & pos) & !bad_det != 0 {
-        return BlockHit::Scalar;
+        return BlockHits::Scalar;
     }
-    let mut mask = in_range & !(neg & pos) & !bad_det;
+    let mask = in_range & !(neg & pos) & !bad_det;
     if mask == 0 {
-        return BlockHit::None;
+        return BlockHits::None;
     }
-    let t = t.to_array();
-    let mut best = mask.trailing_zeros() as usize;
-    mask &= mask - 1;
-    while mask != 0 {
-        let l = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        if t[l] < t[best] {
-            best = l;
+    BlockHits::Lanes {
+        mask,
+        t: t.to_array(),
+        u: (v * rcp).to_array(),
+        v: (w * rcp).to_array(),
+    }
+}
+
+/// The nearest lane of a block hit closer than `tmax` ([`intersect4_all`]'s nearest, the
+/// first lane among equally near ones).
+#[inline(always)]
+pub(super) fn intersect4(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHit {
+    match intersect4_all(b, r, tmax) {
+        BlockHits::None => BlockHit::None,
+        BlockHits::Scalar => BlockHit::Scalar,
+        BlockHits::Lanes { mut mask, t, u, v } => {
+            let mut best = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            while mask != 0 {
+                let l = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if t[l] < t[best] {
+                    best = l;
+                }
+            }
+            BlockHit::Hit(best, t[best], u[best], v[best])
         }
     }
-    let (bu, bv) = ((v * rcp).to_array(), (w * rcp).to_array());
-    BlockHit::Hit(best, t[best], bu[best], bv[best])
 }
 
 /// The box of the triangles in `blocks`, skipping NaN coordinates (`if p < lo { p } else { lo }`

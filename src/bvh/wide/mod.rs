@@ -14,6 +14,8 @@
 //! - an empty child lane holds the empty box (`min = +inf`, `max = -inf`), which no ray hits;
 //! - every lane's box holds its subtree's triangles.
 
+mod all_hits;
+mod closest_point;
 mod lanes;
 mod packet;
 mod refit;

@@ -1,15 +1,17 @@
 //! Proximity, overlap and multi-hit queries through the two-level scene. The top-level tree
-//! prunes instances by their world boxes; inside an instance the mesh's binary tree (kept in
-//! every [`super::Traversal`], refitted or rebuilt by every update) is walked with its node
-//! boxes carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
+//! prunes instances by their world boxes. Inside an instance, with [`super::Traversal::Wide`],
+//! all hits and hit counts walk the mesh's 8-wide tree (they carry the ray into instance space,
+//! as the ray queries do, so `t` keeps its meaning), and so does the closest point when the
+//! instance is placed by the identity. Otherwise the mesh's binary tree (kept in every
+//! [`super::Traversal`], refitted or rebuilt by every update) is walked with its node boxes
+//! carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
 //! triangles' vertices transformed as `transform_point3` rounds them, so distances and
-//! overlaps are world-space ones even under scaled instances. Rays are carried into instance
-//! space as the ray queries carry them, so `t` keeps its meaning. Removed and hidden instances
-//! are skipped.
+//! overlaps are world-space ones even under scaled instances. Removed and hidden instances are
+//! skipped.
 
 use super::{Engine, InstanceEntry, InstanceId, MeshId, SceneHit, local_ray};
 use crate::bvh::{MeshBvh, keep_nearest};
-use crate::geom::{Aabb, Ray, box_distance_squared};
+use crate::geom::{Aabb, Hit, Ray, box_distance_squared};
 use glam::{Affine3A, Vec3};
 
 /// The scene's surface point nearest to a query point.
@@ -53,7 +55,11 @@ impl Engine {
             crate::bvh::squared_bound(max_dist),
             |slot, best| {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
-                let (point, d2, prim) = bvh.closest_point_placed(p, best, placement(inst))?;
+                let wide = self.meshes[inst.mesh as usize].wide.as_ref();
+                let (point, d2, prim) = match (placement(inst), wide) {
+                    (None, Some(w)) => w.closest_point_below(p, best)?,
+                    (place, _) => bvh.closest_point_placed(p, best, place)?,
+                };
                 found = Some(ScenePoint {
                     point,
                     distance: d2.sqrt(),
@@ -130,7 +136,8 @@ impl Engine {
             |slot, _| {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
                 let local = local_ray(inst, ray, limit);
-                bvh.for_each_hit(&local, limit, |h| {
+                let below = limit;
+                let on_hit = |h: Hit| {
                     out.push(SceneHit {
                         t: h.t,
                         u: h.u,
@@ -141,7 +148,13 @@ impl Engine {
                     let l = keep_nearest(out, 0, max, |h| h.t);
                     limit = limit.min(l);
                     limit
-                });
+                };
+                match &self.meshes[inst.mesh as usize].wide {
+                    // Nothing shortens an unbounded walk: any order will do.
+                    Some(w) if max == usize::MAX => w.hits_any_order(&local, below, on_hit),
+                    Some(w) => w.for_each_hit(&local, below, on_hit),
+                    None => bvh.for_each_hit(&local, below, on_hit),
+                }
                 (limit < ray.tmax).then_some(limit)
             },
             &mut (),
@@ -165,10 +178,14 @@ impl Engine {
             |slot, _| {
                 let (_, inst, bvh) = self.slot_instance(slot)?;
                 let local = local_ray(inst, ray, ray.tmax);
-                bvh.for_each_hit(&local, ray.tmax, |_| {
+                let on_hit = |_| {
                     n += 1;
                     ray.tmax
-                });
+                };
+                match &self.meshes[inst.mesh as usize].wide {
+                    Some(w) => w.hits_any_order(&local, ray.tmax, on_hit),
+                    None => bvh.for_each_hit(&local, ray.tmax, on_hit),
+                }
                 None
             },
             &mut (),
