@@ -148,10 +148,11 @@ impl<'s> GltfSource<'s> {
         })
     }
 
-    /// Builds each deforming mesh's first tree for the whole replay: from `poses` poses at
-    /// frame times spread evenly over it, first and last included ([`Engine::build_for_clip`];
-    /// at most [`crate::bvh::build::clip::MAX_POSES`] are used). 0 (the default): a plain build
-    /// of frame 0.
+    /// Builds each deforming mesh's first tree (an engine built at frame 0) for the whole
+    /// replay: from `poses` poses at frame times spread evenly over it, first and last included
+    /// ([`Engine::build_for_clip`]; at most [`crate::bvh::build::clip::MAX_POSES`] are used).
+    /// Engines built at later frames get plain builds, as the policies' rebuilds do. 0 (the
+    /// default): a plain build of frame 0.
     #[must_use]
     pub fn with_clip_aware(mut self, poses: usize) -> Self {
         self.clip_poses = poses;
@@ -303,7 +304,9 @@ impl FrameSource for GltfSource<'_> {
                 InstanceClass::Static => Plan::Static,
             });
         }
-        if self.clip_poses > 0 && !posed.is_empty() {
+        // Only the replay's first tree: an engine built at a later frame stands for a rebuild
+        // there (as the oracle builds them), and the policies' rebuilds are plain builds.
+        if self.clip_poses > 0 && frame == 0 && !posed.is_empty() {
             self.build_for_clip(&mut engine, &posed, frame);
         }
         engine.update();
