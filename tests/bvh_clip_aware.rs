@@ -11,7 +11,7 @@ use dynbvh::bvh::{BuildParams, BuildWorkspace, MeshBvh};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{EngineConfig, Policy};
-use dynbvh::geom::{Aabb, TriMesh};
+use dynbvh::geom::TriMesh;
 use glam::Vec3;
 use std::path::PathBuf;
 
@@ -43,13 +43,7 @@ fn clip_of(file: &str, frames: usize) -> (Vec<Vec<Vec3>>, Vec<[u32; 3]>) {
 }
 
 fn check(mesh: &TriMesh, bvh: &MeshBvh, what: &str) {
-    bvh.validate(mesh)
-        .unwrap_or_else(|e| panic!("{what}: invalid tree: {e}"));
-    let b = Aabb::from_points(&mesh.positions);
-    let r = 0.5 * b.extent().length().max(1e-3);
-    for ray in common::rays_around(b.center(), r, 150, 7) {
-        common::check_ray(mesh, bvh, &ray).unwrap_or_else(|e| panic!("{what}: {e}"));
-    }
+    common::check_tree(mesh, bvh, what);
 }
 
 /// Builds the plain and the clip-aware tree at frame 0 and refits both through the clip,

@@ -2,7 +2,7 @@
 //! both built at frame 0 and refitted through the clip, each frame's SAH and ray work over a
 //! tree freshly built at that frame ([`MeshBvh::build_clip_aware`]).
 
-use crate::bvh::{BuildParams, MeshBvh, TraversalStats};
+use crate::bvh::{BuildParams, MeshBvh};
 use crate::cputime::CpuClock;
 use crate::engine::source::FrameSource;
 use crate::engine::{EngineConfig, Policy};
@@ -52,11 +52,9 @@ pub struct Report {
 }
 
 fn work(tree: &MeshBvh, rays: &[Ray]) -> f64 {
-    let mut w = TraversalStats::default();
-    for r in rays {
-        let _ = tree.closest_hit_counted(r, &mut w);
-    }
-    (w.nodes + w.prims) as f64
+    crate::report::rays::closest_hit_work(rays, |r, w| {
+        let _ = tree.closest_hit_counted(r, w);
+    })
 }
 
 /// Runs the comparison on the largest deforming mesh of `src`, over all its frames.

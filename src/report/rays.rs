@@ -192,6 +192,19 @@ pub fn lidar_rays(bounds: &Aabb, n: usize, frame: usize, out: &mut Vec<Ray>) {
     }
 }
 
+/// Nodes visited plus triangles tested by the closest hits of `rays`, `trace` tracing one ray
+/// with the counters (the deterministic cost the rung and clip reports compare trees by).
+pub fn closest_hit_work(
+    rays: &[Ray],
+    mut trace: impl FnMut(&Ray, &mut crate::bvh::TraversalStats),
+) -> f64 {
+    let mut w = crate::bvh::TraversalStats::default();
+    for r in rays {
+        trace(r, &mut w);
+    }
+    (w.nodes + w.prims) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,7 @@
 use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
 use crate::bvh::partial::{PartialCut, PartialScratch};
 use crate::bvh::topology::RestructureWorkspace;
-use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8, TraversalStats};
+use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
 use crate::cputime::CpuClock;
 use crate::engine::source::FrameSource;
 use crate::engine::{EngineConfig, Policy};
@@ -160,11 +160,9 @@ fn pct(x: f64) -> String {
 }
 
 fn work(tree: &MeshBvh8, rays: &[Ray]) -> f64 {
-    let mut w = TraversalStats::default();
-    for r in rays {
-        let _ = tree.closest_hit_counted(r, &mut w);
-    }
-    (w.nodes + w.prims) as f64
+    crate::report::rays::closest_hit_work(rays, |r, w| {
+        let _ = tree.closest_hit_counted(r, w);
+    })
 }
 
 /// Runs `opts.rungs` on the largest deforming mesh of `src`.

@@ -170,3 +170,15 @@ pub fn same_closest(mesh: &TriMesh, ray: &Ray, want: Option<Hit>, got: Option<Hi
         _ => false,
     }
 }
+
+/// Checks `bvh` over `mesh`: every invariant, and 150 rays around the mesh against brute force
+/// (`what` names the case in the failure).
+pub fn check_tree(mesh: &TriMesh, bvh: &MeshBvh, what: &str) {
+    bvh.validate(mesh)
+        .unwrap_or_else(|e| panic!("{what}: invalid tree: {e}"));
+    let b = dynbvh::geom::Aabb::from_points(&mesh.positions);
+    let r = 0.5 * b.extent().length().max(1e-3);
+    for ray in rays_around(b.center(), r, 150, 7) {
+        check_ray(mesh, bvh, &ray).unwrap_or_else(|e| panic!("{what}: {e}"));
+    }
+}
