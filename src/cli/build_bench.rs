@@ -207,7 +207,8 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
     let threads = rayon::current_num_threads();
     eprintln!("{name}: {} triangles, {threads} thread(s)", mesh.len());
     // Brute force tests every triangle for every checked ray: on a huge mesh fewer rays are
-    // checked (at least 16 per set), so the check stays a few seconds.
+    // checked (at least 16 per set), so that the check's triangle tests stay within
+    // `CHECK_WORK` per set.
     let check_rays = (CHECK_WORK / mesh.len().max(1)).clamp(16, Options::default().check_rays);
     let opts = Options {
         build_runs: args.runs as usize,

@@ -5,7 +5,6 @@
 use crate::bvh::{BuildParams, MeshBvh};
 use crate::cputime::CpuClock;
 use crate::engine::source::FrameSource;
-use crate::engine::{EngineConfig, Policy};
 use crate::geom::{Aabb, Ray};
 use glam::Vec3;
 use std::fmt::Write as _;
@@ -62,16 +61,9 @@ fn work(tree: &MeshBvh, rays: &[Ray]) -> f64 {
 /// # Errors
 /// When the source has no deforming mesh or fewer than two frames.
 pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> {
-    let config = EngineConfig {
-        policy: Policy::Refit,
-        ..EngineConfig::default()
-    };
     let frames = src.frames();
     anyhow::ensure!(frames >= 2, "{}: fewer than two frames", src.name());
-    let mut e = src.build(0, config);
-    let Some(&mesh) = src.deforming().iter().max_by_key(|&&m| e.indices(m).len()) else {
-        anyhow::bail!("{}: no deforming mesh to refit", src.name());
-    };
+    let (mut e, mesh) = super::refit_engine_on_largest_mesh(src)?;
     let indices = e.indices(mesh).to_vec();
     let mut positions: Vec<Vec<Vec3>> = vec![e.positions(mesh).to_vec()];
     for f in 1..frames {

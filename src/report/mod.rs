@@ -31,6 +31,25 @@ pub fn nonzero_or_dash(v: f64, decimals: usize) -> String {
     or_dash((v != 0.0).then_some(v), decimals)
 }
 
+/// An always-refit engine built at frame 0 of `src`, and its largest deforming mesh: what the
+/// rung and clip reports follow through the frames.
+///
+/// # Errors
+/// When the source has no deforming mesh.
+pub(crate) fn refit_engine_on_largest_mesh(
+    src: &mut dyn crate::engine::source::FrameSource,
+) -> anyhow::Result<(crate::engine::Engine, crate::engine::MeshId)> {
+    let config = crate::engine::EngineConfig {
+        policy: crate::engine::Policy::Refit,
+        ..crate::engine::EngineConfig::default()
+    };
+    let e = src.build(0, config);
+    let Some(&mesh) = src.deforming().iter().max_by_key(|&&m| e.indices(m).len()) else {
+        anyhow::bail!("{}: no deforming mesh to refit", src.name());
+    };
+    Ok((e, mesh))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

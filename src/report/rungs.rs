@@ -10,7 +10,6 @@ use crate::bvh::topology::RestructureWorkspace;
 use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
 use crate::cputime::CpuClock;
 use crate::engine::source::FrameSource;
-use crate::engine::{EngineConfig, Policy};
 use crate::geom::Ray;
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -170,14 +169,7 @@ fn work(tree: &MeshBvh8, rays: &[Ray]) -> f64 {
 /// # Errors
 /// When the source has no deforming mesh.
 pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> {
-    let config = EngineConfig {
-        policy: Policy::Refit,
-        ..EngineConfig::default()
-    };
-    let mut e = src.build(0, config);
-    let Some(&mesh) = src.deforming().iter().max_by_key(|&&m| e.indices(m).len()) else {
-        anyhow::bail!("{}: no deforming mesh to refit", src.name());
-    };
+    let (mut e, mesh) = super::refit_engine_on_largest_mesh(src)?;
     let params = BuildParams::BINNED;
     let indices = e.indices(mesh).to_vec();
     let mut refitted = MeshBvh::build_indexed(e.positions(mesh), &indices, &params);
