@@ -205,23 +205,26 @@ impl ValueFormatter<f64> for Axis {
     }
 }
 
-/// About five round values covering `[lo, hi]`: steps of 1, 2 or 5 times a power of ten.
+/// Round values covering `[lo, hi]`: the coarsest step of 1, 2 or 5 times a power of ten
+/// that still leaves at least four ticks (so a span just past a power of ten keeps its ticks).
 fn linear_ticks(lo: f64, hi: f64) -> Vec<f64> {
     let span = (hi - lo).max(f64::MIN_POSITIVE);
-    let raw = span / 5.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
-        .iter()
-        .map(|m| m * mag)
-        .find(|s| *s >= raw)
-        .unwrap_or(10.0 * mag);
-    let first = (lo / step).ceil() * step;
-    (0..)
-        .map(|k| first + f64::from(k) * step)
-        .take_while(|v| *v <= hi + step * 1e-9)
-        .take(20)
-        .map(|v| if v.abs() < step * 1e-9 { 0.0 } else { v })
-        .collect()
+    let ticks = |step: f64| -> Vec<f64> {
+        let first = (lo / step).ceil() * step;
+        (0..)
+            .map(|k| first + f64::from(k) * step)
+            .take_while(|v| *v <= hi + step * 1e-9)
+            .take(24)
+            .map(|v| if v.abs() < step * 1e-9 { 0.0 } else { v })
+            .collect()
+    };
+    let e = (span / 4.0).log10().floor() as i32;
+    (e - 1..=e + 1)
+        .rev()
+        .flat_map(|e| [5.0, 2.0, 1.0].map(|m| m * 10f64.powi(e)))
+        .map(ticks)
+        .find(|t| t.len() >= 4)
+        .unwrap_or_else(|| ticks(10f64.powi(e - 2)))
 }
 
 /// Ticks of a logarithmic axis: powers of ten, with 2 and 5 between them, or every integer
@@ -261,14 +264,20 @@ fn tick_label(v: f64, ticks: &[f64]) -> String {
         let (d, suffix) = if a >= 1e6 { (1e6, "M") } else { (1e3, "k") };
         return format!("{}{suffix}", trim(format!("{:.2}", v / d)));
     }
-    // The smallest gap between ticks decides the decimals.
+    // The fewest decimals that print every tick exactly (2.5 steps need one more than 2).
     let gap = ticks
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())
         .filter(|g| *g > 0.0)
-        .fold(f64::INFINITY, f64::min);
-    let scale = if gap.is_finite() { gap.min(a) } else { a };
-    let decimals = (-scale.log10().floor()).clamp(0.0, 6.0) as usize;
+        .fold(a, f64::min);
+    let exact = |d: i32| {
+        let k = 10f64.powi(d);
+        let tolerance = 1e-3 * (gap * k).min(1.0);
+        ticks
+            .iter()
+            .all(|t| ((t * k).round() - t * k).abs() <= tolerance)
+    };
+    let decimals = (0..=6).find(|d| exact(*d)).unwrap_or(6) as usize;
     trim(format!("{v:.decimals$}"))
 }
 
@@ -604,6 +613,22 @@ mod tests {
         assert!((t[5] - 1.0).abs() < 1e-9 && t[0] == 0.0);
         assert_eq!(tick_label(0.2, &t), "0.2");
         assert_eq!(tick_label(20000.0, &[10000.0, 20000.0]), "20k");
+        assert_eq!(tick_label(0.025, &[0.0, 0.025, 0.05]), "0.025");
+    }
+
+    /// Spans just past a power of ten (e.g. 0.0501) once gave two ticks.
+    #[test]
+    fn linear_ticks_never_fewer_than_four() {
+        for lo in [0.0, 0.0883, 1.0, -3.7, 1234.5] {
+            for k in 0..400 {
+                let span = 10f64.powf(-4.0 + f64::from(k) * 0.02);
+                let t = linear_ticks(lo, lo + span);
+                assert!((4..=12).contains(&t.len()), "{lo} +{span}: {t:?}");
+                let labels: std::collections::HashSet<_> =
+                    t.iter().map(|v| tick_label(*v, &t)).collect();
+                assert_eq!(labels.len(), t.len(), "{lo} +{span}: {t:?}");
+            }
+        }
     }
 
     #[test]
