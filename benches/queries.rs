@@ -6,9 +6,12 @@
 //! - all-hits and hit counting against the closest hit on camera rays (the shipped
 //!   `lidar_cloth.glb` through the engine, and a 100k-triangle bumpy sphere's binary and 8-wide
 //!   trees, each tree against its own closest hit), with the work per ray behind the ratio.
+//! - the engine's closest point on one instance of a 100k-triangle sphere placed by the
+//!   identity, by a turn and an even scale, and by an uneven one, with the wide traversal (the
+//!   8-wide tree searched in the mesh's space) against the binary one.
 //!
-//! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh]` (figures in
-//! `docs/library.md`).
+//! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh |
+//! closest_point_placed]` (figures in `docs/library.md`).
 
 #[path = "common/timing.rs"]
 mod timing;
@@ -16,7 +19,9 @@ mod timing;
 use dynbvh::anim::Scene;
 use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8, TraversalStats};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
-use dynbvh::engine::{Engine, EngineConfig, FrameSource, InstanceId, QueryFilter, SceneHit};
+use dynbvh::engine::{
+    Engine, EngineConfig, FrameSource, InstanceId, QueryFilter, SceneHit, Traversal,
+};
 use dynbvh::geom::{Ray, shapes};
 use dynbvh::glam::{Affine3A, Quat, Vec3};
 use dynbvh::report::rays::camera_rays;
@@ -248,6 +253,95 @@ fn all_hits_mesh() {
     );
 }
 
+fn closest_point_placed() {
+    const QUERIES: usize = 100_000;
+    let mesh = shapes::bumpy_sphere(100_000);
+    let placements = [
+        ("identity", Affine3A::IDENTITY),
+        (
+            "turned, scaled 0.5",
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5),
+                Quat::from_rotation_y(0.7),
+                Vec3::new(3.0, -1.0, 2.0),
+            ),
+        ),
+        (
+            "turned, scaled (2, 0.6, 1)",
+            Affine3A::from_scale_rotation_translation(
+                Vec3::new(2.0, 0.6, 1.0),
+                Quat::from_rotation_x(0.4) * Quat::from_rotation_z(1.1),
+                Vec3::new(-2.0, 0.5, 1.0),
+            ),
+        ),
+    ];
+    println!(
+        "\nclosest point, engine, one instance of a {}-triangle sphere, {QUERIES} points within 1% of the diagonal of the surface, 1 thread",
+        mesh.indices.len()
+    );
+    println!(
+        "{:<28} {:>12} {:>12} {:>14}",
+        "placement", "wide CPU ms", "binary CPU ms", "binary / wide"
+    );
+    for (name, x) in placements {
+        let engine = |traversal| {
+            let mut e = Engine::new(EngineConfig {
+                traversal,
+                ..EngineConfig::default()
+            });
+            let m = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+            e.add_instance(m, x);
+            e.update();
+            e
+        };
+        let (wide, binary) = (engine(Traversal::Wide), engine(Traversal::Binary));
+        let diag = wide.bounds().extent().length();
+        let mut rng = Rng(7);
+        let points: Vec<Vec3> = (0..QUERIES)
+            .map(|_| {
+                let t = mesh.indices
+                    [(rng.f() * mesh.indices.len() as f32) as usize % mesh.indices.len()];
+                let [a, b, c] = t.map(|v| x.transform_point3(mesh.positions[v as usize]));
+                let (u, v) = (rng.f(), rng.f());
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let off = Vec3::new(rng.f(), rng.f(), rng.f()) * 2.0 - Vec3::ONE;
+                a + (b - a) * u + (c - a) * v + off * (0.01 * diag / 3f32.sqrt())
+            })
+            .collect();
+        let (mut sw, mut sb) = (0f64, 0f64);
+        let t = interleaved(
+            REPEATS,
+            &mut [
+                &mut || {
+                    sw = points
+                        .iter()
+                        .filter_map(|p| wide.closest_point(*p, f32::INFINITY))
+                        .map(|h| f64::from(h.distance))
+                        .sum();
+                },
+                &mut || {
+                    sb = points
+                        .iter()
+                        .filter_map(|p| binary.closest_point(*p, f32::INFINITY))
+                        .map(|h| f64::from(h.distance))
+                        .sum();
+                },
+            ],
+        );
+        assert_eq!(black_box(sw), black_box(sb), "{name}: the traversals agree");
+        println!(
+            "{name:<28} {:>12.2} {:>12.2} {:>14.2}",
+            t[0].cpu_ms,
+            t[1].cpu_ms,
+            t[1].cpu_ms / t[0].cpu_ms
+        );
+    }
+}
+
 /// Prints the rates of `t` over `traced` rays and the counts of one pass.
 fn report(title: &str, traced: &[Ray], t: &[timing::Timed], counts: &[usize]) {
     println!("\n{title}, 1 thread, {PASSES} passes a repeat");
@@ -292,6 +386,9 @@ fn main() {
         }
         if wanted("all_hits_mesh") {
             all_hits_mesh();
+        }
+        if wanted("closest_point_placed") {
+            closest_point_placed();
         }
     });
 }

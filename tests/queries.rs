@@ -306,8 +306,19 @@ fn check_engine_queries(e: &Engine, probe: &mut Probe, what: &str) {
     let diag = bounds.extent().length();
     let mut got = Vec::new();
     let mut hits = Vec::new();
-    for _ in 0..25 {
-        let p = probe.point(&bounds, 1.3);
+    // Random points around the scene, and points on and just off the surface (a corner, a
+    // centroid nudged), where rounding decides between neighbours.
+    let step = (world.len() / 12).max(1);
+    let near: Vec<Vec3> = world
+        .iter()
+        .step_by(step)
+        .flat_map(|(_, _, [a, b, c])| [*a, (*a + *b + *c) / 3.0 + (*b - *a) * 1e-3])
+        .collect();
+    for k in 0..25 + near.len() {
+        let p = near
+            .get(k.wrapping_sub(25))
+            .copied()
+            .unwrap_or_else(|| probe.point(&bounds, 1.3));
         for max_dist in [f32::INFINITY, 0.05 * diag] {
             let want = world
                 .iter()
@@ -540,9 +551,10 @@ fn closest_point_from_a_sphere_centre() {
     }
 }
 
-/// The engine's queries with one instance placed by the identity (whose closest point walks the
-/// wide tree under the wide traversal) and one scaled, turned and moved (walked in place on the
-/// binary tree), against brute force over their world triangles.
+/// The engine's queries with one instance placed by the identity and others scaled (evenly,
+/// unevenly, tiny and far), sheared, turned and moved, under both traversals (the wide one
+/// searches placed meshes in their own space, the binary one carries its boxes into the
+/// world), against brute force over their world triangles.
 #[test]
 fn engine_queries_on_placed_and_identity_instances() {
     for traversal in [Traversal::Wide, Traversal::Binary] {
@@ -562,7 +574,46 @@ fn engine_queries_on_placed_and_identity_instances() {
             ),
         );
         e.set_instance_mask(moved, 2);
+        let uneven = Affine3A::from_scale_rotation_translation(
+            Vec3::new(2.0, 0.3, 1.0),
+            dynbvh::glam::Quat::from_euler(dynbvh::glam::EulerRot::XYZ, 0.4, -0.7, 1.1),
+            Vec3::new(-1.5, 0.4, 0.9),
+        );
+        e.add_instance(mesh, uneven);
+        let shear = Affine3A::from_cols(
+            Vec3::new(0.8, 0.1, 0.0).into(),
+            Vec3::new(0.6, 0.7, 0.2).into(),
+            Vec3::new(-0.3, 0.0, 0.9).into(),
+            Vec3::new(0.2, -1.6, 0.3).into(),
+        );
+        let sheared = e.add_instance(mesh, shear);
+        e.set_instance_mask(sheared, 2);
+        let tiny = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(1e-3),
+            dynbvh::glam::Quat::from_rotation_z(2.0),
+            Vec3::new(0.3, 1.4, -0.2),
+        );
+        e.add_instance(mesh, tiny);
         e.update();
-        check_engine_queries(&e, &mut Probe(5), &format!("two spheres, {traversal}"));
+        check_engine_queries(&e, &mut Probe(5), &format!("five spheres, {traversal}"));
+        // Far from the origin, where the placed vertices' rounding is largest.
+        let mut far = Engine::new(EngineConfig {
+            traversal,
+            ..EngineConfig::default()
+        });
+        let m = far.add_mesh(sphere.positions.clone(), sphere.indices.clone());
+        for k in 0..3 {
+            let x = Affine3A::from_scale_rotation_translation(
+                Vec3::new(30.0, 10.0 + 5.0 * k as f32, 20.0),
+                dynbvh::glam::Quat::from_rotation_x(0.5 * k as f32),
+                Vec3::new(1e5 + 70.0 * k as f32, -2e5, 3e4),
+            );
+            let i = far.add_instance(m, x);
+            if k % 2 == 1 {
+                far.set_instance_mask(i, 2);
+            }
+        }
+        far.update();
+        check_engine_queries(&far, &mut Probe(9), &format!("far spheres, {traversal}"));
     }
 }

@@ -1,15 +1,18 @@
 //! The nearest surface point on the wide tree: the binary tree's best-first branch and bound
 //! ([`crate::bvh::Bvh::nearest_slot`]) with a node's `K` child box distances computed in one
 //! SIMD pass ([`box_distance_lanes`]); leaf triangles take the scalar
-//! [`closest_point_on_triangle`], so the distance is exactly brute force's.
+//! [`closest_point_on_triangle`], so the distance is exactly brute force's. A mesh placed by
+//! an affine map is searched in its own space: a world distance is at least the smallest
+//! singular value of the map times the mesh-space one, so mesh-space box distances bound
+//! world ones once scaled and widened by the rounding of the placed vertices ([`Placed`]).
 
 use super::lanes::{DistanceLanes, box_distance_lanes};
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::PointHit;
 use crate::bvh::closest_point::{PENDING, Pending, key, squared_bound};
-use crate::geom::closest_point_on_triangle;
-use glam::Vec3;
+use crate::geom::{Aabb, closest_point_on_triangle};
+use glam::{Affine3A, DVec3, Vec3};
 
 /// The nearest triangle so far: block lane (`4 * block + lane`), its closest point and squared
 /// distance (the bound when none).
@@ -39,17 +42,37 @@ impl<const K: usize> WideBvh<K> {
     /// [`WideBvh::closest_point`] below the squared distance `bound`: `(point, squared
     /// distance, triangle)`.
     pub(crate) fn closest_point_below(&self, p: Vec3, bound: f32) -> Option<(Vec3, f32, u32)> {
-        self.closest_point_pending(p, bound, PENDING)
+        self.closest_point_pending(p, bound, PENDING, &InPlace)
     }
 
-    /// [`WideBvh::closest_point_below`] keeping at most `limit` subtrees pending.
-    fn closest_point_pending(&self, p: Vec3, bound: f32, limit: usize) -> Option<(Vec3, f32, u32)> {
+    /// [`WideBvh::closest_point_below`] of the mesh placed in the world by `place` (its
+    /// vertices transformed as `transform_point3` rounds them; `p` and the result in world
+    /// space).
+    pub(crate) fn closest_point_placed(
+        &self,
+        p: Vec3,
+        bound: f32,
+        place: &Placed,
+    ) -> Option<(Vec3, f32, u32)> {
+        self.closest_point_pending(p, bound, PENDING, place)
+    }
+
+    /// [`WideBvh::closest_point_below`] keeping at most `limit` subtrees pending, the mesh
+    /// where `frame` puts it.
+    fn closest_point_pending<F: Frame>(
+        &self,
+        p: Vec3,
+        bound: f32,
+        limit: usize,
+        frame: &F,
+    ) -> Option<(Vec3, f32, u32)> {
         // A non-finite point is at no finite distance from anything (brute force finds
         // nothing either).
         if self.nodes.is_empty() || bound.is_nan() || bound <= 0.0 || !p.is_finite() {
             return None;
         }
-        let lanes = DistanceLanes::new(p, &self.bounds());
+        let lanes = frame.lanes(p, &self.bounds())?;
+        let walk = Walk { p, frame, lanes };
         let mut best = Nearest {
             slot: None,
             point: Vec3::ZERO,
@@ -61,10 +84,11 @@ impl<const K: usize> WideBvh<K> {
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT != 0 {
-                self.leaf_nearest(cur, p, &mut best);
+                self.leaf_nearest(cur, &walk, &mut best);
             } else {
                 let node = &self.nodes[cur as usize];
-                let mut mask = box_distance_lanes(&node.bounds, &lanes, best.d2, &mut dist);
+                let reach = walk.frame.reach(best.d2);
+                let mut mask = box_distance_lanes(&node.bounds, &walk.lanes, reach, &mut dist);
                 // The nearest lane is entered now when no pending subtree is nearer; the
                 // others wait.
                 let mut enter = None;
@@ -75,22 +99,24 @@ impl<const K: usize> WideBvh<K> {
                     let key = key(dist[k], node.child[k]);
                     if key < nearest {
                         if let Some(prev) = enter.replace(key) {
-                            self.wait(&mut pending, prev, p, &lanes, &mut best);
+                            self.wait(&mut pending, prev, &walk, &mut best);
                         }
                         nearest = key;
                     } else {
-                        self.wait(&mut pending, key, p, &lanes, &mut best);
+                        self.wait(&mut pending, key, &walk, &mut best);
                     }
                 }
                 if let Some(k) = enter {
-                    if k <= pending.nearest && f32::from_bits((k >> 32) as u32) < best.d2 {
+                    if k <= pending.nearest
+                        && f32::from_bits((k >> 32) as u32) < frame.reach(best.d2)
+                    {
                         cur = k as u32;
                         continue;
                     }
-                    self.wait(&mut pending, k, p, &lanes, &mut best);
+                    self.wait(&mut pending, k, &walk, &mut best);
                 }
             }
-            match pending.pop(best.d2) {
+            match pending.pop(frame.reach(best.d2)) {
                 Some(next) => cur = next,
                 None => {
                     let slot = best.slot?;
@@ -103,30 +129,22 @@ impl<const K: usize> WideBvh<K> {
     /// Puts a child (its key) among the pending ones and asks for its memory, or searches it
     /// depth first now when they are full.
     #[inline(always)]
-    fn wait(
-        &self,
-        pending: &mut Pending,
-        key: u64,
-        p: Vec3,
-        lanes: &DistanceLanes,
-        best: &mut Nearest,
-    ) {
+    fn wait<F: Frame>(&self, pending: &mut Pending, key: u64, walk: &Walk<F>, best: &mut Nearest) {
         if pending.push(key) {
             self.prefetch(key as u32);
         } else if self.stack_need < SMALL_STACK {
-            self.nearest_depth_first::<SMALL_STACK>(key as u32, p, lanes, best);
+            self.nearest_depth_first::<SMALL_STACK, F>(key as u32, walk, best);
         } else {
-            self.nearest_depth_first::<BIG_STACK>(key as u32, p, lanes, best);
+            self.nearest_depth_first::<BIG_STACK, F>(key as u32, walk, best);
         }
     }
 
     /// The search below `best` within the child `start`, depth first, nearest lane first, on a
     /// stack of `N` entries (enough for the tree: [`WideBvh::stack_need`]).
-    fn nearest_depth_first<const N: usize>(
+    fn nearest_depth_first<const N: usize, F: Frame>(
         &self,
         start: u32,
-        p: Vec3,
-        lanes: &DistanceLanes,
+        walk: &Walk<F>,
         best: &mut Nearest,
     ) {
         let mut stack = [(0u32, 0f32); N];
@@ -135,10 +153,11 @@ impl<const K: usize> WideBvh<K> {
         let mut cur = start;
         loop {
             if cur & LEAF_BIT != 0 {
-                self.leaf_nearest(cur, p, best);
+                self.leaf_nearest(cur, walk, best);
             } else {
                 let node = &self.nodes[cur as usize];
-                let mut mask = box_distance_lanes(&node.bounds, lanes, best.d2, &mut dist);
+                let reach = walk.frame.reach(best.d2);
+                let mut mask = box_distance_lanes(&node.bounds, &walk.lanes, reach, &mut dist);
                 // Farthest first onto the stack, so the nearest is on top.
                 let base = sp;
                 while mask != 0 {
@@ -160,7 +179,7 @@ impl<const K: usize> WideBvh<K> {
                 }
                 sp -= 1;
                 let (c, d) = stack[sp];
-                if d < best.d2 {
+                if d < walk.frame.reach(best.d2) {
                     cur = c;
                     break;
                 }
@@ -170,7 +189,8 @@ impl<const K: usize> WideBvh<K> {
 
     /// Tests a leaf child's triangles below `best`, keeping the nearest.
     #[inline(always)]
-    fn leaf_nearest(&self, leaf: u32, p: Vec3, best: &mut Nearest) {
+    fn leaf_nearest<F: Frame>(&self, leaf: u32, walk: &Walk<F>, best: &mut Nearest) {
+        let p = walk.p;
         let (first, count) = leaf_range(leaf);
         let first = first as usize;
         for (b, block) in (first..).zip(&self.blocks[first..first + count as usize]) {
@@ -178,7 +198,7 @@ impl<const K: usize> WideBvh<K> {
                 if block.prims[l] == NO_PRIM {
                     continue;
                 }
-                let [a, v, c] = block.get(l);
+                let [a, v, c] = block.get(l).map(|x| walk.frame.place(x));
                 let q = closest_point_on_triangle(p, a, v, c);
                 let d2 = q.distance_squared(p);
                 if d2 < best.d2 {
@@ -193,11 +213,191 @@ impl<const K: usize> WideBvh<K> {
     }
 }
 
+/// One search's query: the point in world space, where its frame puts the mesh, and the
+/// point's lanes in mesh space.
+struct Walk<'a, F> {
+    p: Vec3,
+    frame: &'a F,
+    lanes: DistanceLanes,
+}
+
+/// Where a search sees the mesh: the box distances' query lanes in mesh space, the
+/// mesh-space squared box distance a subtree must stay below to hold a triangle nearer than
+/// a world squared distance, and a vertex in world space.
+trait Frame {
+    fn lanes(&self, p: Vec3, root: &Aabb) -> Option<DistanceLanes>;
+    fn reach(&self, best: f32) -> f32;
+    fn place(&self, v: Vec3) -> Vec3;
+}
+
+/// The mesh where it is (world and mesh space agree).
+struct InPlace;
+
+impl Frame for InPlace {
+    #[inline(always)]
+    fn lanes(&self, p: Vec3, root: &Aabb) -> Option<DistanceLanes> {
+        Some(DistanceLanes::new(p, root, 0.0))
+    }
+    #[inline(always)]
+    fn reach(&self, best: f32) -> f32 {
+        best
+    }
+    #[inline(always)]
+    fn place(&self, v: Vec3) -> Vec3 {
+        v
+    }
+}
+
+/// A mesh placed by an affine map `M = (A, t)`. For mesh-space points `x`, `q`:
+/// `|A (x - q)| >= σ |x - q|` with `σ` the smallest singular value of `A`, so a mesh-space box
+/// distance times `σ` bounds the world distance of the exact placed triangles; the placed
+/// vertices as `transform_point3` rounds them, the closest-point arithmetic in world space
+/// and the mapping of the query point into mesh space each move that by a little, which a
+/// margin added to every box distance (in mesh units) covers.
+pub(crate) struct Placed {
+    m: Affine3A,
+    inverse: glam::DAffine3,
+    /// `1 / σ²`, rounded up with room for the squared distances' rounding.
+    inv_s2: f32,
+    /// Per component: `Σ_j |A_ij|` and `|t_i|`, for the placed vertices' rounding.
+    rows: DVec3,
+    shift: DVec3,
+    sigma: f64,
+}
+
+impl Placed {
+    /// `None` when the map is not finite or so near singular (`σ` below 1e-4 of the largest
+    /// singular value) that the bound would prune nothing: search the binary tree then.
+    pub(crate) fn new(m: &Affine3A) -> Option<Self> {
+        let d = glam::DAffine3::from_cols(
+            m.matrix3.x_axis.as_dvec3(),
+            m.matrix3.y_axis.as_dvec3(),
+            m.matrix3.z_axis.as_dvec3(),
+            DVec3::from(Vec3::from(m.translation)),
+        );
+        if !d.is_finite() {
+            return None;
+        }
+        let (low, high) = gram_extremes(&d.matrix3);
+        // The closed form's smallest eigenvalue can be off by far more than its rounding
+        // suggests: lower it until `AᵀA - low I` is positive definite (a Cholesky factoring
+        // with every pivot clear of its rounding), which proves `low` a lower bound.
+        let g = d.matrix3.transpose() * d.matrix3;
+        let mut low = low * (1.0 - 1e-6);
+        while low > 1e-8 * high && !positive_definite(&g, low, 1e-12 * high) {
+            low *= 0.5;
+        }
+        if low.is_nan() || low <= 1e-8 * high {
+            return None;
+        }
+        let inv_s2 = ((1.0 / low) * (1.0 + 1e-5)) as f32;
+        let inverse = d.inverse();
+        let a = d.matrix3.transpose();
+        Some(Self {
+            m: *m,
+            inverse,
+            inv_s2: inv_s2.next_up(),
+            rows: DVec3::new(
+                a.x_axis.abs().element_sum(),
+                a.y_axis.abs().element_sum(),
+                a.z_axis.abs().element_sum(),
+            ),
+            shift: d.translation.abs(),
+            sigma: low.sqrt(),
+        })
+    }
+}
+
+impl Frame for Placed {
+    fn lanes(&self, p: Vec3, root: &Aabb) -> Option<DistanceLanes> {
+        let q = self.inverse.transform_point3(p.as_dvec3()).as_vec3();
+        if !q.is_finite() {
+            return None;
+        }
+        let eps = f64::from(f32::EPSILON);
+        let reach = f64::from(root.min.abs().max(root.max.abs()).max_element());
+        // Each placed coordinate is rounded at most 4 times; the world-space closest point
+        // and its distance round relative to the world coordinates involved (8 ε as the
+        // in-place walk allows); twice each, in world units, then in mesh units over σ.
+        let vertex = (self.rows * reach + self.shift) * (4.0 * eps);
+        let world = self.rows.max_element() * reach + self.shift.max_element();
+        let world = f64::from(p.abs().max_element()) + world;
+        let margin = 2.0 * (vertex.length() + 8.0 * eps * world) / self.sigma;
+        Some(DistanceLanes::new(q, root, margin as f32))
+    }
+    #[inline(always)]
+    fn reach(&self, best: f32) -> f32 {
+        best * self.inv_s2
+    }
+    #[inline(always)]
+    fn place(&self, v: Vec3) -> Vec3 {
+        self.m.transform_point3(v)
+    }
+}
+
+/// Whether `g - shift I` (symmetric) factors as `L D Lᵀ` with every pivot of `D` above `floor`.
+fn positive_definite(g: &glam::DMat3, shift: f64, floor: f64) -> bool {
+    let m = |r: usize, c: usize| g.col(c)[r] - if r == c { shift } else { 0.0 };
+    let d1 = m(0, 0);
+    if d1.is_nan() || d1 <= floor {
+        return false;
+    }
+    let (l10, l20) = (m(1, 0) / d1, m(2, 0) / d1);
+    let d2 = m(1, 1) - l10 * l10 * d1;
+    if d2.is_nan() || d2 <= floor {
+        return false;
+    }
+    let l21 = (m(2, 1) - l20 * l10 * d1) / d2;
+    m(2, 2) - l20 * l20 * d1 - l21 * l21 * d2 > floor
+}
+
+/// The smallest and largest eigenvalues of `AᵀA` (the squared extreme singular values of
+/// `A`), by the closed form for symmetric 3×3 matrices (Smith, "Eigenvalues of a symmetric
+/// 3 × 3 matrix", 1961).
+fn gram_extremes(a: &glam::DMat3) -> (f64, f64) {
+    let g = a.transpose() * *a;
+    let off = g.y_axis.x.powi(2) + g.z_axis.x.powi(2) + g.z_axis.y.powi(2);
+    let q = (g.x_axis.x + g.y_axis.y + g.z_axis.z) / 3.0;
+    let p2 =
+        (g.x_axis.x - q).powi(2) + (g.y_axis.y - q).powi(2) + (g.z_axis.z - q).powi(2) + 2.0 * off;
+    if p2 <= 0.0 {
+        return (q, q);
+    }
+    let p = (p2 / 6.0).sqrt();
+    let b = (g - glam::DMat3::from_diagonal(DVec3::splat(q))) * (1.0 / p);
+    let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let high = q + 2.0 * p * phi.cos();
+    let low = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    (low.max(0.0), high)
+}
+
 #[cfg(test)]
 mod tests {
     use crate::bvh::{BuildParams, MeshBvh4, MeshBvh8, brute_force_closest_point};
     use crate::geom::shapes;
-    use glam::Vec3;
+    use glam::{Affine3A, Quat, Vec3};
+
+    /// The squared singular values of a turned, unevenly scaled map; none for a singular one.
+    #[test]
+    fn singular_values_of_placements() {
+        let a = Affine3A::from_scale_rotation_translation(
+            Vec3::new(2.0, 0.3, 1.0),
+            Quat::from_rotation_y(0.8) * Quat::from_rotation_x(-0.3),
+            Vec3::new(4.0, 5.0, 6.0),
+        );
+        let d = glam::DAffine3::from_mat4(glam::Mat4::from(a).as_dmat4());
+        let (low, high) = super::gram_extremes(&d.matrix3);
+        assert!(
+            (low - 0.09).abs() < 1e-6 && (high - 4.0).abs() < 1e-5,
+            "{low} {high}"
+        );
+        let p = super::Placed::new(&a).unwrap();
+        let s = f64::from(0.3f32);
+        assert!(p.sigma <= s && p.sigma > s * (1.0 - 1e-5), "{}", p.sigma);
+        let flat = Affine3A::from_scale(Vec3::new(1.0, 1.0, 0.0));
+        assert!(super::Placed::new(&flat).is_none());
+        assert!(super::Placed::new(&Affine3A::from_scale(Vec3::splat(f32::NAN))).is_none());
+    }
 
     /// With room for one or two pending subtrees nearly every subtree is searched depth first
     /// on the spot: the answers stay brute force's, on fresh and refitted 8-wide trees and a
@@ -222,12 +422,12 @@ mod tests {
             for limit in [1, 2, super::PENDING] {
                 for tree in [&fresh, &refitted] {
                     let got = tree
-                        .closest_point_pending(p, f32::INFINITY, limit)
+                        .closest_point_pending(p, f32::INFINITY, limit, &super::InPlace)
                         .map(|(_, d2, _)| d2.sqrt());
                     assert_eq!(got, want, "{p} with {limit} pending");
                 }
                 let got = fresh4
-                    .closest_point_pending(p, f32::INFINITY, limit)
+                    .closest_point_pending(p, f32::INFINITY, limit, &super::InPlace)
                     .map(|(_, d2, _)| d2.sqrt());
                 assert_eq!(got, want, "{p} with {limit} pending, 4 wide");
             }

@@ -144,8 +144,10 @@ pub(super) struct DistanceLanes {
 
 impl DistanceLanes {
     #[inline(always)]
-    pub(super) fn new(p: Vec3, root: &Aabb) -> Self {
-        let pad = (root.min.abs().max(root.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
+    /// The point `p`'s lanes for boxes inside `root`, every box distance lowered by the
+    /// rounding of the arithmetic and by `margin` more (per axis).
+    pub(super) fn new(p: Vec3, root: &Aabb, margin: f32) -> Self {
+        let pad = (root.min.abs().max(root.max.abs()) + p.abs()) * (8.0 * f32::EPSILON) + margin;
         Self {
             above: (p + pad).into(),
             below: (p - pad).into(),

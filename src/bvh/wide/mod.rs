@@ -16,6 +16,7 @@
 
 mod all_hits;
 mod closest_point;
+pub(crate) use closest_point::Placed;
 mod lanes;
 mod packet;
 mod refit;

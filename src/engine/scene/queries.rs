@@ -1,15 +1,17 @@
 //! Proximity, overlap and multi-hit queries through the two-level scene. The top-level tree
 //! prunes instances by their world boxes. Inside an instance, with [`super::Traversal::Wide`],
 //! all hits and hit counts walk the mesh's 8-wide tree (they carry the ray into instance space,
-//! as the ray queries do, so `t` keeps its meaning), and so does the closest point when the
-//! instance is placed by the identity. Otherwise the mesh's binary tree (kept in every
-//! [`super::Traversal`], refitted or rebuilt by every update) is walked with its node boxes
+//! as the ray queries do, so `t` keeps its meaning), and so does the closest point (in the
+//! mesh's space, its box distances scaled to bound world ones: [`crate::bvh::wide`]'s
+//! `Placed`). Otherwise the mesh's binary tree (kept in every [`super::Traversal`], refitted or
+//! rebuilt by every update) is walked with its node boxes
 //! carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
 //! triangles' vertices transformed as `transform_point3` rounds them, so distances and
 //! overlaps are world-space ones even under scaled instances. Removed and hidden instances are
 //! skipped.
 
 use super::{Engine, InstanceEntry, InstanceId, MeshId, SceneHit, local_ray};
+use crate::bvh::wide::Placed;
 use crate::bvh::{MeshBvh, keep_nearest};
 use crate::geom::{Aabb, Hit, Ray, box_distance_squared};
 use glam::{Affine3A, Vec3};
@@ -56,9 +58,11 @@ impl Engine {
             |slot, best| {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
                 let wide = self.meshes[inst.mesh as usize].wide.as_ref();
-                let (point, d2, prim) = match (placement(inst), wide) {
-                    (None, Some(w)) => w.closest_point_below(p, best)?,
-                    (place, _) => bvh.closest_point_placed(p, best, place)?,
+                let placed = placement(inst).and_then(Placed::new);
+                let (point, d2, prim) = match (placement(inst), wide, placed) {
+                    (None, Some(w), _) => w.closest_point_below(p, best)?,
+                    (Some(_), Some(w), Some(placed)) => w.closest_point_placed(p, best, &placed)?,
+                    (place, ..) => bvh.closest_point_placed(p, best, place)?,
                 };
                 found = Some(ScenePoint {
                     point,
