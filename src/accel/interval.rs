@@ -18,24 +18,17 @@ pub(super) const PLANE_SLACK: f32 = 1.0 / (1u32 << 20) as f32;
 /// skipped only when it starts beyond the best hit by more than this (`2^-16`).
 pub(super) const HIT_SLACK: f32 = 1.0 / (1u32 << 16) as f32;
 
-/// `x` moved down by [`PLANE_SLACK`] of itself (infinities stay).
+/// `x` moved down by [`PLANE_SLACK`] of itself (infinities and zeros stay). The slack takes
+/// `x`'s sign, so that no branch depends on it.
 #[inline(always)]
 pub(super) fn lower(x: f32) -> f32 {
-    if x > 0.0 {
-        x * (1.0 - PLANE_SLACK)
-    } else {
-        x * (1.0 + PLANE_SLACK)
-    }
+    x * (1.0 - PLANE_SLACK.copysign(x))
 }
 
-/// `x` moved up by [`PLANE_SLACK`] of itself (infinities stay).
+/// `x` moved up by [`PLANE_SLACK`] of itself (infinities and zeros stay).
 #[inline(always)]
 pub(super) fn upper(x: f32) -> f32 {
-    if x > 0.0 {
-        x * (1.0 + PLANE_SLACK)
-    } else {
-        x * (1.0 - PLANE_SLACK)
-    }
+    x * (1.0 + PLANE_SLACK.copysign(x))
 }
 
 /// The distance beyond which a node cannot hold a hit closer than `best`.
@@ -82,12 +75,10 @@ pub(super) enum Crossing {
 }
 
 /// The [`Crossing`] at distance `d` to the plane (the course's rule, widened: `d > tf` near
-/// only, `d < tn` far only, else both). A NaN distance (the ray lies in the plane) is both.
+/// only, `d < tn` far only, else both). A NaN distance (the ray lies in the plane) is both,
+/// over the whole interval: no comparison with NaN holds, and `min`/`max` return the other side.
 #[inline(always)]
 pub(super) fn cross(d: f32, tn: f32, tf: f32) -> Crossing {
-    if d.is_nan() {
-        return Crossing::Both(tf, tn);
-    }
     let (lo, hi) = (lower(d), upper(d));
     if tn > hi {
         Crossing::Far

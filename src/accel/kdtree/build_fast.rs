@@ -106,7 +106,10 @@ impl<'a> Builder<'a> {
         cell: &Aabb,
         depth: usize,
     ) -> Option<Split> {
-        if depth >= self.max_depth || n == 0 {
+        // A split costs at least one traversal: when that alone is as dear as testing the
+        // triangles, no plane can win (always so for one triangle with the default costs).
+        let leaf_cost = f64::from(self.params.intersection_cost) * n as f64;
+        if depth >= self.max_depth || n == 0 || f64::from(self.params.traversal_cost) >= leaf_cost {
             return None;
         }
         choose_split(events, n, cell, self.params)
@@ -254,21 +257,18 @@ fn split_list(
     (start..mid, mid..list.len())
 }
 
-/// Appends the merge of the sorted `a` and `b` to `out`.
+/// Appends the merge of the sorted `a` and `b` to `out`. Room is made first, and each step
+/// takes the smaller head without a branch on which it is (the two lists interleave
+/// unpredictably).
 fn merge_into(out: &mut Vec<Event>, a: &[Event], b: &[Event]) {
-    if b.is_empty() {
-        out.extend_from_slice(a);
-        return;
-    }
+    out.reserve(a.len() + b.len());
     let (mut i, mut j) = (0, 0);
     while i < a.len() && j < b.len() {
-        if b[j] < a[i] {
-            out.push(b[j]);
-            j += 1;
-        } else {
-            out.push(a[i]);
-            i += 1;
-        }
+        let (x, y) = (a[i], b[j]);
+        let take_b = y < x;
+        out.push(if take_b { y } else { x });
+        j += usize::from(take_b);
+        i += usize::from(!take_b);
     }
     out.extend_from_slice(&a[i..]);
     out.extend_from_slice(&b[j..]);

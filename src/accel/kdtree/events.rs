@@ -222,41 +222,51 @@ pub(super) fn classify(
     straddlers: &mut Vec<u32>,
 ) -> (usize, usize) {
     let plane = pos_key(event(split.pos, Kind::End, 0));
+    // The events are sorted: those before the plane, at it, and past it are three runs, and in
+    // the first and last the kind alone decides, without a branch.
+    let below = events.partition_point(|&e| pos_key(e) < plane);
+    let above = below + events[below..].partition_point(|&e| pos_key(e) == plane);
     let (mut left, mut right) = (0, 0);
     let first = straddlers.len();
-    for &e in events {
-        let (key, t) = (pos_key(e), tri_of(e) as usize);
+    // Before the plane: an end or a planar event puts its triangle left; a start marks it both
+    // until its end is seen.
+    for &e in &events[..below] {
+        let starts = kind_of(e) == Kind::Start as usize;
+        side[tri_of(e) as usize] = if starts { BOTH } else { LEFT };
+        left += usize::from(!starts);
+    }
+    for &e in &events[below..above] {
+        let t = tri_of(e) as usize;
         match kind_of(e) {
             0 => {
-                if key <= plane {
-                    side[t] = LEFT;
-                    left += 1;
-                } else if side[t] == BOTH {
-                    straddlers.push(t as u32);
-                }
+                side[t] = LEFT;
+                left += 1;
             }
             1 => {
-                let s = if key < plane || (key == plane && split.planar_left) {
-                    LEFT
-                } else {
-                    RIGHT
-                };
-                side[t] = s;
-                if s == LEFT {
+                if split.planar_left {
+                    side[t] = LEFT;
                     left += 1;
                 } else {
+                    side[t] = RIGHT;
                     right += 1;
                 }
             }
             _ => {
-                if key >= plane {
-                    side[t] = RIGHT;
-                    right += 1;
-                } else {
-                    side[t] = BOTH;
-                }
+                side[t] = RIGHT;
+                right += 1;
             }
         }
+    }
+    // Past the plane: a start or a planar event puts its triangle right; the end of one still
+    // marked both (it started before the plane) names a straddler.
+    for &e in &events[above..] {
+        let t = tri_of(e) as usize;
+        let ends = kind_of(e) == Kind::End as usize;
+        if ends && side[t] == BOTH {
+            straddlers.push(t as u32);
+        }
+        side[t] = if ends { side[t] } else { RIGHT };
+        right += usize::from(!ends);
     }
     let both = straddlers.len() - first;
     (left + both, right + both)

@@ -5,15 +5,16 @@
 //! the best hit, so the first hit found in the near cells is the answer.
 
 use super::{KdTree, MAX_KD_DEPTH};
-use crate::accel::interval::{
-    Crossing, beyond, box_interval, cross, lower_is_near, plane_distance,
-};
+use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
 use crate::geom::{Hit, Ray};
 
-/// A node still to visit and the ray's interval in it.
+/// A node still to visit and the ray's interval in it, already widened (`tn` lowered and `tf`
+/// raised by [`PLANE_SLACK`](crate::accel::interval) once more), so that the descent compares a
+/// plane's distance with it as computed: the widening is off the chain from one node's load to
+/// the next.
 #[derive(Clone, Copy, Default)]
 struct Pending {
     node: u32,
@@ -21,13 +22,44 @@ struct Pending {
     tf: f32,
 }
 
+impl Pending {
+    #[inline(always)]
+    fn root(tn: f32, tf: f32) -> Self {
+        Self {
+            node: 0,
+            tn: lower(tn),
+            tf: upper(tf),
+        }
+    }
+}
+
+/// What the descent reads of a ray at every node, gathered once: origin, reciprocal direction,
+/// and which child of a pair is the near one on each axis.
+struct KdRay {
+    origin: [f32; 3],
+    inv_dir: [f32; 3],
+    near: [usize; 3],
+}
+
+impl KdRay {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Self {
+        Self {
+            origin: ray.origin.to_array(),
+            inv_dir: ray.inv_dir.to_array(),
+            near: std::array::from_fn(|a| usize::from(!lower_is_near(ray, a))),
+        }
+    }
+}
+
 impl KdTree {
-    /// Walks down from `node` over `[tn, tf]` to the first leaf, pushing the far children it
-    /// passes; returns the leaf and the interval left in it.
+    /// Walks down from `p.node` over `[p.tn, p.tf]` to the first leaf, pushing the far children
+    /// it passes; returns the leaf. The child is chosen without a branch; only crossing both
+    /// children (which pushes) branches.
     #[inline(always)]
     fn descend(
         &self,
-        ray: &Ray,
+        ray: &KdRay,
         mut p: Pending,
         stack: &mut [Pending; MAX_KD_DEPTH],
         sp: &mut usize,
@@ -41,25 +73,24 @@ impl KdTree {
                 return node;
             }
             let axis = n.axis();
-            let (near, far) = if lower_is_near(ray, axis) {
-                (n.index(), n.index() + 1)
-            } else {
-                (n.index() + 1, n.index())
-            };
-            match cross(plane_distance(ray, axis, n.split()), p.tn, p.tf) {
-                Crossing::Near => node = near,
-                Crossing::Far => node = far,
-                Crossing::Both(near_end, far_start) => {
-                    stack[*sp] = Pending {
-                        node: far as u32,
-                        tn: far_start,
-                        tf: p.tf,
-                    };
-                    *sp += 1;
-                    p.tf = near_end;
-                    node = near;
-                }
+            let d = (n.split() - ray.origin[axis]) * ray.inv_dir[axis];
+            let near = n.index() + ray.near[axis];
+            let far = n.index() + (ray.near[axis] ^ 1);
+            let far_only = p.tn > d;
+            let near_only = d > p.tf;
+            if !(far_only || near_only) {
+                // Both (also when `d` is NaN: the ray lies in the plane; `min`/`max` then keep
+                // the whole interval). The plane's distance is widened once as a bound of the
+                // exact one, and once more as a stored bound.
+                stack[*sp] = Pending {
+                    node: far as u32,
+                    tn: lower(lower(d)).max(p.tn),
+                    tf: p.tf,
+                };
+                *sp += 1;
+                p.tf = upper(upper(d)).min(p.tf);
             }
+            node = if far_only { far } else { near };
         }
     }
 
@@ -73,9 +104,10 @@ impl KdTree {
         let mut mailbox = Mailbox::new();
         let mut stack = [Pending::default(); MAX_KD_DEPTH];
         let mut sp = 0;
-        let mut next = Pending { node: 0, tn, tf };
+        let kray = KdRay::new(ray);
+        let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(ray, next, &mut stack, &mut sp, c)];
+            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
                 if !mailbox.seen(prim) {
@@ -107,9 +139,10 @@ impl KdTree {
         let mut mailbox = Mailbox::new();
         let mut stack = [Pending::default(); MAX_KD_DEPTH];
         let mut sp = 0;
-        let mut next = Pending { node: 0, tn, tf };
+        let kray = KdRay::new(ray);
+        let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(ray, next, &mut stack, &mut sp, c)];
+            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
                 if !mailbox.seen(prim) && q.test(tri, c) {
