@@ -242,14 +242,9 @@ pub(super) fn classify(
                 side[t] = LEFT;
                 left += 1;
             }
-            1 => {
-                if split.planar_left {
-                    side[t] = LEFT;
-                    left += 1;
-                } else {
-                    side[t] = RIGHT;
-                    right += 1;
-                }
+            1 if split.planar_left => {
+                side[t] = LEFT;
+                left += 1;
             }
             _ => {
                 side[t] = RIGHT;
