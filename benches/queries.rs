@@ -312,25 +312,19 @@ fn closest_point_placed() {
                 a + (b - a) * u + (c - a) * v + off * (0.01 * diag / 3f32.sqrt())
             })
             .collect();
+        let distances = |e: &Engine| -> f64 {
+            points
+                .iter()
+                .filter_map(|p| e.closest_point(*p, f32::INFINITY))
+                .map(|h| f64::from(h.distance))
+                .sum()
+        };
         let (mut sw, mut sb) = (0f64, 0f64);
         let t = interleaved(
             REPEATS,
-            &mut [
-                &mut || {
-                    sw = points
-                        .iter()
-                        .filter_map(|p| wide.closest_point(*p, f32::INFINITY))
-                        .map(|h| f64::from(h.distance))
-                        .sum();
-                },
-                &mut || {
-                    sb = points
-                        .iter()
-                        .filter_map(|p| binary.closest_point(*p, f32::INFINITY))
-                        .map(|h| f64::from(h.distance))
-                        .sum();
-                },
-            ],
+            &mut [&mut || sw = distances(&wide), &mut || {
+                sb = distances(&binary)
+            }],
         );
         assert_eq!(black_box(sw), black_box(sb), "{name}: the traversals agree");
         println!(

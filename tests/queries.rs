@@ -309,16 +309,12 @@ fn check_engine_queries(e: &Engine, probe: &mut Probe, what: &str) {
     // Random points around the scene, and points on and just off the surface (a corner, a
     // centroid nudged), where rounding decides between neighbours.
     let step = (world.len() / 12).max(1);
-    let near: Vec<Vec3> = world
+    let around: Vec<Vec3> = (0..25).map(|_| probe.point(&bounds, 1.3)).collect();
+    let near = world
         .iter()
         .step_by(step)
-        .flat_map(|(_, _, [a, b, c])| [*a, (*a + *b + *c) / 3.0 + (*b - *a) * 1e-3])
-        .collect();
-    for k in 0..25 + near.len() {
-        let p = near
-            .get(k.wrapping_sub(25))
-            .copied()
-            .unwrap_or_else(|| probe.point(&bounds, 1.3));
+        .flat_map(|(_, _, [a, b, c])| [*a, (*a + *b + *c) / 3.0 + (*b - *a) * 1e-3]);
+    for p in around.into_iter().chain(near) {
         for max_dist in [f32::INFINITY, 0.05 * diag] {
             let want = world
                 .iter()

@@ -223,8 +223,9 @@ fn linear_ticks(lo: f64, hi: f64) -> Vec<f64> {
         .rev()
         .flat_map(|e| [5.0, 2.0, 1.0].map(|m| m * 10f64.powi(e)))
         .map(ticks)
+        // The finest step leaves at least 40 ticks (24 kept); none only for a NaN range.
         .find(|t| t.len() >= 4)
-        .unwrap_or_else(|| ticks(10f64.powi(e - 2)))
+        .unwrap_or_default()
 }
 
 /// Ticks of a logarithmic axis: powers of ten, with 2 and 5 between them, or every integer
@@ -264,7 +265,7 @@ fn tick_label(v: f64, ticks: &[f64]) -> String {
         let (d, suffix) = if a >= 1e6 { (1e6, "M") } else { (1e3, "k") };
         return format!("{}{suffix}", trim(format!("{:.2}", v / d)));
     }
-    // The fewest decimals that print every tick exactly (2.5 steps need one more than 2).
+    // The fewest decimals that print every tick exactly (ticks 0.025 apart need three).
     let gap = ticks
         .windows(2)
         .map(|w| (w[1] - w[0]).abs())

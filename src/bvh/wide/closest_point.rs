@@ -278,11 +278,11 @@ impl Placed {
         if !d.is_finite() {
             return None;
         }
-        let (low, high) = gram_extremes(&d.matrix3);
+        let g = d.matrix3.transpose() * d.matrix3;
+        let (low, high) = symmetric_extremes(&g);
         // The closed form's smallest eigenvalue can be off by far more than its rounding
         // suggests: lower it until `AᵀA - low I` is positive definite (a Cholesky factoring
         // with every pivot clear of its rounding), which proves `low` a lower bound.
-        let g = d.matrix3.transpose() * d.matrix3;
         let mut low = low * (1.0 - 1e-6);
         while low > 1e-8 * high && !positive_definite(&g, low, 1e-12 * high) {
             low *= 0.5;
@@ -351,11 +351,11 @@ fn positive_definite(g: &glam::DMat3, shift: f64, floor: f64) -> bool {
     m(2, 2) - l20 * l20 * d1 - l21 * l21 * d2 > floor
 }
 
-/// The smallest and largest eigenvalues of `AᵀA` (the squared extreme singular values of
-/// `A`), by the closed form for symmetric 3×3 matrices (Smith, "Eigenvalues of a symmetric
-/// 3 × 3 matrix", 1961).
-fn gram_extremes(a: &glam::DMat3) -> (f64, f64) {
-    let g = a.transpose() * *a;
+/// The smallest (at least 0) and largest eigenvalues of the symmetric `g` (for `g = AᵀA`, the
+/// squared extreme singular values of `A`), by the closed form for symmetric 3×3 matrices
+/// (Smith, "Eigenvalues of a symmetric 3 × 3 matrix", 1961).
+fn symmetric_extremes(g: &glam::DMat3) -> (f64, f64) {
+    let g = *g;
     let off = g.y_axis.x.powi(2) + g.z_axis.x.powi(2) + g.z_axis.y.powi(2);
     let q = (g.x_axis.x + g.y_axis.y + g.z_axis.z) / 3.0;
     let p2 =
@@ -386,7 +386,7 @@ mod tests {
             Vec3::new(4.0, 5.0, 6.0),
         );
         let d = glam::DAffine3::from_mat4(glam::Mat4::from(a).as_dmat4());
-        let (low, high) = super::gram_extremes(&d.matrix3);
+        let (low, high) = super::symmetric_extremes(&(d.matrix3.transpose() * d.matrix3));
         assert!(
             (low - 0.09).abs() < 1e-6 && (high - 4.0).abs() < 1e-5,
             "{low} {high}"

@@ -58,11 +58,14 @@ impl Engine {
             |slot, best| {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
                 let wide = self.meshes[inst.mesh as usize].wide.as_ref();
-                let placed = placement(inst).and_then(Placed::new);
-                let (point, d2, prim) = match (placement(inst), wide, placed) {
-                    (None, Some(w), _) => w.closest_point_below(p, best)?,
-                    (Some(_), Some(w), Some(placed)) => w.closest_point_placed(p, best, &placed)?,
-                    (place, ..) => bvh.closest_point_placed(p, best, place)?,
+                let place = placement(inst);
+                let (point, d2, prim) = match (place, wide) {
+                    (None, Some(w)) => w.closest_point_below(p, best)?,
+                    (Some(m), Some(w)) => match Placed::new(m) {
+                        Some(placed) => w.closest_point_placed(p, best, &placed)?,
+                        None => bvh.closest_point_placed(p, best, place)?,
+                    },
+                    (place, None) => bvh.closest_point_placed(p, best, place)?,
                 };
                 found = Some(ScenePoint {
                     point,
