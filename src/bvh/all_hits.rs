@@ -1,8 +1,9 @@
 //! Every hit along a ray, not only the closest: for inside/outside tests and occupancy (count
 //! the crossings), transparency and multi-return sensors (the first few surfaces in order).
-//! The traversal is the closest-hit one with a distance limit that only shrinks once `max`
-//! hits are held (the farthest of them), so `all_hits(ray, 1)` walks about as the closest hit
-//! does and an unbounded one visits every leaf the ray's box test reaches.
+//! A bounded query walks as the closest hit does, with a distance limit that only shrinks once
+//! `max` hits are held (the farthest of them), so `all_hits(ray, 1)` costs about a closest hit.
+//! An unbounded one and a hit count can prune nothing: they visit every leaf the ray's box test
+//! reaches, in any order ([`Bvh::leaves_hit`](super::Bvh::leaves_hit)).
 
 use super::MeshBvh;
 use crate::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
@@ -18,7 +19,11 @@ impl MeshBvh {
         if max == 0 {
             return;
         }
-        self.all_hits_within(ray, ray.tmax, max, out);
+        if max == usize::MAX {
+            self.hits_any_order(ray, ray.tmax, |h| out.push(h));
+        } else {
+            self.all_hits_within(ray, ray.tmax, max, out);
+        }
         out.sort_unstable_by(|a, b| a.t.total_cmp(&b.t).then(a.prim.cmp(&b.prim)));
         out.truncate(max);
     }
@@ -65,16 +70,34 @@ impl MeshBvh {
         );
     }
 
+    /// Calls `on_hit` with every hit along `ray` in `[ray.tmin, tmax)`, in no particular order.
+    #[inline]
+    pub(crate) fn hits_any_order(&self, ray: &Ray, tmax: f32, mut on_hit: impl FnMut(Hit)) {
+        let pre = RayTriPrecomp::new(ray.dir);
+        let tris = self.tris.as_slice();
+        let prims = self.bvh.prim_indices();
+        self.bvh.leaves_hit(ray, tmax, |first, count| {
+            for slot in first..first + count {
+                let [a, b, c] = tris[slot];
+                if let Some((t, u, v)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
+                    on_hit(Hit {
+                        t,
+                        u,
+                        v,
+                        prim: prims[slot],
+                    });
+                }
+            }
+        });
+    }
+
     /// How many triangles `ray` hits in `[ray.tmin, ray.tmax)`, each triangle once (a ray
     /// through a shared edge counts every triangle there). Exactly the length of
     /// [`brute_force_all_hits`].
     #[must_use]
     pub fn count_hits(&self, ray: &Ray) -> u32 {
         let mut n = 0;
-        self.for_each_hit(ray, ray.tmax, |_| {
-            n += 1;
-            ray.tmax
-        });
+        self.hits_any_order(ray, ray.tmax, |_| n += 1);
         n
     }
 }

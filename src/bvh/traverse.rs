@@ -1,4 +1,5 @@
-//! Ray traversal: closest hit and any hit, nearer child first, on a fixed-size stack.
+//! Ray traversal: closest hit and any hit, nearer child first, on a fixed-size stack; and the
+//! unordered walk over every leaf a ray's interval reaches (all hits, hit counts).
 //!
 //! The traversal is generic over the primitive test, so the same code serves triangle meshes
 //! and instance trees; with [`Counters`] it also counts the work a ray costs.
@@ -164,6 +165,57 @@ impl Bvh {
                     break;
                 }
             }
+        }
+    }
+
+    /// Calls `leaf(first, count)` for every leaf whose box `ray` meets in `[ray.tmin, tmax]`, in
+    /// no particular order. Nothing shortens the interval, so the walk keeps no distances:
+    /// both children are tested, the left one taken next when hit, the right one stacked.
+    #[inline(always)]
+    pub(crate) fn leaves_hit(&self, ray: &Ray, tmax: f32, mut leaf: impl FnMut(usize, usize)) {
+        let nodes = self.nodes.as_slice();
+        let Some(root) = nodes.first() else {
+            return;
+        };
+        if ray
+            .hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)
+            .is_none()
+        {
+            return;
+        }
+        let mut stack = [0u32; MAX_DEPTH];
+        let mut sp = 0;
+        let mut node = root;
+        loop {
+            if node.is_leaf() {
+                leaf(node.first as usize, node.count as usize);
+            } else {
+                let l = &nodes[node.first as usize];
+                let r = &nodes[node.first as usize + 1];
+                let hl = ray
+                    .hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax)
+                    .is_some();
+                let hr = ray
+                    .hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax)
+                    .is_some();
+                if hl {
+                    if hr {
+                        stack[sp] = node.first + 1;
+                        sp += 1;
+                    }
+                    node = l;
+                    continue;
+                }
+                if hr {
+                    node = r;
+                    continue;
+                }
+            }
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            node = &nodes[stack[sp] as usize];
         }
     }
 }

@@ -144,7 +144,7 @@ impl Engine {
                 let (k, inst, bvh) = self.slot_instance(slot)?;
                 let local = local_ray(inst, ray, limit);
                 let below = limit;
-                let on_hit = |h: Hit| {
+                let mut on_hit = |h: Hit| {
                     out.push(SceneHit {
                         t: h.t,
                         u: h.u,
@@ -160,6 +160,9 @@ impl Engine {
                     // Nothing shortens an unbounded walk: any order will do.
                     Some(w) if max == usize::MAX => w.hits_any_order(&local, below, on_hit),
                     Some(w) => w.for_each_hit(&local, below, on_hit),
+                    None if max == usize::MAX => bvh.hits_any_order(&local, below, |h| {
+                        on_hit(h);
+                    }),
                     None => bvh.for_each_hit(&local, below, on_hit),
                 }
                 (limit < ray.tmax).then_some(limit)
@@ -185,13 +188,12 @@ impl Engine {
             |slot, _| {
                 let (_, inst, bvh) = self.slot_instance(slot)?;
                 let local = local_ray(inst, ray, ray.tmax);
-                let on_hit = |_| {
-                    n += 1;
-                    ray.tmax
-                };
                 match &self.meshes[inst.mesh as usize].wide {
-                    Some(w) => w.hits_any_order(&local, ray.tmax, on_hit),
-                    None => bvh.for_each_hit(&local, ray.tmax, on_hit),
+                    Some(w) => w.hits_any_order(&local, ray.tmax, |_| {
+                        n += 1;
+                        ray.tmax
+                    }),
+                    None => bvh.hits_any_order(&local, ray.tmax, |_| n += 1),
                 }
                 None
             },
