@@ -4,9 +4,11 @@
 //! The traversal is generic over the primitive test, so the same code serves triangle meshes
 //! and instance trees; with [`Counters`] it also counts the work a ray costs.
 
-use super::{Bvh, MAX_DEPTH};
+use super::{Bvh, MAX_DEPTH, Node};
 use crate::geom::{FAR_SCALE, Ray};
+use bytemuck::cast;
 use glam::Vec3;
+use wide::{f32x8, u32x8};
 
 /// Receives traversal work counts; `()` counts nothing and compiles away.
 pub trait Counters {
@@ -183,6 +185,7 @@ impl Bvh {
         {
             return;
         }
+        let pair = PairSlab::new(ray, tmax);
         let mut stack = [0u32; MAX_DEPTH];
         let mut sp = 0;
         let mut node = root;
@@ -190,24 +193,18 @@ impl Bvh {
             if node.is_leaf() {
                 leaf(node.first as usize, node.count as usize);
             } else {
-                let l = &nodes[node.first as usize];
-                let r = &nodes[node.first as usize + 1];
-                let hl = ray
-                    .hit_box(Vec3::from(l.min), Vec3::from(l.max), tmax)
-                    .is_some();
-                let hr = ray
-                    .hit_box(Vec3::from(r.min), Vec3::from(r.max), tmax)
-                    .is_some();
+                let first = node.first as usize;
+                let (hl, hr) = pair.hit(&nodes[first], &nodes[first + 1]);
                 if hl {
                     if hr {
                         stack[sp] = node.first + 1;
                         sp += 1;
                     }
-                    node = l;
+                    node = &nodes[first];
                     continue;
                 }
                 if hr {
-                    node = r;
+                    node = &nodes[first + 1];
                     continue;
                 }
             }
@@ -217,5 +214,66 @@ impl Bvh {
             sp -= 1;
             node = &nodes[stack[sp] as usize];
         }
+    }
+}
+
+/// The slab test of both children of a node at once, eight lanes: the left child's x, y, z
+/// and the interval, then the right child's. Lane by lane the arithmetic of [`Ray::hit_box`]
+/// (the same distances, the interval's lane giving `tmin` and `tmax` when `tmin <= tmax`;
+/// otherwise nothing is in range and either answer is right), so just as conservative.
+struct PairSlab {
+    /// Subtracted from the lower corners: the nudged origin, and `-tmin` in the interval lane.
+    lo: f32x8,
+    /// Subtracted from the upper corners: the nudged origin, and `-tmax` in the interval lane.
+    hi: f32x8,
+    /// The reciprocal direction, and 1 in the interval lane.
+    inv: f32x8,
+    /// Keeps the corners' lanes; clears the interval lane (it holds a node's index or count).
+    corners: f32x8,
+}
+
+impl PairSlab {
+    #[inline(always)]
+    fn new(ray: &Ray, tmax: f32) -> Self {
+        let lanes = |v: Vec3, w: f32| f32x8::from([v.x, v.y, v.z, w, v.x, v.y, v.z, w]);
+        let all = f32::from_bits(u32::MAX);
+        Self {
+            lo: lanes(ray.slab_lo, -ray.tmin),
+            hi: lanes(ray.slab_hi, -tmax),
+            inv: lanes(ray.inv_dir, 1.0),
+            corners: f32x8::from([all, all, all, 0.0, all, all, all, 0.0]),
+        }
+    }
+
+    /// Whether the ray meets `l`'s box and `r`'s within the interval.
+    #[inline(always)]
+    fn hit(&self, l: &Node, r: &Node) -> (bool, bool) {
+        // Each corner as laid out in memory (three coordinates and a u32), the u32 cleared.
+        let row = |a: &[f32; 3], ai: u32, b: &[f32; 3], bi: u32| {
+            f32x8::from([
+                a[0],
+                a[1],
+                a[2],
+                f32::from_bits(ai),
+                b[0],
+                b[1],
+                b[2],
+                f32::from_bits(bi),
+            ]) & self.corners
+        };
+        let t0 = (row(&l.min, l.first, &r.min, r.first) - self.lo) * self.inv;
+        let t1 = (row(&l.max, l.count, &r.max, r.count) - self.hi) * self.inv;
+        let near = t0.fast_min(t1);
+        let far = t0.fast_max(t1);
+        // The largest entry and the smallest exit of each half (four lanes).
+        let swap = |v: f32x8, s: u32x8| cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(v).shuffle(s));
+        let pairs = u32x8::from([1, 0, 3, 2, 5, 4, 7, 6]);
+        let halves = u32x8::from([2, 3, 0, 1, 6, 7, 4, 5]);
+        let near = near.fast_max(swap(near, pairs));
+        let near = near.fast_max(swap(near, halves));
+        let far = far.fast_min(swap(far, pairs));
+        let far = far.fast_min(swap(far, halves)) * f32x8::splat(FAR_SCALE);
+        let mask = near.simd_le(far).to_bitmask();
+        (mask & 1 != 0, mask & 0x10 != 0)
     }
 }
