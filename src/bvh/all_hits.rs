@@ -77,15 +77,10 @@ impl MeshBvh {
         let tris = self.tris.as_slice();
         let prims = self.bvh.prim_indices();
         self.bvh.leaves_hit(ray, tmax, |first, count| {
-            for slot in first..first + count {
-                let [a, b, c] = tris[slot];
+            let slots = first..first + count;
+            for (&[a, b, c], &prim) in tris[slots.clone()].iter().zip(&prims[slots]) {
                 if let Some((t, u, v)) = intersect_triangle(ray, &pre, a, b, c, tmax) {
-                    on_hit(Hit {
-                        t,
-                        u,
-                        v,
-                        prim: prims[slot],
-                    });
+                    on_hit(Hit { t, u, v, prim });
                 }
             }
         });

@@ -194,17 +194,20 @@ impl Bvh {
                 leaf(node.first as usize, node.count as usize);
             } else {
                 let first = node.first as usize;
-                let (hl, hr) = pair.hit(&nodes[first], &nodes[first + 1]);
+                let [l, r] = &nodes[first..first + 2] else {
+                    unreachable!("two children")
+                };
+                let (hl, hr) = pair.hit(l, r);
                 if hl {
                     if hr {
                         stack[sp] = node.first + 1;
                         sp += 1;
                     }
-                    node = &nodes[first];
+                    node = l;
                     continue;
                 }
                 if hr {
-                    node = &nodes[first + 1];
+                    node = r;
                     continue;
                 }
             }
