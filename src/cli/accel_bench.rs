@@ -617,7 +617,11 @@ fn print_table(r: &Report) {
 fn chart(r: &Report, title: &str) -> Chart {
     let mut series: Vec<Series> = Vec::new();
     for row in r.rows.iter().filter(|row| row.total_ms > 0.0) {
-        let name = format!("{} ({})", row.method, row.update);
+        let name = if row.method.ends_with("-rebuild") {
+            row.method.clone()
+        } else {
+            format!("{} ({})", row.method, row.update)
+        };
         let point = (row.rays_per_frame as f64, row.total_ms);
         match series.iter_mut().find(|s| s.name == name) {
             Some(s) => s.points.push(point),
@@ -632,16 +636,17 @@ fn chart(r: &Report, title: &str) -> Chart {
     Chart {
         title: format!("cost per frame, update + trace: {title}"),
         x_label: "rays per frame".into(),
-        y_label: format!(
-            "update + closest-hit trace, ms per frame (median, {})",
-            clock_name(r.clock != "wall")
-        ),
+        y_label: "update + trace, ms per frame (median)".into(),
         series,
         log_x: true,
         log_y: true,
         note: format!(
-            "{} frames, {} triangles, {} thread(s); lower is better",
-            r.frames, r.triangles, r.threads
+            "{} frames, {} triangles, {} thread(s), single-ray closest hits; ms {}; lower is \
+             better",
+            r.frames,
+            r.triangles,
+            r.threads,
+            clock_name(r.clock != "wall")
         ),
         ..Default::default()
     }
