@@ -30,6 +30,9 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Every builder on one mesh: build time, SAH cost, size, Mrays/s, agreement with brute force.
     BuildBench(cli::build_bench::BuildBenchArgs),
+    /// The acceleration structures per frame of an animation: the BVH and BIH refitted, the
+    /// kd-tree, grid and octree rebuilt; update and trace time at each ray count per frame.
+    AccelBench(cli::accel_bench::AccelBenchArgs),
     /// Summarize a glTF file: scenes, meshes, skins, morph targets, animations, instance classes.
     Info(cli::info::InfoArgs),
     /// Pose a glTF scene at a time and write its triangles as OBJ or PLY.
@@ -64,6 +67,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     cli::set_allow_outside_files(cli.allow_outside_files);
     match cli.command {
         Some(Command::BuildBench(a)) => cli::build_bench::run(a),
+        Some(Command::AccelBench(a)) => cli::accel_bench::run(a),
         Some(Command::Bench(a)) => cli::bench::run(a),
         Some(Command::Info(a)) => cli::info::run(a),
         Some(Command::Pose(a)) => cli::pose::run(a),

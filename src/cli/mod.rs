@@ -1,5 +1,6 @@
 //! Subcommands of the `dynbvh` binary, one per file.
 
+pub mod accel_bench;
 pub mod args;
 pub mod bench;
 pub mod build_bench;
