@@ -100,13 +100,18 @@ mod tests {
     fn spinning_counts_cpu_time() {
         let c = CpuClock::now();
         let mut x = 0u64;
-        while c.wall.elapsed().as_millis() < 30 {
-            x = std::hint::black_box(x.wrapping_add(1));
+        // At least 30 ms, and on until the CPU clock has moved (it ticks coarsely on some
+        // machines, and a loaded one may not run this thread at once), at most 2 s.
+        let mut e = c.elapsed_ms();
+        while e.wall_ms < 30.0 || (e.cpu_ms <= 0.0 && e.wall_ms < 2000.0) {
+            for _ in 0..10_000 {
+                x = std::hint::black_box(x.wrapping_add(1));
+            }
+            e = c.elapsed_ms();
         }
-        let e = c.elapsed_ms();
         assert!(e.wall_ms >= 30.0);
         if thread_times_ns().is_some() {
-            // Spinning for 30 ms of wall clock is at least some CPU time, never more than the
+            // Spinning for up to 2 s of wall clock is at least some CPU time, never more than the
             // wall clock times the cores.
             assert!(e.cpu_ms > 0.0, "{e:?}");
             assert!(
