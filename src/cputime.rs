@@ -100,7 +100,7 @@ mod tests {
     fn spinning_counts_cpu_time() {
         let c = CpuClock::now();
         let mut x = 0u64;
-        // At least 30 ms, and on until the CPU clock has moved (it ticks coarsely on some
+        // A short spin, and on until the CPU clock has moved (it ticks coarsely on some
         // machines, and a loaded one may not run this thread at once), at most 2 s.
         let mut e = c.elapsed_ms();
         while e.wall_ms < 30.0 || (e.cpu_ms <= 0.0 && e.wall_ms < 2000.0) {

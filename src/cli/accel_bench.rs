@@ -315,7 +315,7 @@ fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
 /// Runs `f`, returning (measured ms, wall ms). Measured is the wall clock less the time this
 /// process's threads were runnable but waited for a core (when the kernel counts it): with one
 /// thread working at a time, its time on a core. The kernel's per-thread CPU time itself is
-/// only brought up to date at scheduler ticks (4 ms here), too coarse for a frame's update,
+/// only brought up to date at scheduler ticks on some kernels, too coarse for a frame's update,
 /// while the wait is added exactly whenever a thread gets a core back.
 fn timed(f: impl FnOnce()) -> (f64, f64) {
     let c = CpuClock::now();
