@@ -58,7 +58,7 @@ fn rebuilds(file: &str, casting: Casting) -> u32 {
 
 #[test]
 fn batch_only_callers_get_rebuilds_from_the_default_policy() {
-    for file in ["explode.glb", "swap.glb"] {
+    for file in ["explode.glb", "wave.glb"] {
         let untracked = rebuilds(file, Casting::Untracked);
         for casting in [Casting::Closest, Casting::Any, Casting::ClosestPackets] {
             let n = rebuilds(file, casting);

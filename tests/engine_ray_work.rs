@@ -261,3 +261,30 @@ fn sampling_in_the_trace_pass_takes_the_same_sample_as_tracing_again() {
         assert_eq!(ka, kb, "frame {f}: entries");
     }
 }
+
+#[test]
+fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
+    use dynbvh::geom::{Ray, shapes};
+    use dynbvh::glam::{Affine3A, Vec3};
+    let mut e = dynbvh::engine::Engine::new(EngineConfig::default());
+    let ball = shapes::icosphere(3);
+    let m = e.add_mesh(ball.positions, ball.indices);
+    e.add_instance(m, Affine3A::IDENTITY);
+    e.update();
+    let rays: Vec<Ray> = (0..4096)
+        .map(|i| {
+            let x = (i % 64) as f32 / 32.0 - 1.0;
+            let y = (i / 64) as f32 / 32.0 - 1.0;
+            Ray::new(Vec3::new(x, y, -3.0), Vec3::Z)
+        })
+        .collect();
+    let mut hits = vec![None; rays.len()];
+    // Nothing has moved, but the fresh tree's work is the measure's reference for the first
+    // refits: the first trace is sampled.
+    e.trace_closest(&rays, &mut hits);
+    assert!(e.sampled_mesh_work(m).nodes > 0, "first trace not sampled");
+    // Later frames where nothing moved have nothing to weigh: not sampled.
+    e.update();
+    e.trace_closest(&rays, &mut hits);
+    assert_eq!(e.sampled_mesh_work(m).nodes, 0, "an unmoved frame was sampled");
+}

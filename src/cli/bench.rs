@@ -87,6 +87,10 @@ pub struct BenchArgs {
     /// top-level tree policy).
     #[arg(long)]
     no_tlas_compare: bool,
+    /// Do not tell the policies how many frames the run makes: each decides as if the run
+    /// went on forever (a rebuild just before the end is then not ruled out).
+    #[arg(long)]
+    open_ended: bool,
     /// Build each deforming mesh's first tree for the whole clip from this many poses spread
     /// over the frames (`MeshBvh::build_clip_aware`); 0: a plain build of frame 0. The
     /// policies' rebuilds stay plain builds.
@@ -159,6 +163,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         trace_repeats: a.repeats as usize,
         oracle: !a.no_oracle,
         tlas_compare: !a.no_tlas_compare,
+        known_length: !a.open_ended,
         traversal: a.traversal,
         cost: a.cost,
         prices: prices(&a)?,

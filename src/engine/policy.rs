@@ -341,6 +341,33 @@ pub struct PolicyState {
     pub ray_calibrations: u32,
     /// The intermediate rungs: optimise, partial rebuild.
     pub rungs: [RungModel; 2],
+    /// The extra trace time the last frame's degradation added (ms): what an action that
+    /// removes it saves each frame from now on.
+    pub frame_extra_ms: f64,
+    /// Frames the run still traces, this one included (`None`: open-ended; see
+    /// [`super::Engine::plan_frames`]). An action is taken only if it pays for itself within
+    /// them.
+    pub frames_left: Option<u64>,
+    /// The last rebuild while it is being judged (ray-work measure): whether the trace time
+    /// it saves against the replaced tree's degradation pays for it.
+    pub payback: Option<Payback>,
+}
+
+/// A rebuild being judged by what it saved: each frame the new tree's extra trace time is
+/// compared with the replaced tree's just before the rebuild (assumed to stay at that level).
+/// It paid once the savings reach its cost; it failed if the new tree is as degraded as the
+/// old one was before they do (a tree built at an unusual pose can refit worse over the rest
+/// of a clip than the one it replaced).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Payback {
+    /// The replaced tree's extra trace time per frame when it was replaced, ms.
+    pub level_ms: f64,
+    /// What the rebuild cost, ms.
+    pub cost_ms: f64,
+    /// Savings so far, ms.
+    pub saved_ms: f64,
+    /// Frames judged.
+    pub frames: u32,
 }
 
 impl Default for PolicyState {
@@ -368,6 +395,9 @@ impl Default for PolicyState {
                     runs: 0,
                 },
             ],
+            frame_extra_ms: 0.0,
+            frames_left: None,
+            payback: None,
         }
     }
 }
@@ -436,7 +466,8 @@ impl PolicyState {
             | Policy::Async => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(fresh - 1.0).max(0.0);
-                self.extra_ms += fresh_ms * degradation;
+                self.frame_extra_ms = fresh_ms * degradation;
+                self.extra_ms += self.frame_extra_ms;
                 self.choose(policy)
             }
             _ => Decision::Refit,
@@ -446,7 +477,9 @@ impl PolicyState {
     /// The amortized rule over the policy's actions: each action `a` wins back a share
     /// `recovery(a)` of the extra trace time degradation costs (1 for a rebuild) at a cost
     /// `cost(a)`; once `recovery(a) * extra > cost(a)` for some action, take the one with the
-    /// largest `recovery * extra - cost`.
+    /// largest `recovery * extra - cost`. With a known end of the run, an action must also
+    /// pay for itself before it: `recovery(a) * frame_extra * frames_left > cost(a)` (what it
+    /// saves each frame, were the degradation to stay as it is, over the frames left).
     fn choose(&self, policy: Policy) -> Decision {
         let rebuild = (Decision::Rebuild, 1.0, self.rebuild_ms * self.rebuild_scale);
         let rung = |d: Decision| {
@@ -465,7 +498,11 @@ impl PolicyState {
         };
         let mut best = (Decision::Refit, 0.0);
         for &(d, recovery, cost) in options {
-            let net = recovery * self.extra_ms - cost;
+            let won = match self.frames_left {
+                Some(left) => self.extra_ms.min(self.frame_extra_ms * left as f64),
+                None => self.extra_ms,
+            };
+            let net = recovery * won - cost;
             if net > best.1 {
                 best = (d, net);
             }
@@ -489,10 +526,38 @@ impl PolicyState {
             | Policy::Async => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
-                self.extra_ms = (self.extra_ms + fresh_ms * degradation).max(0.0);
+                self.frame_extra_ms = fresh_ms * degradation;
+                self.extra_ms = (self.extra_ms + self.frame_extra_ms).max(0.0);
+                self.judge_payback();
                 self.choose(policy)
             }
             _ => self.after_refit(policy, judged, raw),
+        }
+    }
+
+    /// Starts judging the rebuild just made (cost `cost_ms`) against the degradation the
+    /// replaced tree had, `level_ms` of extra trace time a frame.
+    pub fn judge_rebuild(&mut self, level_ms: f64, cost_ms: f64) {
+        self.payback = (level_ms > 0.0 && cost_ms > 0.0).then_some(Payback {
+            level_ms,
+            cost_ms,
+            saved_ms: 0.0,
+            frames: 0,
+        });
+    }
+
+    /// One more frame of the rebuild being judged: paid once its savings reach its cost,
+    /// failed once the new tree is as degraded as the old one was.
+    fn judge_payback(&mut self) {
+        let Some(p) = &mut self.payback else { return };
+        p.frames += 1;
+        p.saved_ms += p.level_ms - self.frame_extra_ms;
+        if p.saved_ms >= p.cost_ms {
+            self.payback = None;
+            self.rebuild_paid();
+        } else if p.frames >= PAYBACK_MIN_FRAMES && self.frame_extra_ms >= p.level_ms {
+            self.payback = None;
+            self.rebuild_failed();
         }
     }
 
@@ -548,6 +613,7 @@ impl PolicyState {
         self.extra_ms = 0.0;
         self.rebuild_ms = ms;
         self.traced_ratio = 1.0;
+        self.payback = None;
     }
 }
 
@@ -567,6 +633,10 @@ const MAX_RAY_GAIN: f32 = 8.0;
 const MIN_RAY_GAIN: f32 = 0.25;
 /// Estimated degradation below which a replay teaches nothing.
 const MIN_RAY_SIGNAL: f32 = 0.05;
+
+/// Frames a rebuild is judged before it can be found to have failed (the first frames'
+/// samples are the noisiest part of the smoothed ratio).
+const PAYBACK_MIN_FRAMES: u32 = 2;
 
 /// Bound of [`PolicyState::rebuild_scale`].
 const MAX_REBUILD_SCALE: f64 = 64.0;
@@ -698,6 +768,62 @@ mod tests {
         let best = best_schedule(&c).cost_ms;
         let ours = c.cost_of(&rebuild);
         assert!(ours <= best * 1.1, "amortized {ours} against oracle {best}");
+    }
+
+    #[test]
+    fn a_known_end_rules_out_rebuilds_that_cannot_pay_before_it() {
+        // Ratio 1.5 from the first frame: 2 ms extra a frame; a 10 ms rebuild passes the
+        // amortized bar at the sixth frame, open-ended.
+        let run = |left: Option<u64>| {
+            let mut s = PolicyState::default();
+            s.rebuilt(1.0, 1.0, 10.0);
+            s.trace_share_ms = 4.0;
+            (1..=10u64).find(|f| {
+                s.frames_left = left.map(|n| n.saturating_sub(f - 1));
+                s.after_refit_sampled(Policy::Amortized, 1.5, 1.5) == Decision::Rebuild
+            })
+        };
+        assert_eq!(run(None), Some(6));
+        // Plenty of frames left: the same frame.
+        assert_eq!(run(Some(100)), Some(6));
+        // Ten frames in all: at the sixth, 5 frames are left, 2 ms each saves exactly the
+        // 10 ms the rebuild costs, which does not pay; nor does any later frame.
+        assert_eq!(run(Some(10)), None);
+        // Eleven: at the sixth frame six are left (12 ms saved): it pays.
+        assert_eq!(run(Some(11)), Some(6));
+    }
+
+    #[test]
+    fn a_rebuild_is_judged_by_what_it_saves_against_the_tree_it_replaced() {
+        let fresh = |s: &mut PolicyState, ratio: f32| {
+            s.trace_share_ms = 4.0;
+            s.traced_ratio = 1.0;
+            s.after_refit_sampled(Policy::Amortized, ratio, ratio);
+        };
+        // The replaced tree cost 2 ms extra a frame; the new one none: 2 ms saved a frame, so
+        // a 5 ms rebuild has paid after the third frame and lowers the bar.
+        let mut s = PolicyState::default();
+        s.rebuild_scale = 4.0;
+        s.rebuilt(1.0, 1.0, 5.0);
+        s.judge_rebuild(2.0, 5.0);
+        fresh(&mut s, 1.0);
+        fresh(&mut s, 1.0);
+        assert!(s.payback.is_some());
+        fresh(&mut s, 1.0);
+        assert!(s.payback.is_none());
+        assert_eq!(s.rebuild_scale, 2.0);
+        // A new tree as degraded as the old one within two frames: failed, the bar doubles.
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, 5.0);
+        s.judge_rebuild(2.0, 5.0);
+        fresh(&mut s, 1.3);
+        assert!(s.payback.is_some(), "one frame is not enough to judge");
+        fresh(&mut s, 1.6);
+        assert!(s.payback.is_none());
+        assert_eq!(s.rebuild_scale, 2.0);
+        // Nothing to judge without a degraded tree replaced.
+        s.judge_rebuild(0.0, 5.0);
+        assert!(s.payback.is_none());
     }
 
     #[test]

@@ -15,6 +15,7 @@
 //! interval each instance is entered with; only the work inside a mesh's tree does.
 
 use super::MeshId;
+use super::prices::Prices;
 use crate::bvh::TraversalStats;
 use crate::geom::Ray;
 use std::fmt;
@@ -29,9 +30,9 @@ pub const SAMPLE_STRIDE: u64 = 64;
 pub enum CostMeasure {
     /// The SAH: expected cost for uniformly random lines, estimated fresh cost by a quick build.
     Sah,
-    /// Ray work: the SAH's estimated degradation, scaled by how much of it the sampled rays
-    /// really felt at the last rebuilds (measured on both trees), and the frame's trace cost by
-    /// the sampled work per mesh.
+    /// Ray work: the sampled work into each mesh over what its fresh tree cost on as many
+    /// hitting and missing entries ([`FreshWork`]), scaled by what the last rebuilds' replays
+    /// showed, and the frame's trace cost by the sampled work per mesh.
     #[default]
     Rays,
 }
@@ -78,7 +79,77 @@ pub struct SampleEntry {
     pub ray: Ray,
     /// The work it cost in the tree it walked when it was sampled.
     pub work: TraversalStats,
+    /// It hit the mesh within its interval (blocked, for an any-hit ray): like the interval,
+    /// the same whatever the trees.
+    pub hit: bool,
 }
+
+/// One mesh's part of a frame's sample: its entries and their work, and those of the entries
+/// that hit it (a fresh tree costs a hit and a miss differently, so the two are weighed apart).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeshSample {
+    /// Sampled entries into the mesh's instances.
+    pub entries: u32,
+    /// Their work.
+    pub work: TraversalStats,
+    /// Those of them that hit.
+    pub hits: u32,
+    /// The hits' work.
+    pub hit_work: TraversalStats,
+}
+
+impl MeshSample {
+    /// Adds one entry.
+    pub fn add(&mut self, e: &SampleEntry) {
+        self.entries += 1;
+        self.work += e.work;
+        if e.hit {
+            self.hits += 1;
+            self.hit_work += e.work;
+        }
+    }
+}
+
+/// What a mesh's fresh tree cost per sampled entry (modelled ms), hits and misses apart: a
+/// fresh tree's work on a frame's entries is predicted as these per-entry costs times the
+/// frame's hits and misses, so that a change in how many rays hit the mesh is not taken for
+/// degradation.
+#[derive(Clone, Copy, Debug)]
+pub struct FreshWork {
+    /// Per entry, all entries.
+    all: f64,
+    /// Per hitting entry; `None` with too few of them to tell.
+    hit: Option<f64>,
+    /// Per missing entry; `None` with too few of them to tell.
+    miss: Option<f64>,
+}
+
+impl FreshWork {
+    /// The per-entry costs of a fresh tree's sample.
+    #[must_use]
+    pub fn of(s: &MeshSample, p: &Prices) -> Self {
+        let total = p.trace_ms(s.work);
+        let hit = p.trace_ms(s.hit_work);
+        let misses = s.entries - s.hits;
+        let per = |ms: f64, n: u32| (n >= MIN_STRATUM).then(|| ms / f64::from(n));
+        Self {
+            all: total / f64::from(s.entries.max(1)),
+            hit: per(hit, s.hits),
+            miss: per(total - hit, misses),
+        }
+    }
+
+    /// What a fresh tree would have cost on sample `s`'s entries (modelled ms).
+    #[must_use]
+    pub fn predict(&self, s: &MeshSample) -> f64 {
+        let misses = s.entries - s.hits;
+        f64::from(s.hits) * self.hit.unwrap_or(self.all)
+            + f64::from(misses) * self.miss.unwrap_or(self.all)
+    }
+}
+
+/// Entries of a kind (hits, misses) a fresh tree's sample needs for its own per-entry cost.
+const MIN_STRATUM: u32 = 8;
 
 /// Which rays of a batch the frame's sample takes: every `stride`-th from `first`.
 #[derive(Clone, Copy, Debug)]
@@ -265,6 +336,40 @@ fn splitmix(x: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn entries(hits: u32, hit_nodes: u64, misses: u32, miss_nodes: u64) -> MeshSample {
+        let mut s = MeshSample::default();
+        for (n, nodes, hit) in [(hits, hit_nodes, true), (misses, miss_nodes, false)] {
+            for _ in 0..n {
+                s.add(&SampleEntry {
+                    mesh: MeshId(0),
+                    query: Query::Closest,
+                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                    work: TraversalStats { nodes, prims: 0 },
+                    hit,
+                });
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn a_fresh_trees_work_is_predicted_for_as_many_hits_and_misses() {
+        let p = Prices::default();
+        let node = p.trace_ms_f(1.0, 0.0);
+        // Fresh: 20 hits of 30 nodes, 20 misses of 10.
+        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p);
+        // Later, 5 hits and 35 misses on the same (undegraded) tree: 50 + 350 nodes, which
+        // the prediction matches, where the work per entry alone (20) would read 0.5.
+        let later = entries(5, 30, 35, 10);
+        let predicted = fresh.predict(&later) / node;
+        assert!((predicted - 500.0).abs() < 1e-6, "{predicted}");
+        // Too few of a kind at the fresh tree: its cost per entry of any kind stands in.
+        let few = FreshWork::of(&entries(3, 30, 37, 10), &p);
+        let all = (3.0 * 30.0 + 37.0 * 10.0) / 40.0;
+        let predicted = few.predict(&entries(10, 30, 0, 10)) / node;
+        assert!((predicted - 10.0 * all).abs() < 1e-6, "{predicted}");
+    }
 
     #[test]
     fn every_ray_is_sampled_once_in_stride_whatever_the_batches() {

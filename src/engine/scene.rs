@@ -17,7 +17,7 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Policy, PolicyState};
 use super::prices::Prices;
-use super::ray_work::{CostMeasure, RaySample, SampleEntry};
+use super::ray_work::{CostMeasure, FreshWork, MeshSample, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
@@ -241,6 +241,7 @@ struct MeshEntry {
     /// While probing, the tree the last rebuild replaced, refitted alongside; otherwise spare
     /// storage the next probed rebuild goes into.
     prev: MeshBvh,
+
     probe: Option<Probe>,
     sah: f32,
     dirty: bool,
@@ -260,8 +261,9 @@ struct MeshEntry {
     /// Sum over its visible instances of their world box's half area.
     world_area: f64,
     /// Ray-work measure: the modelled work per sampled entry into this mesh on its tree when it
-    /// was fresh (the first frame traced after a (re)build); 0 until measured.
-    ray_base: f64,
+    /// was fresh (the first frame traced after a (re)build), hits and misses apart; `None`
+    /// until measured.
+    ray_base: Option<FreshWork>,
     /// The same frame by frame since, over `ray_base`, smoothed over frames; 0 without.
     ray_observed: f64,
     /// The subtrees a partial rebuild keeps or rebuilds (taken at each full build when the
@@ -356,10 +358,8 @@ pub struct Engine {
     sample: RaySample,
     /// Its sampled rays' entries into instances.
     entries: Vec<SampleEntry>,
-    /// Its work per mesh.
-    sample_work: Vec<TraversalStats>,
-    /// Its entries per mesh.
-    sample_entries: Vec<u32>,
+    /// Its entries and work per mesh.
+    mesh_samples: Vec<MeshSample>,
     /// Scratch of optimisations and partial rebuilds.
     restructure: Restructure,
     /// The background rebuild's worker ([`Policy::Async`]).
@@ -367,6 +367,10 @@ pub struct Engine {
     /// The last sampled frame's trace cost (ms, modelled under [`Timing::Priced`]): how many
     /// frames a background rebuild is given.
     frame_trace_ms: f64,
+    /// The frame count at which the run ends, when it is known ([`Engine::plan_frames`]).
+    horizon: Option<u64>,
+    /// A mesh was added since the last sampled trace.
+    unsampled_meshes: bool,
 }
 
 impl Engine {
@@ -389,12 +393,21 @@ impl Engine {
             stats: FrameStats::default(),
             sample: RaySample::new(u64::MAX),
             entries: Vec::new(),
-            sample_work: Vec::new(),
-            sample_entries: Vec::new(),
+            mesh_samples: Vec::new(),
             restructure: Restructure::default(),
             background: background::Background::default(),
             frame_trace_ms: 0.0,
+            horizon: None,
+            unsampled_meshes: false,
         }
+    }
+
+    /// Tells the policy that the run makes `updates` more updates (and traces after each), so
+    /// that it acts only where the action pays for itself before the end: a rebuild that
+    /// cannot is left out. `None` (the default): open-ended. Past the planned frames the run
+    /// is open-ended again.
+    pub fn plan_frames(&mut self, updates: Option<u64>) {
+        self.horizon = updates.map(|n| self.frame + n);
     }
 
     /// True when rebuilds are probed (the replaced tree kept and refitted alongside): the
@@ -452,8 +465,8 @@ impl Engine {
     pub fn add_mesh(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshId {
         let entry = self.new_mesh_entry(positions, indices);
         self.meshes.push(entry);
-        self.sample_work.push(TraversalStats::default());
-        self.sample_entries.push(0);
+        self.mesh_samples.push(MeshSample::default());
+        self.unsampled_meshes = true;
         MeshId(self.meshes.len() as u32 - 1)
     }
 
@@ -534,7 +547,7 @@ impl Engine {
             },
             weight: 0.0,
             world_area: 0.0,
-            ray_base: 0.0,
+            ray_base: None,
             ray_observed: 0.0,
             cut,
             removed: false,
@@ -723,6 +736,10 @@ impl Engine {
             background: &mut self.background,
             frame: self.frame,
             frame_trace_ms: self.frame_trace_ms,
+            frames_left: self
+                .horizon
+                .and_then(|h| h.checked_sub(self.frame))
+                .filter(|&n| n > 0),
         };
         let mut restructured = Action::None;
         let mut background = Action::None;
@@ -864,23 +881,25 @@ impl Engine {
         self.frame_trace_ms = total;
         match self.config.cost {
             CostMeasure::Rays => {
-                for (k, m) in self.meshes.iter_mut().enumerate() {
-                    let hits = self.sample_entries[k];
-                    if hits > 0 {
-                        let per_entry = p.trace_ms(self.sample_work[k]) / f64::from(hits);
-                        if m.ray_base <= 0.0 {
-                            m.ray_base = per_entry;
+                for (m, s) in self.meshes.iter_mut().zip(&self.mesh_samples) {
+                    if s.entries == 0 {
+                        continue;
+                    }
+                    match m.ray_base {
+                        None => {
+                            m.ray_base = Some(FreshWork::of(s, &p));
                             m.ray_observed = 1.0;
-                        } else {
-                            let seen = per_entry / m.ray_base;
+                        }
+                        Some(base) => {
+                            let seen = p.trace_ms(s.work) / base.predict(s);
                             m.ray_observed =
                                 RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
                         }
                     }
                 }
-                for (m, w) in self.meshes.iter_mut().zip(&self.sample_work) {
+                for (m, s) in self.meshes.iter_mut().zip(&self.mesh_samples) {
                     let share = if modelled > 0.0 {
-                        scale * p.trace_ms(*w) / modelled
+                        scale * p.trace_ms(s.work) / modelled
                     } else {
                         0.0
                     };

@@ -102,6 +102,10 @@ pub struct Options {
     /// keeps at most this many; all rays when the frame casts fewer): the judge's sample,
     /// denser than the engine's own, replayed on every run's trees and on the oracle's.
     pub judge_rays: usize,
+    /// Tell each engine how many frames the run makes ([`Engine::plan_frames`]), so that the
+    /// policies leave out actions that cannot pay for themselves before its end; false: every
+    /// run is open-ended.
+    pub known_length: bool,
 }
 
 impl Default for Options {
@@ -128,6 +132,7 @@ impl Default for Options {
             cost: CostMeasure::default(),
             prices: Prices::default(),
             judge_rays: 16384,
+            known_length: true,
         }
     }
 }
@@ -455,6 +460,11 @@ fn run_lockstep(
 ) -> Vec<Run> {
     let deforming = src.deforming().to_vec();
     let mut engines: Vec<Engine> = configs.iter().map(|&c| src.build(0, c)).collect();
+    if opts.known_length {
+        for e in &mut engines {
+            e.plan_frames(Some(frames as u64));
+        }
+    }
     let mut frame_rays = Vec::new();
     opts.rays.frame_rays(bounds, 0, &mut frame_rays);
     let mut hits: Vec<Option<SceneHit>> = vec![None; frame_rays.len()];
@@ -476,9 +486,10 @@ fn run_lockstep(
         s.clear();
         s.push(SampledFrame::default());
     }
-    // Warm-up: one untimed pass each.
-    for e in &engines {
-        e.closest_hit_batch(&frame_rays, &mut hits);
+    // Warm-up: one untimed pass each over frame 0, sampled as a frame loop's first trace is
+    // (the ray-work measure's reference: the fresh trees' work per entry).
+    for e in &mut engines {
+        e.closest_hit_batch_sampled(&frame_rays, &mut hits);
     }
     let n = engines.len();
     let mut best = vec![f64::INFINITY; n];

@@ -4,8 +4,8 @@
 //! [`Engine::mesh_count`] / [`Engine::instance_count`]). Edits may allocate; the next
 //! [`Engine::update`] rebuilds the top-level tree.
 
-use super::{Engine, InstanceId, MeshId, RaySample};
-use crate::bvh::{MeshBvh, TraversalStats};
+use super::{Engine, InstanceId, MeshId, MeshSample, RaySample};
+use crate::bvh::MeshBvh;
 use crate::error::{Error, Result};
 use glam::Vec3;
 
@@ -145,7 +145,6 @@ impl Engine {
         self.tlas_stale = true;
         self.sample = RaySample::new(u64::MAX);
         self.entries.clear();
-        self.sample_work.fill(TraversalStats::default());
-        self.sample_entries.fill(0);
+        self.mesh_samples.fill(MeshSample::default());
     }
 }

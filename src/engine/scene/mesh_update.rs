@@ -65,6 +65,8 @@ pub(super) struct FrameContext<'a> {
     /// The frame being updated, and the last sampled frame's trace cost (ms).
     pub frame: u64,
     pub frame_trace_ms: f64,
+    /// Updates the run still makes, this one included, when it is known.
+    pub frames_left: Option<u64>,
 }
 
 /// What one mesh's update did, for the frame's statistics.
@@ -90,6 +92,7 @@ impl MeshEntry {
         self.stats.rebuild_ms = 0.0;
         let swapped = self.swap_in_background_tree(id, cx);
         out.swapped = swapped;
+        self.state.frames_left = cx.frames_left;
         let early = self.state.before_refit(cx.policy);
         let (decision, raw_work_ratio) = match early {
             Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
@@ -161,7 +164,7 @@ impl MeshEntry {
             t => t.build_ms(job.build_ms, tris, &cx.prices),
         };
         self.state.rebuilt(self.sah, 0.0, cost);
-        self.ray_base = 0.0;
+        self.ray_base = None;
         self.ray_observed = 0.0;
         cx.background.recycle(job);
         true
@@ -382,7 +385,11 @@ impl MeshEntry {
             Timing::Measured => rebuild_ms,
             t => t.build_ms(rebuild_ms, tris, &cx.prices) + replay_ms,
         };
+        let level = self.state.frame_extra_ms;
         self.state.rebuilt(self.sah, est, rebuild_cost);
+        if cx.ray_judged && refitted {
+            self.state.judge_rebuild(level, rebuild_cost);
+        }
         self.probe = None;
         if let (true, Some(refit_sah)) = (probe, refit_sah) {
             // This frame's trace already gains from the new tree.
@@ -402,7 +409,7 @@ impl MeshEntry {
         self.stats.sah_ratio = 1.0;
         self.stats.fresh_ratio = if cx.estimate { 1.0 } else { 0.0 };
         self.stats.work_ratio = if cx.ray_judged { 1.0 } else { 0.0 };
-        self.ray_base = 0.0;
+        self.ray_base = None;
         self.ray_observed = 0.0;
         self.stats.rebuild_ms = rebuild_ms;
     }

@@ -12,7 +12,7 @@ use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
 use crate::engine::ray_work::{
-    Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
+    MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
 };
 use crate::geom::{Hit, Ray};
 use rayon::prelude::*;
@@ -94,6 +94,7 @@ impl<'a> TaskBuf<'a> {
             query: Query::Closest,
             ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
             work: TraversalStats::default(),
+            hit: false,
         };
         Self {
             items: [blank; BUF],
@@ -274,15 +275,16 @@ impl Engine {
     /// The frame's sample plan for a batch of `n` rays, starting a new sample at a new frame;
     /// `None` (nothing sampled) when no mesh was refitted or rebuilt.
     fn begin_sample(&mut self, n: usize) -> Option<SamplePlan> {
-        // Nothing was refitted or rebuilt: no policy has anything to weigh.
-        if !self.meshes.iter().any(|m| m.moved) {
+        // Nothing was refitted or rebuilt: no policy has anything to weigh, unless a mesh was
+        // added since the last sample (its fresh tree's work is the ray-work measure's
+        // reference for its first refits).
+        if !self.meshes.iter().any(|m| m.moved) && !std::mem::take(&mut self.unsampled_meshes) {
             return None;
         }
         if self.sample.frame != self.frame {
             self.sample = RaySample::new(self.frame);
             self.entries.clear();
-            self.sample_work.fill(TraversalStats::default());
-            self.sample_entries.fill(0);
+            self.mesh_samples.fill(MeshSample::default());
             self.stats.model_sample_ms = 0.0;
         }
         Some(self.sample.plan(n))
@@ -307,9 +309,7 @@ impl Engine {
         let grew = log.entries.capacity() != log.capacity;
         self.entries = log.entries;
         for e in &self.entries[before..] {
-            let k = e.mesh.0 as usize;
-            self.sample_work[k] += e.work;
-            self.sample_entries[k] += 1;
+            self.mesh_samples[e.mesh.0 as usize].add(e);
         }
         // Headroom once it has had to grow: later frames whose rays enter a few more instances
         // do not grow it again.
@@ -357,7 +357,7 @@ impl Engine {
     /// Sampled work this frame in `mesh`'s tree (all its instances).
     #[must_use]
     pub fn sampled_mesh_work(&self, mesh: MeshId) -> TraversalStats {
-        self.current(|e| e.sample_work[mesh.0 as usize])
+        self.current(|e| e.mesh_samples[mesh.0 as usize].work)
     }
 
     /// Sampled work this frame, both levels.
@@ -445,6 +445,7 @@ impl Engine {
                 query,
                 ray: local,
                 work: w,
+                hit: h.is_some(),
             });
             let h = h?;
             best = Some(SceneHit {
