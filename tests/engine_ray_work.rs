@@ -286,5 +286,9 @@ fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
     // Later frames where nothing moved have nothing to weigh: not sampled.
     e.update();
     e.trace_closest(&rays, &mut hits);
-    assert_eq!(e.sampled_mesh_work(m).nodes, 0, "an unmoved frame was sampled");
+    assert_eq!(
+        e.sampled_mesh_work(m).nodes,
+        0,
+        "an unmoved frame was sampled"
+    );
 }
