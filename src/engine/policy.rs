@@ -802,8 +802,10 @@ mod tests {
         };
         // The replaced tree cost 2 ms extra a frame; the new one none: 2 ms saved a frame, so
         // a 5 ms rebuild has paid after the third frame and lowers the bar.
-        let mut s = PolicyState::default();
-        s.rebuild_scale = 4.0;
+        let mut s = PolicyState {
+            rebuild_scale: 4.0,
+            ..PolicyState::default()
+        };
         s.rebuilt(1.0, 1.0, 5.0);
         s.judge_rebuild(2.0, 5.0);
         fresh(&mut s, 1.0);
