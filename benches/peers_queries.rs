@@ -23,7 +23,7 @@ use std::path::PathBuf;
 use timing::interleaved;
 
 const QUERIES: usize = 100_000;
-const REPEATS: usize = 9;
+const REPEATS: usize = 15;
 
 struct Rng(u64);
 impl Rng {

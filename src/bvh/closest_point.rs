@@ -116,15 +116,29 @@ impl Bvh {
         bound: f32,
         test: impl FnMut(usize, f32) -> Option<f32>,
     ) -> Option<(usize, f32)> {
-        self.nearest_slot_pending(lower, bound, test, PENDING)
+        self.nearest_slot_pending(lower, bound, test, |_| {}, PENDING)
     }
 
-    /// [`Bvh::nearest_slot`] keeping at most `limit` subtrees pending.
+    /// [`Bvh::nearest_slot`] that calls `prefetch_leaf(leaf)` for each leaf it puts among the
+    /// pending subtrees, so the caller can ask for the primitives' memory, which the leaf's
+    /// test reads later.
+    pub(crate) fn nearest_slot_prefetching(
+        &self,
+        lower: impl Fn(&Node) -> f32,
+        bound: f32,
+        test: impl FnMut(usize, f32) -> Option<f32>,
+        prefetch_leaf: impl Fn(&Node),
+    ) -> Option<(usize, f32)> {
+        self.nearest_slot_pending(lower, bound, test, prefetch_leaf, PENDING)
+    }
+
+    /// [`Bvh::nearest_slot_prefetching`] keeping at most `limit` subtrees pending.
     fn nearest_slot_pending(
         &self,
         lower: impl Fn(&Node) -> f32,
         bound: f32,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
+        prefetch_leaf: impl Fn(&Node),
         limit: usize,
     ) -> Option<(usize, f32)> {
         let nodes = self.nodes.as_slice();
@@ -151,7 +165,7 @@ impl Bvh {
                 };
                 if df < best.1 {
                     if pending.push(key(df, far)) {
-                        prefetch_children(nodes, far);
+                        prefetch_subtree(nodes, far, &prefetch_leaf);
                     } else {
                         self.nearest_depth_first(far, &lower, &mut best, &mut test);
                     }
@@ -163,7 +177,7 @@ impl Bvh {
                         continue;
                     }
                     if pending.push(k) {
-                        prefetch_children(nodes, near);
+                        prefetch_subtree(nodes, near, &prefetch_leaf);
                     } else {
                         self.nearest_depth_first(near, &lower, &mut best, &mut test);
                     }
@@ -225,15 +239,14 @@ impl Bvh {
     }
 }
 
-/// Asks for the cache line holding a pending interior node's two children, which its
-/// expansion reads, likely after the walk has been elsewhere (a leaf's triangles are the
-/// caller's data: not asked for).
+/// Asks for the memory a pending subtree's expansion reads, likely after the walk has been
+/// elsewhere: an interior node's two children, or (through the caller) a leaf's primitives.
 #[inline(always)]
-fn prefetch_children(nodes: &[Node], node: u32) {
+fn prefetch_subtree(nodes: &[Node], node: u32, prefetch_leaf: &impl Fn(&Node)) {
     let n = &nodes[node as usize];
-    if !n.is_leaf()
-        && let Some(c) = nodes.get(n.first as usize)
-    {
+    if n.is_leaf() {
+        prefetch_leaf(n);
+    } else if let Some(c) = nodes.get(n.first as usize) {
         crate::simd::prefetch_all(c);
     }
 }
@@ -287,7 +300,7 @@ impl MeshBvh {
                 let r = self.bvh.bounds();
                 let pad = (r.min.abs().max(r.max.abs()) + p.abs()) * (8.0 * f32::EPSILON);
                 let (above, below) = (p + pad, p - pad);
-                self.bvh.nearest_slot(
+                self.bvh.nearest_slot_prefetching(
                     |n| {
                         let lo = Vec3::from(n.min) - above;
                         let hi = below - Vec3::from(n.max);
@@ -303,6 +316,7 @@ impl MeshBvh {
                             d2
                         })
                     },
+                    |leaf| prefetch_tris(tris, leaf),
                 )
             }
             Some(m) => self.bvh.nearest_slot(
@@ -320,6 +334,15 @@ impl MeshBvh {
             ),
         }?;
         Some((point, d2, self.bvh.prim_indices()[slot]))
+    }
+}
+
+/// Asks for the cache lines of a leaf's triangles.
+#[inline(always)]
+fn prefetch_tris(tris: &[[Vec3; 3]], leaf: &Node) {
+    let (first, count) = (leaf.first as usize, leaf.count as usize);
+    if let Some(run) = tris.get(first..first + count) {
+        crate::simd::prefetch_slice(run);
     }
 }
 
@@ -389,6 +412,7 @@ mod tests {
                             let d2 = closest_point_on_triangle(p, a, b, c).distance_squared(p);
                             (d2 < best).then_some(d2)
                         },
+                        |leaf| prefetch_tris(tris, leaf),
                         limit,
                     )
                     .map(|(_, d2)| d2.sqrt());

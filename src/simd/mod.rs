@@ -18,6 +18,21 @@ pub fn prefetch_all<T>(r: &T) {
     prefetch_addr(p.wrapping_add(size.saturating_sub(1)));
 }
 
+/// [`prefetch`] of every cache line the elements of `s` span.
+#[inline(always)]
+pub fn prefetch_slice<T>(s: &[T]) {
+    let p = s.as_ptr().cast::<u8>();
+    let size = std::mem::size_of_val(s);
+    let mut off = 0;
+    while off < size {
+        prefetch_addr(p.wrapping_add(off));
+        off += 64;
+    }
+    if size > 0 {
+        prefetch_addr(p.wrapping_add(size - 1));
+    }
+}
+
 /// Hints the CPU to bring the cache line holding `r` into the cache (no effect on other
 /// targets). Used where loads go to addresses known well ahead but scattered, such as vertex
 /// positions read through index buffers during refit.
