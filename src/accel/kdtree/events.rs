@@ -183,20 +183,47 @@ pub(super) fn best_split_on_axis(
 
 /// The cheapest split over the three axes' sorted events (the lowest axis on ties), if it
 /// beats making a leaf of the `n` triangles.
+///
+/// Axes are swept in the order of a lower bound on their splits' cost, and an axis whose bound
+/// is already above the best split found (or the leaf) is not swept: every triangle goes to
+/// at least one child, and a child's area is at least the cell's face across the axis, so a
+/// split costs at least `kt + ki min(λ f n, f n + 1 - f)` (`f` that face over the cell's area,
+/// `λ` the empty cut's factor; the second term when both children hold triangles).
 pub(super) fn choose_split(
     events: [&[Event]; 3],
     n: usize,
     cell: &Aabb,
     params: &KdParams,
 ) -> Option<Split> {
-    let leaf_cost = f64::from(params.intersection_cost) * n as f64;
-    (0..3)
-        .filter_map(|axis| best_split_on_axis(events[axis], axis, n, cell, params))
-        .fold(None, |best: Option<Split>, s| match best {
-            Some(b) if b.cost <= s.cost => Some(b),
-            _ => Some(s),
-        })
-        .filter(|s| s.cost < leaf_cost)
+    let (kt, ki) = (
+        f64::from(params.traversal_cost),
+        f64::from(params.intersection_cost),
+    );
+    let leaf_cost = ki * n as f64;
+    let area = cell.half_area_f64();
+    let e = cell.extent();
+    let empty_factor = (1.0 - f64::from(params.empty_bonus)).max(0.0);
+    let bound = |axis: usize| {
+        let f = f64::from(e[(axis + 1) % 3]) * f64::from(e[(axis + 2) % 3]) / area;
+        let n = n as f64;
+        // Kept below the costs the sweep computes, whatever their rounding.
+        (kt + ki * (empty_factor * f * n).min(f * n + 1.0 - f)) * (1.0 - 1e-9)
+    };
+    let bounds = [bound(0), bound(1), bound(2)];
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| bounds[a].total_cmp(&bounds[b]));
+    let mut best: Option<Split> = None;
+    for axis in order {
+        if bounds[axis] >= best.map_or(leaf_cost, |b| b.cost) {
+            continue;
+        }
+        if let Some(s) = best_split_on_axis(events[axis], axis, n, cell, params) {
+            if best.is_none_or(|b| s.cost < b.cost || (s.cost == b.cost && s.axis < b.axis)) {
+                best = Some(s);
+            }
+        }
+    }
+    best.filter(|s| s.cost < leaf_cost)
 }
 
 /// `b` clipped to `cell` (the box the triangle has in that cell when splits are not perfect).
