@@ -199,21 +199,28 @@ impl<'a> Builder<'a> {
                 scratch.left.push(event(s.pos, Kind::End, t));
                 scratch.right.push(event(s.pos, Kind::Start, t));
             }
+            // On the split axis the lists are sorted by position, so the left child's events
+            // (before the plane, ends at it, flat ones at it when they go left) come first.
+            let at_plane = if s.planar_left {
+                Kind::Start
+            } else {
+                Kind::Planar
+            };
+            let first_right = event(s.pos, at_plane, 0);
+            let cut = lists[s.axis].partition_point(|&e| e < first_right);
             let mut left_ranges: [Range<usize>; 3] = Default::default();
             let mut right_ranges: [Range<usize>; 3] = Default::default();
             for a in 0..3 {
-                let extra: [&[Event]; 2] = if a == s.axis {
-                    [&scratch.left, &scratch.right]
+                let (l, r) = if a == s.axis {
+                    split_at_plane(
+                        &mut arena[a],
+                        ranges[a].clone(),
+                        cut,
+                        [&scratch.left, &scratch.right],
+                    )
                 } else {
-                    [&[], &[]]
+                    split_by_side(&mut arena[a], ranges[a].clone(), &self.side)
                 };
-                let (l, r) = split_list(
-                    &mut arena[a],
-                    ranges[a].clone(),
-                    &self.side,
-                    a == s.axis,
-                    extra,
-                );
                 left_ranges[a] = l;
                 right_ranges[a] = r;
             }
@@ -245,66 +252,65 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// Writes past `arena.top` the events of `arena.ev[src]` of the left child, then those of the
-/// right child, each merged in order with the sorted new events `extra` of its side, and
-/// returns their ranges (`top` moved past them). A straddler's events go to both children,
-/// except on the split axis, where its start goes left and its end right.
-///
-/// One branch-free pass writes every event to both halves of the room and advances the side
-/// it belongs to; each half starts past room for its new events, so that the merge runs
-/// forward in place (its output never overtakes its input), copying runs between new events.
-fn split_list(
+/// Writes past `arena.top` the events of `arena.ev[src]` (an axis the plane does not cut) of
+/// the left child, then those of the right child, and returns their ranges (`top` moved past
+/// them). A straddler's events go to both. One branch-free pass writes every event to both
+/// halves of the room and advances the side it belongs to; the right half is then moved down.
+fn split_by_side(
     arena: &mut Arena,
     src: Range<usize>,
     side: &[u8],
-    split_axis: bool,
-    extra: [&[Event]; 2],
 ) -> (Range<usize>, Range<usize>) {
     let len = src.len();
-    let (xl, xr) = (extra[0].len(), extra[1].len());
-    arena.reserve(2 * len + xl + xr);
+    arena.reserve(2 * len);
     let top = arena.top;
     let (used, room) = arena.ev.split_at_mut(top);
-    let (tl, tr) = room[..2 * len + xl + xr].split_at_mut(len + xl);
-    let (tl, tr) = (&mut tl[xl..], &mut tr[xr..]);
+    let (tl, tr) = room[..2 * len].split_at_mut(len);
     let (mut nl, mut nr) = (0, 0);
     for &e in &used[src] {
         let s = side[tri_of(e) as usize];
-        // On the split axis a straddler's start belongs left and its end right.
-        let starts = kind_of(e) == Kind::Start as usize;
-        let both = s == BOTH;
         tl[nl] = e;
         tr[nr] = e;
-        nl += usize::from(s == LEFT || (both && (starts || !split_axis)));
-        nr += usize::from(s == RIGHT || (both && (!starts || !split_axis)));
+        nl += usize::from(s != RIGHT);
+        nr += usize::from(s != LEFT);
     }
-    let room = &mut arena.ev[top..];
-    let left_len = merge_forward(room, 0, xl, nl, extra[0]);
-    let right_len = merge_forward(room, left_len, len + xl + xr, nr, extra[1]);
-    arena.top = top + left_len + right_len;
-    (top..top + left_len, top + left_len..arena.top)
+    room.copy_within(len..len + nr, nl);
+    arena.top = top + nl + nr;
+    (top..top + nl, top + nl..arena.top)
 }
 
-/// Merges `buf[from..from + count]` (sorted) with the sorted `extra` into `buf[to..]`, where
-/// `to + extra.len() <= from`: for each new event, the run of old ones before it is found by
-/// binary search and moved whole. Returns the merged length.
-fn merge_forward(
-    buf: &mut [Event],
-    to: usize,
-    from: usize,
-    count: usize,
-    extra: &[Event],
-) -> usize {
-    debug_assert!(to + extra.len() <= from);
-    let (mut out, mut next, end) = (to, from, from + count);
-    for &y in extra {
-        let run = buf[next..end].partition_point(|&x| x <= y);
-        buf.copy_within(next..next + run, out);
-        out += run;
-        next += run;
-        buf[out] = y;
-        out += 1;
+/// Writes past `arena.top` the left child's events on the split axis, `arena.ev[src]`'s first
+/// `cut` merged with the straddlers' new ends `extra[0]`, then the right child's, the rest
+/// merged with their new starts `extra[1]`; returns their ranges (`top` moved past them).
+fn split_at_plane(
+    arena: &mut Arena,
+    src: Range<usize>,
+    cut: usize,
+    extra: [&[Event]; 2],
+) -> (Range<usize>, Range<usize>) {
+    let len = src.len();
+    arena.reserve(len + extra[0].len() + extra[1].len());
+    let top = arena.top;
+    let (used, room) = arena.ev.split_at_mut(top);
+    let (before, after) = used[src].split_at(cut);
+    let left = merge_runs(room, before, extra[0]);
+    let right = merge_runs(&mut room[left..], after, extra[1]);
+    arena.top = top + left + right;
+    (top..top + left, top + left..arena.top)
+}
+
+/// Writes to `out` the merge of the sorted `a` and the sorted, short `b` (new events; equal
+/// keys cannot occur, the triangles differ) and returns its length: before each of `b`'s
+/// events, the run of `a` below it is found by binary search and copied whole.
+fn merge_runs(out: &mut [Event], a: &[Event], b: &[Event]) -> usize {
+    let (mut rest, mut len) = (a, 0);
+    for &y in b {
+        let run = rest.partition_point(|&x| x < y);
+        out[len..len + run].copy_from_slice(&rest[..run]);
+        out[len + run] = y;
+        len += run + 1;
+        rest = &rest[run..];
     }
-    buf.copy_within(next..end, out);
-    out + (end - next) - to
+    out[len..len + rest.len()].copy_from_slice(rest);
+    len + rest.len()
 }
