@@ -209,10 +209,10 @@ impl PlaneCost {
                 i += 1;
             }
             nr -= planar + ends;
-            if let Some(s) = self.at(pos_of(events[i - 1]), nl, nr, planar) {
-                if best.is_none_or(|b| s.cost < b.cost) {
-                    best = Some(s);
-                }
+            if let Some(s) = self.at(pos_of(events[i - 1]), nl, nr, planar)
+                && best.is_none_or(|b| s.cost < b.cost)
+            {
+                best = Some(s);
             }
             nl += starts + planar;
         }
