@@ -46,7 +46,7 @@ pub struct KdParams {
 
 /// The default costs: a triangle test at half a traversal step. The leaves hold about twice
 /// the triangles they would at equal costs, the tree has well under half the nodes and builds
-/// faster, and camera rays are traced as fast (the measurements are in `docs/accel.md`).
+/// faster, and camera rays are traced at about the same rate (`docs/accel.md`).
 impl Default for KdParams {
     fn default() -> Self {
         Self {
