@@ -1,16 +1,19 @@
 //! The O(N log N) kd-tree build of Wald & Havran 2006: the events of all triangles are sorted
 //! once per axis; at each node one sweep per axis finds the best plane, the triangles are
 //! classified left, right or both (a flag per triangle), and the lists are split in order. Only
-//! the triangles that straddle the plane get new events (their boxes clipped to each child),
-//! which are sorted and merged into the children's lists.
+//! the triangles that straddle the plane get new events, and only on the split axis: a child's
+//! cell is its parent's on the other two axes, so there a straddler's box clipped to either
+//! child is the one it already had, and its events go to both lists as they are. On the split
+//! axis its start stays left and its end right, and it gets an end at the plane on the left and
+//! a start there on the right (all at one position, so sorted by triangle alone).
 //!
 //! The lists live in one arena per axis used as a stack: a node's children's lists are
-//! appended after everything in use, the left subtree is built, then the right, and the arena
+//! written after everything in use, the left subtree is built, then the right, and the arena
 //! is cut back to where the children's lists began. After the root's lists nothing is
 //! allocated but the arenas' growth.
 
 use super::events::{
-    BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, clip_box, kind_of, push_events,
+    BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, event, kind_of, push_events,
     sort_events, tri_of,
 };
 use super::{Built, KdNode, KdParams};
@@ -26,16 +29,18 @@ pub(super) fn build(boxes: &[Aabb], bounds: &Aabb, params: &KdParams) -> Built {
     if ids.is_empty() {
         return b.finish();
     }
-    let mut arena: [Vec<Event>; 3] = std::array::from_fn(|axis| {
-        // Room for the root's lists and a few levels of children (straddlers add events).
-        let mut ev = Vec::with_capacity(8 * ids.len());
+    let mut arena: [Arena; 3] = std::array::from_fn(|axis| {
+        let mut ev = Vec::with_capacity(2 * ids.len());
         for &i in &ids {
             push_events(&mut ev, &boxes[i as usize], axis, i);
         }
         sort_events(&mut ev);
-        ev
+        let top = ev.len();
+        // Room for a few levels of children (straddlers add events).
+        ev.resize(4 * top, 0);
+        Arena { ev, top }
     });
-    let ranges = std::array::from_fn(|axis| 0..arena[axis].len());
+    let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
     let mut scratch = Scratch::default();
     b.nodes.reserve(4 * ids.len());
     b.refs.reserve(2 * ids.len());
@@ -44,14 +49,30 @@ pub(super) fn build(boxes: &[Aabb], bounds: &Aabb, params: &KdParams) -> Built {
     b.finish()
 }
 
-/// Per-node buffers, reused: the triangles straddling the plane, their new events for each
-/// child, and the node's events sorted by side.
+/// One axis's event lists: `ev[..top]` is in use (the lists of the nodes on the path being
+/// built), the rest is room, kept initialised so that it is written without growing.
+struct Arena {
+    ev: Vec<Event>,
+    top: usize,
+}
+
+impl Arena {
+    /// Makes room for `more` events past `top`.
+    fn reserve(&mut self, more: usize) {
+        let need = self.top + more;
+        if self.ev.len() < need {
+            self.ev.resize(need.max(2 * self.ev.len()), 0);
+        }
+    }
+}
+
+/// Per-node buffers, reused: the triangles straddling the plane and their new events on the
+/// split axis for each child.
 #[derive(Default)]
 struct Scratch {
     straddlers: Vec<u32>,
-    left: [Vec<Event>; 3],
-    right: [Vec<Event>; 3],
-    tmp: Vec<Event>,
+    left: Vec<Event>,
+    right: Vec<Event>,
 }
 
 /// The state shared by the whole build.
@@ -138,7 +159,7 @@ impl<'a> Builder<'a> {
     #[allow(clippy::too_many_arguments)]
     fn node(
         &mut self,
-        arena: &mut [Vec<Event>; 3],
+        arena: &mut [Arena; 3],
         scratch: &mut Scratch,
         index: usize,
         cell: Aabb,
@@ -147,8 +168,8 @@ impl<'a> Builder<'a> {
         depth: usize,
     ) {
         self.depth = self.depth.max(depth);
-        let mark: [usize; 3] = std::array::from_fn(|a| arena[a].len());
-        let lists = std::array::from_fn(|a| &arena[a][ranges[a].clone()]);
+        let mark: [usize; 3] = std::array::from_fn(|a| arena[a].top);
+        let lists = std::array::from_fn(|a| &arena[a].ev[ranges[a].clone()]);
         let Some(s) = self.split_for(lists, n, &cell, depth) else {
             let tris = lists[0]
                 .iter()
@@ -169,31 +190,37 @@ impl<'a> Builder<'a> {
         } else if scratch.straddlers.is_empty() && n_left == 0 {
             (Default::default(), ranges.clone())
         } else {
-            // Triangles in both children: new events from their boxes clipped to each child.
-            for a in 0..3 {
-                scratch.left[a].clear();
-                scratch.right[a].clear();
-            }
+            // Triangles in both children: the straddlers' new events on the split axis, at the
+            // plane, sorted by triangle.
+            scratch.straddlers.sort_unstable();
+            scratch.left.clear();
+            scratch.right.clear();
             for &t in &scratch.straddlers {
-                let b = &self.boxes[t as usize];
-                let (bl, br) = (clip_box(b, &left_cell), clip_box(b, &right_cell));
-                for a in 0..3 {
-                    push_events(&mut scratch.left[a], &bl, a, t);
-                    push_events(&mut scratch.right[a], &br, a, t);
-                }
+                scratch.left.push(event(s.pos, Kind::End, t));
+                scratch.right.push(event(s.pos, Kind::Start, t));
             }
+            // On the split axis the lists are sorted by position, so the left child's events
+            // (before the plane, ends at it, flat ones at it when they go left) come first.
+            let at_plane = if s.planar_left {
+                Kind::Start
+            } else {
+                Kind::Planar
+            };
+            let first_right = event(s.pos, at_plane, 0);
+            let cut = lists[s.axis].partition_point(|&e| e < first_right);
             let mut left_ranges: [Range<usize>; 3] = Default::default();
             let mut right_ranges: [Range<usize>; 3] = Default::default();
             for a in 0..3 {
-                sort_events(&mut scratch.left[a]);
-                sort_events(&mut scratch.right[a]);
-                let (l, r) = split_list(
-                    &mut arena[a],
-                    ranges[a].clone(),
-                    &self.side,
-                    [&scratch.left[a], &scratch.right[a]],
-                    &mut scratch.tmp,
-                );
+                let (l, r) = if a == s.axis {
+                    split_at_plane(
+                        &mut arena[a],
+                        ranges[a].clone(),
+                        cut,
+                        [&scratch.left, &scratch.right],
+                    )
+                } else {
+                    split_by_side(&mut arena[a], ranges[a].clone(), &self.side)
+                };
                 left_ranges[a] = l;
                 right_ranges[a] = r;
             }
@@ -220,56 +247,70 @@ impl<'a> Builder<'a> {
             depth + 1,
         );
         for a in 0..3 {
-            arena[a].truncate(mark[a]);
+            arena[a].top = mark[a];
         }
     }
 }
 
-/// Appends to `list` the events of `list[src]` of the left child, then those of the right
-/// child (each merged in order with the sorted new events `extra` of its side); returns their
-/// ranges. One branch-free pass sorts the node's events into the two halves of `tmp`.
-fn split_list(
-    list: &mut Vec<Event>,
+/// Writes past `arena.top` the events of `arena.ev[src]` (an axis the plane does not cut) of
+/// the left child, then those of the right child, and returns their ranges (`top` moved past
+/// them). A straddler's events go to both. One branch-free pass writes every event to both
+/// halves of the room and advances the side it belongs to; the right half is then moved down.
+fn split_by_side(
+    arena: &mut Arena,
     src: Range<usize>,
     side: &[u8],
-    extra: [&[Event]; 2],
-    tmp: &mut Vec<Event>,
 ) -> (Range<usize>, Range<usize>) {
     let len = src.len();
-    // Grown, never cleared: only the slots written below are read.
-    if tmp.len() < 2 * len {
-        tmp.resize(2 * len, 0);
-    }
-    let (tl, tr) = tmp[..2 * len].split_at_mut(len);
+    arena.reserve(2 * len);
+    let top = arena.top;
+    let (used, room) = arena.ev.split_at_mut(top);
+    let (tl, tr) = room[..2 * len].split_at_mut(len);
     let (mut nl, mut nr) = (0, 0);
-    for &e in &list[src] {
+    for &e in &used[src] {
         let s = side[tri_of(e) as usize];
         tl[nl] = e;
         tr[nr] = e;
-        nl += usize::from(s == LEFT);
-        nr += usize::from(s == RIGHT);
+        nl += usize::from(s != RIGHT);
+        nr += usize::from(s != LEFT);
     }
-    let start = list.len();
-    list.reserve(nl + nr + extra[0].len() + extra[1].len());
-    merge_into(list, &tl[..nl], extra[0]);
-    let mid = list.len();
-    merge_into(list, &tr[..nr], extra[1]);
-    (start..mid, mid..list.len())
+    room.copy_within(len..len + nr, nl);
+    arena.top = top + nl + nr;
+    (top..top + nl, top + nl..arena.top)
 }
 
-/// Appends the merge of the sorted `a` and `b` to `out`. Room is made first, and each step
-/// takes the smaller head without a branch on which it is (the two lists interleave
-/// unpredictably).
-fn merge_into(out: &mut Vec<Event>, a: &[Event], b: &[Event]) {
-    out.reserve(a.len() + b.len());
-    let (mut i, mut j) = (0, 0);
-    while i < a.len() && j < b.len() {
-        let (x, y) = (a[i], b[j]);
-        let take_b = y < x;
-        out.push(if take_b { y } else { x });
-        j += usize::from(take_b);
-        i += usize::from(!take_b);
+/// Writes past `arena.top` the left child's events on the split axis, `arena.ev[src]`'s first
+/// `cut` merged with the straddlers' new ends `extra[0]`, then the right child's, the rest
+/// merged with their new starts `extra[1]`; returns their ranges (`top` moved past them).
+fn split_at_plane(
+    arena: &mut Arena,
+    src: Range<usize>,
+    cut: usize,
+    extra: [&[Event]; 2],
+) -> (Range<usize>, Range<usize>) {
+    let len = src.len();
+    arena.reserve(len + extra[0].len() + extra[1].len());
+    let top = arena.top;
+    let (used, room) = arena.ev.split_at_mut(top);
+    let (before, after) = used[src].split_at(cut);
+    let left = merge_runs(room, before, extra[0]);
+    let right = merge_runs(&mut room[left..], after, extra[1]);
+    arena.top = top + left + right;
+    (top..top + left, top + left..arena.top)
+}
+
+/// Writes to `out` the merge of the sorted `a` and the sorted, short `b` (new events; equal
+/// keys cannot occur, the triangles differ) and returns its length: before each of `b`'s
+/// events, the run of `a` below it is found by binary search and copied whole.
+fn merge_runs(out: &mut [Event], a: &[Event], b: &[Event]) -> usize {
+    let (mut rest, mut len) = (a, 0);
+    for &y in b {
+        let run = rest.partition_point(|&x| x < y);
+        out[len..len + run].copy_from_slice(&rest[..run]);
+        out[len + run] = y;
+        len += run + 1;
+        rest = &rest[run..];
     }
-    out.extend_from_slice(&a[i..]);
-    out.extend_from_slice(&b[j..]);
+    out[len..len + rest.len()].copy_from_slice(rest);
+    len + rest.len()
 }

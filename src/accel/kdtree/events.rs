@@ -102,87 +102,155 @@ pub(super) struct Split {
     pub(super) cost: f64,
 }
 
-/// The cheapest split of `cell` among the planes of `events` (sorted, on `axis`) strictly inside
-/// the cell, for `n` triangles; `None` when the cell has no such plane.
-pub(super) fn best_split_on_axis(
-    events: &[Event],
+/// The SAH cost of the planes across one axis of one cell.
+struct PlaneCost {
     axis: usize,
-    n: usize,
-    cell: &Aabb,
-    params: &KdParams,
-) -> Option<Split> {
-    let area = cell.half_area_f64();
-    if area <= 0.0 || !area.is_finite() {
-        return None;
-    }
-    let (lo, hi) = (cell.min[axis], cell.max[axis]);
-    // A child's half area is linear in its length along `axis`: the face across the axis plus
-    // the perimeter of that face times the length.
-    let e = cell.extent();
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let (eu, ev) = (f64::from(e[u]), f64::from(e[v]));
-    let (face, perim) = (eu * ev / area, (eu + ev) / area);
-    let (kt, ki) = (
-        f64::from(params.traversal_cost),
-        f64::from(params.intersection_cost),
-    );
-    let bonus = 1.0 - f64::from(params.empty_bonus);
-    // The bonus discounts the children's intersection cost only (as in pbrt), not the
-    // traversal: cutting empty space off a cell pays only where it saves triangle tests, so a
-    // leaf of one triangle is never cut down further.
-    let cost = |pl: f64, pr: f64, nl: usize, nr: usize| {
-        let c = ki * (pl * nl as f64 + pr * nr as f64);
-        kt + if nl == 0 || nr == 0 { bonus * c } else { c }
-    };
-    let (mut best_cost, mut best_pos, mut best_planar_left) = (f64::INFINITY, 0.0, true);
-    let (mut nl, mut nr) = (0usize, n);
-    let mut i = 0;
-    while i < events.len() {
-        let key = pos_key(events[i]);
-        // Events at one position, counted by kind without branching on the kind.
-        let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
-        while let Some(&e) = events.get(i) {
-            if pos_key(e) != key {
-                break;
-            }
-            let k = kind_of(e);
-            ends += usize::from(k == 0);
-            planar += usize::from(k == 1);
-            starts += usize::from(k == 2);
-            i += 1;
-        }
-        nr -= planar + ends;
-        let pos = pos_of(events[i - 1]);
-        if lo < pos && pos < hi {
-            let pl = face + perim * f64::from(pos - lo);
-            let pr = face + perim * f64::from(hi - pos);
-            let cost_left = cost(pl, pr, nl + planar, nr);
-            let (c, planar_left) = if planar == 0 {
-                (cost_left, true)
-            } else {
-                let cost_right = cost(pl, pr, nl, nr + planar);
-                if cost_left <= cost_right {
-                    (cost_left, true)
-                } else {
-                    (cost_right, false)
-                }
-            };
-            if c < best_cost {
-                (best_cost, best_pos, best_planar_left) = (c, pos, planar_left);
-            }
-        }
-        nl += starts + planar;
-    }
-    best_cost.is_finite().then_some(Split {
-        axis,
-        pos: best_pos,
-        planar_left: best_planar_left,
-        cost: best_cost,
-    })
+    lo: f32,
+    hi: f32,
+    /// The cell's face across the axis and that face's perimeter, over the cell's area: a
+    /// child's area over the cell's is `face + perim * length` (linear in its length).
+    face: f64,
+    perim: f64,
+    traversal: f64,
+    intersection: f64,
+    /// What an empty child leaves of the children's intersection cost.
+    empty_factor: f64,
 }
 
-/// The cheapest split over the three axes' sorted events (the lowest axis on ties), if it
-/// beats making a leaf of the `n` triangles.
+impl PlaneCost {
+    /// `None` when the cell has no area (or an infinite one).
+    fn new(cell: &Aabb, axis: usize, params: &KdParams) -> Option<Self> {
+        let area = cell.half_area_f64();
+        if area <= 0.0 || !area.is_finite() {
+            return None;
+        }
+        let e = cell.extent();
+        let (eu, ev) = (f64::from(e[(axis + 1) % 3]), f64::from(e[(axis + 2) % 3]));
+        Some(Self {
+            axis,
+            lo: cell.min[axis],
+            hi: cell.max[axis],
+            face: eu * ev / area,
+            perim: (eu + ev) / area,
+            traversal: f64::from(params.traversal_cost),
+            intersection: f64::from(params.intersection_cost),
+            empty_factor: 1.0 - f64::from(params.empty_bonus),
+        })
+    }
+
+    /// The split at `pos` with `nl` triangles before the plane, `nr` after it and `planar` in
+    /// it (put on the cheaper side, left on ties); `None` unless the plane is strictly inside
+    /// the cell.
+    #[inline(always)]
+    fn at(&self, pos: f32, nl: usize, nr: usize, planar: usize) -> Option<Split> {
+        if !(self.lo < pos && pos < self.hi) {
+            return None;
+        }
+        let pl = self.face + self.perim * f64::from(pos - self.lo);
+        let pr = self.face + self.perim * f64::from(self.hi - pos);
+        // The bonus discounts the children's intersection cost only (as in pbrt), not the
+        // traversal: cutting empty space off a cell pays only where it saves triangle tests,
+        // so a leaf of one triangle is never cut down further.
+        let cost = |nl: usize, nr: usize| {
+            let c = self.intersection * (pl * nl as f64 + pr * nr as f64);
+            self.traversal
+                + if nl == 0 || nr == 0 {
+                    self.empty_factor * c
+                } else {
+                    c
+                }
+        };
+        let cost_left = cost(nl + planar, nr);
+        let (cost, planar_left) = if planar == 0 {
+            (cost_left, true)
+        } else {
+            let cost_right = cost(nl, nr + planar);
+            if cost_left <= cost_right {
+                (cost_left, true)
+            } else {
+                (cost_right, false)
+            }
+        };
+        Some(Split {
+            axis: self.axis,
+            pos,
+            planar_left,
+            cost,
+        })
+    }
+
+    /// A lower bound on the cost of every split that leaves triangles on both sides: each of
+    /// the `n` triangles goes to at least one child and each child holds at least one, so
+    /// `pl nl + pr nr >= face n + (1 - face)`. Kept below what [`PlaneCost::at`] computes,
+    /// whatever its rounding.
+    fn both_sides_bound(&self, n: usize) -> f64 {
+        let n = n as f64;
+        (self.traversal + self.intersection * (self.face * n + 1.0 - self.face)) * (1.0 - 1e-9)
+    }
+
+    /// The cheapest split among the planes of `events` (sorted) for `n` triangles, the first
+    /// position on ties; `None` when no plane is strictly inside the cell.
+    fn sweep(&self, events: &[Event], n: usize) -> Option<Split> {
+        let mut best: Option<Split> = None;
+        let (mut nl, mut nr) = (0usize, n);
+        let mut i = 0;
+        while i < events.len() {
+            let key = pos_key(events[i]);
+            // Events at one position, counted by kind without branching on the kind.
+            let (mut ends, mut planar, mut starts) = (0usize, 0usize, 0usize);
+            while let Some(&e) = events.get(i) {
+                if pos_key(e) != key {
+                    break;
+                }
+                let k = kind_of(e);
+                ends += usize::from(k == 0);
+                planar += usize::from(k == 1);
+                starts += usize::from(k == 2);
+                i += 1;
+            }
+            nr -= planar + ends;
+            if let Some(s) = self.at(pos_of(events[i - 1]), nl, nr, planar)
+                && best.is_none_or(|b| s.cost < b.cost)
+            {
+                best = Some(s);
+            }
+            nl += starts + planar;
+        }
+        best
+    }
+
+    /// The cheaper of the planes at the first and at the last position of `events` (sorted),
+    /// the only planes that can leave a child empty, with the counts [`PlaneCost::sweep`] has
+    /// there: nothing ends at the first position (an end follows its triangle's start) and
+    /// nothing starts at the last, so only the triangles flat in those planes need counting.
+    fn end_planes(&self, events: &[Event], n: usize) -> Option<Split> {
+        let (&first, &last) = (events.first()?, events.last()?);
+        let flat_at = |key: u32, e: &&Event| pos_key(**e) == key && kind_of(**e) == 1;
+        let first_flat = events
+            .iter()
+            .take_while(|e| flat_at(pos_key(first), e))
+            .count();
+        let last_flat = events
+            .iter()
+            .rev()
+            .take_while(|e| flat_at(pos_key(last), e))
+            .count();
+        let low = self.at(pos_of(first), 0, n - first_flat, first_flat);
+        let high = self.at(pos_of(last), n - last_flat, 0, last_flat);
+        match (low, high) {
+            (Some(l), Some(h)) => Some(if h.cost < l.cost { h } else { l }),
+            (l, h) => l.or(h),
+        }
+    }
+}
+
+/// The cheapest split over the three axes' sorted events (the lowest axis on ties, then the
+/// lowest position), if it beats making a leaf of the `n` triangles.
+///
+/// The planes that leave a child empty (at each axis's first and last event) are costed
+/// first; then the axes are swept in the order of a lower bound on their other splits' cost
+/// ([`PlaneCost::both_sides_bound`]), and an axis whose bound is not below the best split so
+/// far (or the leaf) is not swept, since none of its other planes can win or tie.
 pub(super) fn choose_split(
     events: [&[Event]; 3],
     n: usize,
@@ -190,13 +258,32 @@ pub(super) fn choose_split(
     params: &KdParams,
 ) -> Option<Split> {
     let leaf_cost = f64::from(params.intersection_cost) * n as f64;
-    (0..3)
-        .filter_map(|axis| best_split_on_axis(events[axis], axis, n, cell, params))
-        .fold(None, |best: Option<Split>, s| match best {
-            Some(b) if b.cost <= s.cost => Some(b),
-            _ => Some(s),
-        })
-        .filter(|s| s.cost < leaf_cost)
+    let planes: [PlaneCost; 3] = [
+        PlaneCost::new(cell, 0, params)?,
+        PlaneCost::new(cell, 1, params)?,
+        PlaneCost::new(cell, 2, params)?,
+    ];
+    let mut per_axis: [Option<Split>; 3] =
+        std::array::from_fn(|axis| planes[axis].end_planes(events[axis], n));
+    let best = |per_axis: &[Option<Split>; 3]| {
+        per_axis
+            .iter()
+            .flatten()
+            .fold(None, |best: Option<Split>, &s| match best {
+                Some(b) if b.cost <= s.cost => Some(b),
+                _ => Some(s),
+            })
+    };
+    let bounds = planes.each_ref().map(|p| p.both_sides_bound(n));
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| bounds[a].total_cmp(&bounds[b]));
+    for axis in order {
+        let limit = best(&per_axis).map_or(leaf_cost, |b| b.cost.min(leaf_cost));
+        if bounds[axis] < limit {
+            per_axis[axis] = planes[axis].sweep(events[axis], n);
+        }
+    }
+    best(&per_axis).filter(|s| s.cost < leaf_cost)
 }
 
 /// `b` clipped to `cell` (the box the triangle has in that cell when splits are not perfect).
@@ -314,8 +401,15 @@ mod tests {
         }
         sort_events(&mut ev);
         let cell = Aabb::new(Vec3::ZERO, Vec3::new(3.0, 1.0, 1.0));
-        let params = KdParams::default();
-        let s = best_split_on_axis(&ev, 0, 3, &cell, &params).unwrap();
+        let params = KdParams {
+            intersection_cost: 1.0,
+            ..KdParams::default()
+        };
+        let s = PlaneCost::new(&cell, 0, &params)
+            .unwrap()
+            .sweep(&ev, 3)
+            .unwrap();
+        assert_eq!(choose_split([&ev, &[], &[]], 3, &cell, &params), Some(s));
         assert!(s.pos == 1.0 || s.pos == 2.0, "{s:?}");
         let mut side = vec![BOTH; 3];
         let mut straddlers = Vec::new();

@@ -44,11 +44,14 @@ pub struct KdParams {
     pub build: KdBuild,
 }
 
+/// The default costs: a triangle test at half a traversal step. The leaves hold about twice
+/// the triangles they would at equal costs, the tree has well under half the nodes and builds
+/// faster, and camera rays are traced at about the same rate (`docs/accel.md`).
 impl Default for KdParams {
     fn default() -> Self {
         Self {
             traversal_cost: 1.0,
-            intersection_cost: 1.0,
+            intersection_cost: 0.5,
             empty_bonus: 0.2,
             max_depth: None,
             build: KdBuild::Sorted,
@@ -60,7 +63,7 @@ impl KdParams {
     /// The naive builder with the default costs.
     pub const NAIVE: KdParams = KdParams {
         traversal_cost: 1.0,
-        intersection_cost: 1.0,
+        intersection_cost: 0.5,
         empty_bonus: 0.2,
         max_depth: None,
         build: KdBuild::Naive,
