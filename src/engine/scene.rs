@@ -241,7 +241,6 @@ struct MeshEntry {
     /// While probing, the tree the last rebuild replaced, refitted alongside; otherwise spare
     /// storage the next probed rebuild goes into.
     prev: MeshBvh,
-
     probe: Option<Probe>,
     sah: f32,
     dirty: bool,
@@ -891,9 +890,12 @@ impl Engine {
                             m.ray_observed = 1.0;
                         }
                         Some(base) => {
-                            let seen = p.trace_ms(s.work) / base.predict(s);
-                            m.ray_observed =
-                                RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
+                            let predicted = base.predict(s);
+                            if predicted > 0.0 {
+                                let seen = p.trace_ms(s.work) / predicted;
+                                m.ray_observed =
+                                    RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
+                            }
                         }
                     }
                 }
