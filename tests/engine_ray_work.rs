@@ -282,7 +282,14 @@ fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
     // Nothing has moved, but the fresh tree's work is the measure's reference for the first
     // refits: the first trace is sampled.
     e.trace_closest(&rays, &mut hits);
-    assert!(e.sampled_mesh_work(m).nodes > 0, "first trace not sampled");
+    let first = e.sampled_mesh_work(m).nodes;
+    assert!(first > 0, "first trace not sampled");
+    // A second batch of the same frame joins the frame's sample.
+    e.trace_closest(&rays, &mut hits);
+    assert!(
+        e.sampled_mesh_work(m).nodes > first,
+        "the frame's second batch was not sampled"
+    );
     // Later frames where nothing moved have nothing to weigh: not sampled.
     e.update();
     e.trace_closest(&rays, &mut hits);

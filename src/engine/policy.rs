@@ -3,8 +3,10 @@
 //! Every policy but `rebuild` and `periodic` refits first, then may rebuild. What it weighs
 //! depends on the engine's [`super::CostMeasure`]:
 //! - **ray work** (the default): the frame's sampled rays ([`super::ray_work`]) give each
-//!   mesh's share of the trace cost, and the degradation is the sampled work per entry into the
-//!   mesh over the fresh tree's, corrected by each rebuild's replay of the rays on both trees;
+//!   mesh's share of the trace cost, and the degradation is the sampled work into the mesh over
+//!   what its fresh tree cost on as many hitting and missing entries
+//!   ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
+//!   trees; each rebuild is then judged by what it saved ([`Payback`]);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
