@@ -1,17 +1,17 @@
 //! Insertion-based optimisation (Bittner, Hapala & Havran 2013): take out the interior nodes
-//! that cost most and reinsert their two subtrees where they cost least, on a refitted tree or
-//! a fresh one. Leaves are never split or merged, so the result is a valid tree over the same
+//! that cost most and reinsert their children where they cost least, on a refitted tree or a
+//! fresh one. Leaves are never split or merged, so the result is a valid tree over the same
 //! leaves; it is written back in the builders' layout ([`super::topology`]).
 //!
 //! A node is chosen by the paper's combined measure `A(n) * A(n) / (A(l) + A(r)) * A(n) /
 //! min(A(l), A(r))` (large boxes over small, unbalanced children: what refitting moving parts
-//! makes). Its subtree leaves the tree (its sibling takes the parent's place) and is inserted
-//! again as the sibling of the node that minimises the increase of the summed areas, found by
-//! branch and bound over the tree (Bittner et al., section 4.2), unless putting it back where
-//! it was costs as little, so the SAH never grows (the paper reinserts the node's two children
-//! instead, which may): the
-//! cost of inserting box `b` beside `x` is `A(x ∪ b)` plus the growth `A(y ∪ b) - A(y)` of
-//! every ancestor `y` of `x`, a bound that only grows going down.
+//! makes). The node and its parent leave the tree (the sibling takes the parent's place) and
+//! the node's two children are inserted again one by one, each as the sibling of the node that
+//! minimises the increase of the summed areas, found by branch and bound over the tree
+//! (section 4.2): the cost of inserting box `b` beside `x` is `A(x ∪ b)` plus the growth
+//! `A(y ∪ b) - A(y)` of every ancestor `y` of `x`, a bound that only grows going down. Where
+//! the paper keeps every move, a move that does not lower the summed areas is undone here,
+//! so the SAH never grows.
 
 use super::MeshBvh;
 use super::topology::{NONE, RestructureWorkspace, Topology};
@@ -144,9 +144,11 @@ impl Topology {
         picks.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     }
 
-    /// Takes the subtree at `n` out (its sibling takes its parent's place) and inserts it
-    /// where it costs least, if that is cheaper than where it was: the summed areas never
-    /// grow. Returns how much they went down when it moved.
+    /// Takes node `n` out of the tree with its parent (the sibling takes the parent's place)
+    /// and inserts `n`'s two children apart, each where it costs least, with the two freed
+    /// nodes as their new parents. If the summed areas did not go down, every step is undone
+    /// in reverse (the boxes come back exactly: they are unions). Returns how much they went
+    /// down when the tree changed.
     fn reinsert(
         &mut self,
         n: u32,
@@ -154,32 +156,67 @@ impl Topology {
         heap: &mut BinaryHeap<Candidate>,
     ) -> (Option<f32>, u32) {
         let p = self.parent[n as usize];
-        if p == NONE {
+        if p == NONE || self.is_leaf(n) {
             return (None, 0);
         }
         let sibling = self.child[p as usize][1 - self.side(n)];
+        let [l, r] = self.child[n as usize];
+        // Out go `n` and `p`: their areas leave the sum, the ancestors may shrink.
+        let mut delta = -self.area(n) - self.area(p) + self.detach(n);
+        // The larger child first (it has fewer good places).
+        let (a, b) = if self.area(l) >= self.area(r) {
+            (l, r)
+        } else {
+            (r, l)
+        };
+        let mut visits = 0;
+        for (x, free) in [(a, p), (b, n)] {
+            let bx = self.bounds[x as usize];
+            let (best, cost, v) = self.best_sibling(bx, bx.half_area(), max_visits, heap);
+            visits += v;
+            self.insert(x, free, best);
+            delta += cost;
+        }
+        if -delta > MIN_GAIN * self.area(p) {
+            return (Some(-delta), visits);
+        }
+        // Undo: take the children out again, rejoin them under `n`, put `n` back beside its
+        // old sibling under `p`.
+        self.detach(b);
+        self.detach(a);
+        self.child[n as usize] = [l, r];
+        self.parent[l as usize] = n;
+        self.parent[r as usize] = n;
+        self.bounds[n as usize] = self.bounds[l as usize].union(self.bounds[r as usize]);
+        self.insert(n, p, sibling);
+        (None, visits)
+    }
+
+    /// Takes the subtree at `x` out of the tree: its parent leaves too and `x`'s sibling
+    /// takes the parent's place. Returns how much the summed areas of the remaining
+    /// ancestors changed (zero or less).
+    fn detach(&mut self, x: u32) -> f32 {
+        let p = self.parent[x as usize];
+        let sibling = self.child[p as usize][1 - self.side(x)];
         let g = self.parent[p as usize];
+        self.parent[x as usize] = NONE;
         if g == NONE {
             self.root = sibling;
             self.parent[sibling as usize] = NONE;
-        } else {
-            let side = self.side(p);
-            self.link(g, side, sibling);
-            self.refit_up(g);
+            return 0.0;
         }
-        let b = self.bounds[n as usize];
-        let ab = b.half_area();
-        // What putting it back costs: beside its old sibling, with that one's ancestors grown.
-        let mut back = self.bounds[sibling as usize].union(b).half_area();
-        let mut y = self.parent[sibling as usize];
+        let side = self.side(p);
+        self.link(g, side, sibling);
+        let mut delta = 0.0;
+        let mut y = g;
         while y != NONE {
-            back += self.bounds[y as usize].union(b).half_area() - self.area(y);
+            let [c0, c1] = self.child[y as usize];
+            let before = self.area(y);
+            self.bounds[y as usize] = self.bounds[c0 as usize].union(self.bounds[c1 as usize]);
+            delta += self.area(y) - before;
             y = self.parent[y as usize];
         }
-        let (best, cost, visits) = self.best_sibling(b, ab, max_visits, heap);
-        let moved = cost < back * (1.0 - MIN_GAIN) && best != sibling;
-        self.insert(n, p, if moved { best } else { sibling });
-        (moved.then_some(back - cost), visits)
+        delta
     }
 
     /// Inserts subtree `x` as the sibling of `best`, with `free` (an unused interior id) as
