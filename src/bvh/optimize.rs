@@ -304,6 +304,10 @@ impl MeshBvh {
         }
         ws.topo.load(&self.bvh);
         let stats = ws.topo.optimize(budget, s);
+        // Every move that stayed lowered the summed areas; none stayed: the tree is unchanged.
+        if stats.moved == 0 {
+            return stats;
+        }
         if self.apply_topology(ws) {
             stats
         } else {
