@@ -4,12 +4,14 @@ use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::accel::AccelKind;
+use dynbvh::bvh::optimize::OptimizeBudget;
 use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
 use dynbvh::report::accel_bench;
-use dynbvh::report::build_bench::{self, Options, Row};
+use dynbvh::report::build_bench::{self, Builder, Options, Row};
 use dynbvh::report::or_dash;
 use dynbvh::report::rays::{RaySet, camera_rays, random_rays};
+use dynbvh::report::rungs::Rung;
 use dynbvh::report::wide_bench::{self, WideRow};
 use std::path::{Path, PathBuf};
 
@@ -50,7 +52,9 @@ pub struct BuildBenchArgs {
     /// Worker threads (default: all cores; more than the cores are capped).
     #[arg(long, allow_negative_numbers = true, value_parser = args::thread_count)]
     threads: Option<usize>,
-    /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all), and
+    /// Builders, comma-separated: median, sweep, binnedK, binnedK-widest (default: all), each
+    /// optionally followed by +opt (then optimised: three passes over a fifth of the interior
+    /// nodes, or +optSHARE[xPASSES]), and
     /// the other structures: kdtree, kdtree-naive, bih, grid (gridL: L cells per triangle),
     /// octree.
     #[arg(long, value_delimiter = ',')]
@@ -73,15 +77,42 @@ pub struct BuildBenchArgs {
     limits: MemoryLimit,
 }
 
-fn parse_method(s: &str) -> Result<BuildParams> {
+/// A builder, optionally followed by `+opt` or `+optSHARE[xPASSES]` (the build then
+/// optimised; `+opt` is [`Builder::OPTIMIZE`]).
+fn parse_method(s: &str) -> Result<Builder> {
+    let Some((build, opt)) = s.split_once("+opt") else {
+        return Ok(parse_build(s)?.into());
+    };
+    let optimize = if opt.is_empty() {
+        Builder::OPTIMIZE
+    } else {
+        match format!("optimize:{opt}").parse::<Rung>() {
+            Ok(Rung::Optimize { share, passes }) => OptimizeBudget {
+                share,
+                passes,
+                ..Builder::OPTIMIZE
+            },
+            _ => bail!(
+                "method {s:?}: after +opt, expected nothing or SHARE[xPASSES] (share in 0..=1, \
+                 passes 1..=100)"
+            ),
+        }
+    };
+    Ok(Builder {
+        params: parse_build(build)?,
+        optimize: Some(optimize),
+    })
+}
+
+fn parse_build(s: &str) -> Result<BuildParams> {
     Ok(match s {
         "median" => BuildParams::MEDIAN,
         "sweep" => BuildParams::SWEEP,
         _ => {
             let rest = s.strip_prefix("binned").with_context(|| {
                 format!(
-                    "unknown method {s:?}: median, sweep, binnedK, binnedK-widest, kdtree, \
-                     kdtree-naive, bih, grid, gridL, octree"
+                    "unknown method {s:?}: median, sweep, binnedK, binnedK-widest (each with \
+                     an optional +opt), kdtree, kdtree-naive, bih, grid, gridL, octree"
                 )
             })?;
             let (k, widest) = match rest.strip_suffix("-widest") {
@@ -157,7 +188,13 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         );
     }
     let (methods, structures) = if args.methods.is_empty() {
-        (build_bench::default_methods(), Vec::new())
+        (
+            build_bench::default_methods()
+                .into_iter()
+                .map(Builder::from)
+                .collect(),
+            Vec::new(),
+        )
     } else {
         let mut methods = Vec::new();
         let mut structures = Vec::new();
@@ -361,5 +398,35 @@ fn print_wide_table(rows: &[WideRow]) {
             r.mismatches,
             r.checked
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_builder_may_be_followed_by_an_optimisation() {
+        let plain = parse_method("binned16").unwrap();
+        assert_eq!(plain.optimize, None);
+        assert_eq!(plain.name(), "binned16");
+        let opt = parse_method("binned16+opt").unwrap();
+        assert_eq!(opt.params, plain.params);
+        assert_eq!(opt.optimize, Some(Builder::OPTIMIZE));
+        assert_eq!(opt.name(), "binned16+opt");
+        let b = parse_method("sweep+opt0.05x2").unwrap();
+        assert_eq!(b.params, BuildParams::SWEEP);
+        let budget = b.optimize.unwrap();
+        assert_eq!((budget.share, budget.passes), (0.05, 2));
+        assert_eq!(b.name(), "sweep+opt0.05x2");
+        for bad in [
+            "binned16+optx",
+            "binned16+opt2",
+            "binned16+opt0.1x0",
+            "nope+opt",
+        ] {
+            let e = parse_method(bad).unwrap_err().to_string();
+            assert!(e.contains(bad.split('+').next().unwrap()), "{bad}: {e}");
+        }
     }
 }

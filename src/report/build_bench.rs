@@ -2,6 +2,8 @@
 //! agreement with brute force.
 
 use super::rays::RaySet;
+use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
+use crate::bvh::topology::RestructureWorkspace;
 use crate::bvh::{BuildParams, MeshBvh, TILE_H, brute_force_closest};
 use crate::geom::{Hit, TriMesh};
 use rayon::prelude::*;
@@ -42,6 +44,56 @@ pub struct Row {
     pub mismatches: usize,
     /// How many rays were compared with brute force.
     pub checked: usize,
+}
+
+/// One builder of the comparison: a build, optionally followed by insertion-based
+/// optimisation ([`MeshBvh::optimize`]), its time counted in the build's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Builder {
+    pub params: BuildParams,
+    pub optimize: Option<OptimizeBudget>,
+}
+
+impl Builder {
+    /// The build's name, with `+opt` (and the budget when it is not [`Builder::OPTIMIZE`]).
+    #[must_use]
+    pub fn name(&self) -> String {
+        match self.optimize {
+            None => self.params.name(),
+            Some(b) if b == Self::OPTIMIZE => format!("{}+opt", self.params.name()),
+            Some(b) => format!("{}+opt{}x{}", self.params.name(), b.share, b.passes),
+        }
+    }
+
+    /// The optimisation `+opt` means: three passes over a fifth of the interior nodes.
+    pub const OPTIMIZE: OptimizeBudget = OptimizeBudget {
+        share: 0.2,
+        passes: 3,
+        max_visits: 4096,
+    };
+
+    /// Builds (and optimises) a tree over `mesh`.
+    #[must_use]
+    pub fn build(&self, mesh: &TriMesh) -> MeshBvh {
+        let mut bvh = MeshBvh::build(mesh, &self.params);
+        if let Some(budget) = self.optimize {
+            bvh.optimize(
+                budget,
+                &mut RestructureWorkspace::default(),
+                &mut OptimizeScratch::default(),
+            );
+        }
+        bvh
+    }
+}
+
+impl From<BuildParams> for Builder {
+    fn from(params: BuildParams) -> Self {
+        Self {
+            params,
+            optimize: None,
+        }
+    }
 }
 
 /// How much to measure.
@@ -188,7 +240,7 @@ pub fn brute_force_samples(mesh: &TriMesh, sets: &[RaySet], check_rays: usize) -
 /// Runs the whole comparison; `progress` is told each method as it starts.
 pub fn run(
     mesh: &TriMesh,
-    methods: &[BuildParams],
+    methods: &[Builder],
     sets: &[RaySet],
     opts: Options,
     progress: impl FnMut(&str),
@@ -200,19 +252,19 @@ pub fn run(
 /// [`run`] with brute force's answers already computed ([`brute_force_samples`]).
 pub fn run_with_samples(
     mesh: &TriMesh,
-    methods: &[BuildParams],
+    methods: &[Builder],
     sets: &[RaySet],
     opts: Options,
     samples: &[Samples],
     mut progress: impl FnMut(&str),
 ) -> Vec<Row> {
     let mut rows = Vec::new();
-    for params in methods {
-        let name = params.name();
+    for builder in methods {
+        let name = builder.name();
         progress(&name);
         let mut bvh = None;
         let builds: Vec<f64> = (0..opts.build_runs.max(1))
-            .map(|_| time_ms(|| bvh = Some(MeshBvh::build(mesh, params))))
+            .map(|_| time_ms(|| bvh = Some(builder.build(mesh))))
             .collect();
         let mut bvh = bvh.expect("at least one build ran");
         let refits: Vec<f64> = (0..opts.build_runs.max(1))
