@@ -7,6 +7,7 @@
 
 mod build_fast;
 mod build_naive;
+mod clip;
 mod events;
 mod traverse;
 mod validate;
@@ -40,6 +41,9 @@ pub struct KdParams {
     pub empty_bonus: f32,
     /// Depth limit; `None`: `8 + 1.3 log2 N`, at most [`MAX_KD_DEPTH`].
     pub max_depth: Option<usize>,
+    /// Perfect splits: a triangle's box in a cell is that of the triangle clipped to the cell
+    /// (not its own box clipped to the cell), so cells it does not enter lose it.
+    pub perfect_splits: bool,
     /// The builder.
     pub build: KdBuild,
 }
@@ -54,6 +58,7 @@ impl Default for KdParams {
             intersection_cost: 0.5,
             empty_bonus: 0.2,
             max_depth: None,
+            perfect_splits: true,
             build: KdBuild::Sorted,
         }
     }
@@ -66,6 +71,7 @@ impl KdParams {
         intersection_cost: 0.5,
         empty_bonus: 0.2,
         max_depth: None,
+        perfect_splits: true,
         build: KdBuild::Naive,
     };
 
@@ -177,8 +183,8 @@ impl KdTree {
         let boxes = tris.boxes();
         let bounds = super::triangles::bounds_of(&boxes);
         let built = match params.build {
-            KdBuild::Sorted => build_fast::build(&boxes, &bounds, params),
-            KdBuild::Naive => build_naive::build(&boxes, &bounds, params),
+            KdBuild::Sorted => build_fast::build(&tris.tris, &boxes, &bounds, params),
+            KdBuild::Naive => build_naive::build(&tris.tris, &boxes, &bounds, params),
         };
         let leaf_tris = built.refs.iter().map(|&r| tris.tris[r as usize]).collect();
         Self {
