@@ -37,6 +37,18 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             ..KdParams::NAIVE
         },
     )));
+    // The other setting of perfect splits, in both builders.
+    let perfect = !KdParams::default().perfect_splits;
+    for params in [KdParams::default(), KdParams::NAIVE] {
+        v.push(Box::new(KdTree::build(
+            mesh,
+            &KdParams {
+                perfect_splits: perfect,
+                intersection_cost: 1.0,
+                ..params
+            },
+        )));
+    }
     v.push(Box::new(Bih::build(mesh, &BihParams { max_leaf_size: 1 })));
     for density in [0.05, 8.0] {
         v.push(Box::new(Grid::build(
@@ -290,14 +302,28 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
         lattice_box(5),
         common::soup_with_nan_and_inf(),
     ] {
-        let fast = KdTree::build(&mesh, &KdParams::default());
-        let naive = KdTree::build(&mesh, &KdParams::NAIVE);
-        assert_eq!(naive.params().build, KdBuild::Naive);
-        assert_eq!(fast.nodes(), naive.nodes());
-        assert_eq!(fast.depth(), naive.depth());
-        assert_eq!(fast.reference_count(), naive.reference_count());
-        assert_eq!(fast.sah(), naive.sah());
-        assert!(fast.nodes() > 1);
+        for perfect_splits in [false, true] {
+            let fast = KdTree::build(
+                &mesh,
+                &KdParams {
+                    perfect_splits,
+                    ..KdParams::default()
+                },
+            );
+            let naive = KdTree::build(
+                &mesh,
+                &KdParams {
+                    perfect_splits,
+                    ..KdParams::NAIVE
+                },
+            );
+            assert_eq!(naive.params().build, KdBuild::Naive);
+            assert_eq!(fast.nodes(), naive.nodes());
+            assert_eq!(fast.depth(), naive.depth());
+            assert_eq!(fast.reference_count(), naive.reference_count());
+            assert_eq!(fast.sah(), naive.sah());
+            assert!(fast.nodes() > 1);
+        }
     }
 }
 

@@ -7,6 +7,10 @@
 //! axis its start stays left and its end right, and it gets an end at the plane on the left and
 //! a start there on the right (all at one position, so sorted by triangle alone).
 //!
+//! With perfect splits a straddler is clipped to each child instead (`clip.rs`): its old
+//! events are dropped on every axis, and its new ones, sorted, are merged into each child's
+//! lists (section 4.3 and 5.2 of the paper).
+//!
 //! The lists live in one arena per axis used as a stack: a node's children's lists are
 //! written after everything in use, the left subtree is built, then the right, and the arena
 //! is cut back to where the children's lists began. After the root's lists nothing is
@@ -38,9 +42,11 @@ pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &
         }
         sort_events(&mut ev);
         let top = ev.len();
-        // Room for a few levels of children (straddlers add events).
-        ev.resize(4 * top, 0);
-        Arena { ev, top }
+        // Room for a few levels of children (straddlers add events), zeroed by the allocator
+        // (fresh pages) rather than written.
+        let mut room = vec![0; 4 * top];
+        room[..top].copy_from_slice(&ev);
+        Arena { ev: room, top }
     });
     let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
     let mut scratch = Scratch::default();
@@ -373,12 +379,19 @@ fn split_perfect(
 
 /// Merges in place the sorted `buf[..na]` and the sorted, short `b` (no key in both) into
 /// `buf[..na + b.len()]`, from the end: for each of `b`'s events, largest first, the run of
-/// `buf` above it is found by binary search and moved up whole. Returns the length.
+/// `buf` above it is found by galloping search and moved up whole (`O(k log(n / k))` for `k`
+/// new events among `n`). Returns the length.
 fn merge_back(buf: &mut [Event], na: usize, b: &[Event]) -> usize {
     let mut end = na;
     let mut out = na + b.len();
     for &y in b.iter().rev() {
-        let start = buf[..end].partition_point(|&x| x < y);
+        // Galloping back from `end`, then a binary search in the last step: O(log run).
+        let mut step = 1;
+        while step <= end && buf[end - step] > y {
+            step *= 2;
+        }
+        let low = end.saturating_sub(step);
+        let start = low + buf[low..end].partition_point(|&x| x < y);
         let run = end - start;
         buf.copy_within(start..end, out - run);
         out -= run + 1;
@@ -408,13 +421,25 @@ fn split_at_plane(
     (top..top + left, top + left..arena.top)
 }
 
+/// How many of the sorted `a`'s first events are below `y`: galloping from the start, then a
+/// binary search in the last step, `O(log answer)`.
+fn leading_below(a: &[Event], y: Event) -> usize {
+    let mut step = 1;
+    while step <= a.len() && a[step - 1] < y {
+        step *= 2;
+    }
+    let low = step / 2;
+    let high = step.min(a.len());
+    low + a[low..high].partition_point(|&x| x < y)
+}
+
 /// Writes to `out` the merge of the sorted `a` and the sorted, short `b` (new events; equal
 /// keys cannot occur, the triangles differ) and returns its length: before each of `b`'s
-/// events, the run of `a` below it is found by binary search and copied whole.
+/// events, the run of `a` below it is found by galloping search and copied whole.
 fn merge_runs(out: &mut [Event], a: &[Event], b: &[Event]) -> usize {
     let (mut rest, mut len) = (a, 0);
     for &y in b {
-        let run = rest.partition_point(|&x| x < y);
+        let run = leading_below(rest, y);
         out[len..len + run].copy_from_slice(&rest[..run]);
         out[len + run] = y;
         len += run + 1;

@@ -42,7 +42,8 @@ pub struct KdParams {
     /// Depth limit; `None`: `8 + 1.3 log2 N`, at most [`MAX_KD_DEPTH`].
     pub max_depth: Option<usize>,
     /// Perfect splits: a triangle's box in a cell is that of the triangle clipped to the cell
-    /// (not its own box clipped to the cell), so cells it does not enter lose it.
+    /// (not its own box clipped to the cell), so cells it does not enter lose it. Off by
+    /// default: fewer triangle tests per ray, but a dearer build (figures in `docs/accel.md`).
     pub perfect_splits: bool,
     /// The builder.
     pub build: KdBuild,
@@ -58,7 +59,7 @@ impl Default for KdParams {
             intersection_cost: 0.5,
             empty_bonus: 0.2,
             max_depth: None,
-            perfect_splits: true,
+            perfect_splits: false,
             build: KdBuild::Sorted,
         }
     }
@@ -71,7 +72,7 @@ impl KdParams {
         intersection_cost: 0.5,
         empty_bonus: 0.2,
         max_depth: None,
-        perfect_splits: true,
+        perfect_splits: false,
         build: KdBuild::Naive,
     };
 
