@@ -16,7 +16,7 @@
 //! is cut back to where the children's lists began. After the root's lists nothing is
 //! allocated but the arenas' growth.
 
-use super::clip::clipped_box;
+use super::clip::split_clipped_boxes;
 use super::events::{
     BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, clip_box, event, kind_of,
     push_events, sort_events, tri_of,
@@ -156,11 +156,14 @@ impl<'a> Builder<'a> {
 
     /// With perfect splits, the boxes of straddler `t` in the two children (empty where it
     /// misses the child); where rounding would drop it from both, its box clipped to each.
-    pub(super) fn straddler_boxes(&self, t: u32, left: &Aabb, right: &Aabb) -> (Aabb, Aabb) {
+    pub(super) fn straddler_boxes(&self, t: u32, cell: &Aabb, s: &Split) -> (Aabb, Aabb) {
         let (tri, bx) = (&self.tris[t as usize], &self.boxes[t as usize]);
-        let (l, r) = (clipped_box(tri, bx, left), clipped_box(tri, bx, right));
+        let (l, r) = split_clipped_boxes(tri, bx, cell, s.axis, s.pos);
         if l.is_empty() && r.is_empty() {
-            (clip_box(bx, left), clip_box(bx, right))
+            let (mut left, mut right) = (*cell, *cell);
+            left.max[s.axis] = s.pos;
+            right.min[s.axis] = s.pos;
+            (clip_box(bx, &left), clip_box(bx, &right))
         } else {
             (l, r)
         }
@@ -227,7 +230,7 @@ impl<'a> Builder<'a> {
                 scratch.new_right[a].clear();
             }
             for &t in &scratch.straddlers {
-                let (l, r) = self.straddler_boxes(t, &left_cell, &right_cell);
+                let (l, r) = self.straddler_boxes(t, &cell, &s);
                 n_left -= usize::from(l.is_empty());
                 n_right -= usize::from(r.is_empty());
                 for a in 0..3 {
@@ -378,10 +381,24 @@ fn split_perfect(
 }
 
 /// Merges in place the sorted `buf[..na]` and the sorted, short `b` (no key in both) into
-/// `buf[..na + b.len()]`, from the end: for each of `b`'s events, largest first, the run of
-/// `buf` above it is found by galloping search and moved up whole (`O(k log(n / k))` for `k`
-/// new events among `n`). Returns the length.
+/// `buf[..na + b.len()]`, from the end. Few new events: for each of `b`'s events, largest
+/// first, the run of `buf` above it is found by galloping search and moved up whole
+/// (`O(k log(n / k))` for `k` new events among `n`); many: element by element. Returns the
+/// length.
 fn merge_back(buf: &mut [Event], na: usize, b: &[Event]) -> usize {
+    if 4 * b.len() >= na {
+        // Many new events: an element-wise merge, without branches on the keys.
+        let (mut i, mut j) = (na, b.len());
+        while j > 0 {
+            let y = b[j - 1];
+            let take_a = i > 0 && buf[i - 1] > y;
+            let x = if take_a { buf[i - 1] } else { y };
+            buf[i + j - 1] = x;
+            i -= usize::from(take_a);
+            j -= usize::from(!take_a);
+        }
+        return na + b.len();
+    }
     let mut end = na;
     let mut out = na + b.len();
     for &y in b.iter().rev() {

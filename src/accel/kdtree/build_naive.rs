@@ -57,7 +57,7 @@ fn node(b: &mut Builder, index: usize, cell: Aabb, items: Vec<(u32, Aabb)>, dept
             RIGHT => right.push((t, bx)),
             _ => {
                 let (l, r) = if b.params.perfect_splits {
-                    b.straddler_boxes(t, &left_cell, &right_cell)
+                    b.straddler_boxes(t, &cell, &s)
                 } else {
                     (clip_box(&bx, &left_cell), clip_box(&bx, &right_cell))
                 };

@@ -60,7 +60,8 @@ impl Polygon {
 
 /// The box of triangle `tri` (its own box `tri_box`) within `cell`, widened as the module says;
 /// empty when the triangle misses the widened cell. A triangle with a coordinate that is not
-/// finite gets its box clipped to the cell.
+/// finite gets its box clipped to the cell. (The builders use [`split_clipped_boxes`].)
+#[cfg(test)]
 pub(super) fn clipped_box(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb) -> Aabb {
     clip_with_margin(tri, tri_box, cell, true)
 }
@@ -71,24 +72,23 @@ pub(super) fn clipped_box_exact(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb) ->
     clip_with_margin(tri, tri_box, cell, false)
 }
 
-fn clip_with_margin(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb, margin: bool) -> Aabb {
-    let base = super::events::clip_box(tri_box, cell);
-    if base.is_empty() || !tri.iter().all(|p| p.is_finite()) {
-        return base;
+/// The margin for `tri` (`None` when a coordinate is not finite).
+fn margin_of(tri: &[Vec3; 3]) -> Option<f32> {
+    if !tri.iter().all(|p| p.is_finite()) {
+        return None;
     }
     let big = tri.iter().fold(0.0f32, |m, p| m.max(p.abs().max_element()));
-    let eps = if margin {
-        big * CLIP_MARGIN + f32::MIN_POSITIVE
-    } else {
-        0.0
-    };
+    Some(big * CLIP_MARGIN + f32::MIN_POSITIVE)
+}
+
+/// `tri` clipped to `cell` widened by `eps` (only at the planes its box `tri_box` crosses).
+fn clip_to_cell(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb, eps: f32) -> Polygon {
     let mut poly = Polygon {
         p: [Vec3::ZERO; MAX_CORNERS],
         n: 3,
     };
     poly.p[..3].copy_from_slice(tri);
     for axis in 0..3 {
-        // Only the planes the triangle's box crosses can cut it.
         let lo = cell.min[axis] - eps;
         if tri_box.min[axis] < lo {
             poly = poly.clip(axis, lo, -1.0);
@@ -98,13 +98,59 @@ fn clip_with_margin(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb, margin: bool) 
             poly = poly.clip(axis, hi, 1.0);
         }
         if poly.n == 0 {
-            return Aabb::EMPTY;
+            break;
         }
     }
+    poly
+}
+
+/// The box of `poly` widened by `eps` and cut to `base`; empty when `poly` is.
+fn widened_box(poly: &Polygon, eps: f32, base: &Aabb) -> Aabb {
+    if poly.n == 0 {
+        return Aabb::EMPTY;
+    }
     let b = Aabb::from_points(&poly.p[..poly.n]);
-    let widened = Aabb::new(b.min - Vec3::splat(eps), b.max + Vec3::splat(eps));
-    let out = Aabb::new(widened.min.max(base.min), widened.max.min(base.max));
+    let out = Aabb::new(
+        (b.min - Vec3::splat(eps)).max(base.min),
+        (b.max + Vec3::splat(eps)).min(base.max),
+    );
     if out.is_empty() { Aabb::EMPTY } else { out }
+}
+
+fn clip_with_margin(tri: &[Vec3; 3], tri_box: &Aabb, cell: &Aabb, margin: bool) -> Aabb {
+    let base = super::events::clip_box(tri_box, cell);
+    let Some(eps) = margin_of(tri).filter(|_| !base.is_empty()) else {
+        return base;
+    };
+    let eps = if margin { eps } else { 0.0 };
+    widened_box(&clip_to_cell(tri, tri_box, cell, eps), eps, &base)
+}
+
+/// The boxes of `tri` (own box `tri_box`, which crosses the plane) in the two halves of
+/// `cell` cut at `pos` on `axis`, as [`clipped_box`] gives them but with one clip to the
+/// widened cell, whose polygon is then cut by the plane (widened to each side).
+pub(super) fn split_clipped_boxes(
+    tri: &[Vec3; 3],
+    tri_box: &Aabb,
+    cell: &Aabb,
+    axis: usize,
+    pos: f32,
+) -> (Aabb, Aabb) {
+    let (mut left, mut right) = (*cell, *cell);
+    left.max[axis] = pos;
+    right.min[axis] = pos;
+    let (lb, rb) = (
+        super::events::clip_box(tri_box, &left),
+        super::events::clip_box(tri_box, &right),
+    );
+    let Some(eps) = margin_of(tri) else {
+        return (lb, rb);
+    };
+    let poly = clip_to_cell(tri, tri_box, cell, eps);
+    (
+        widened_box(&poly.clip(axis, pos + eps, 1.0), eps, &lb),
+        widened_box(&poly.clip(axis, pos - eps, -1.0), eps, &rb),
+    )
 }
 
 #[cfg(test)]
@@ -136,6 +182,18 @@ mod tests {
         let cell = Aabb::new(Vec3::new(0.5, 0.5, -1.0), Vec3::new(1.0, 1.0, 1.0));
         let b = clipped_box(&tri, &tb, &cell);
         assert!(!b.is_empty() && b.min.x <= 0.5 && b.min.y <= 0.5);
+        // The split clip gives each half's box, within the margin of clipping to the half.
+        let whole = Aabb::new(Vec3::new(0.0, 0.0, -1.0), Vec3::ONE);
+        let (l, r) = split_clipped_boxes(&tri, &tb, &whole, 0, 0.75);
+        let (mut lc, mut rc) = (whole, whole);
+        lc.max.x = 0.75;
+        rc.min.x = 0.75;
+        let (el, er) = (
+            clipped_box_exact(&tri, &tb, &lc),
+            clipped_box_exact(&tri, &tb, &rc),
+        );
+        assert!(l.contains(&el) && r.contains(&er), "{l:?} {r:?}");
+        assert!(r.max.y < 0.26 && l.max.y == 1.0, "{l:?} {r:?}");
         let inf = [Vec3::ZERO, Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::Y];
         let ib = Aabb::of_triangle(&inf);
         assert_eq!(
