@@ -37,13 +37,14 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             ..KdParams::NAIVE
         },
     )));
-    // The other setting of perfect splits, in both builders.
-    let perfect = !KdParams::default().perfect_splits;
+    // The other settings of perfect splits and of the axes swept, in both builders.
+    let d = KdParams::default();
     for params in [KdParams::default(), KdParams::NAIVE] {
         v.push(Box::new(KdTree::build(
             mesh,
             &KdParams {
-                perfect_splits: perfect,
+                perfect_splits: !d.perfect_splits,
+                longest_axis_only: !d.longest_axis_only,
                 intersection_cost: 1.0,
                 ..params
             },
@@ -302,11 +303,14 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
         lattice_box(5),
         common::soup_with_nan_and_inf(),
     ] {
-        for perfect_splits in [false, true] {
+        for (perfect_splits, longest_axis_only) in
+            [(false, false), (false, true), (true, false), (true, true)]
+        {
             let fast = KdTree::build(
                 &mesh,
                 &KdParams {
                     perfect_splits,
+                    longest_axis_only,
                     ..KdParams::default()
                 },
             );
@@ -314,6 +318,7 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
                 &mesh,
                 &KdParams {
                     perfect_splits,
+                    longest_axis_only,
                     ..KdParams::NAIVE
                 },
             );
