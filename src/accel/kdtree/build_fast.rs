@@ -19,7 +19,7 @@
 use super::clip::split_clipped_boxes;
 use super::events::{
     BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, clip_box, event, kind_of,
-    push_events, sort_events, tri_of,
+    push_events, sort_events, tri_of, write_events,
 };
 use super::{Built, KdNode, KdParams};
 use crate::geom::Aabb;
@@ -36,17 +36,15 @@ pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &
         return b.finish();
     }
     let mut arena: [Arena; 3] = std::array::from_fn(|axis| {
-        let mut ev = Vec::with_capacity(2 * ids.len());
+        // The root's events (at most two a triangle) and room for a few levels of children
+        // (straddlers add events), zeroed by the allocator (fresh pages) rather than written.
+        let mut ev = vec![0; 8 * ids.len()];
+        let mut top = 0;
         for &i in &ids {
-            push_events(&mut ev, &boxes[i as usize], axis, i);
+            top += write_events(&mut ev[top..], &boxes[i as usize], axis, i);
         }
-        sort_events(&mut ev);
-        let top = ev.len();
-        // Room for a few levels of children (straddlers add events), zeroed by the allocator
-        // (fresh pages) rather than written.
-        let mut room = vec![0; 4 * top];
-        room[..top].copy_from_slice(&ev);
-        Arena { ev: room, top }
+        sort_events(&mut ev[..top]);
+        Arena { ev, top }
     });
     let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
     let mut scratch = Scratch::default();

@@ -91,6 +91,21 @@ pub(super) fn push_events(out: &mut Vec<Event>, b: &Aabb, axis: usize, tri: u32)
     }
 }
 
+/// Writes the events of triangle `tri`'s box on `axis` at the start of `out`; returns how
+/// many (1 or 2), as [`push_events`] appends them.
+#[inline(always)]
+pub(super) fn write_events(out: &mut [Event], b: &Aabb, axis: usize, tri: u32) -> usize {
+    let (lo, hi) = (b.min[axis], b.max[axis]);
+    if lo == hi {
+        out[0] = event(lo, Kind::Planar, tri);
+        1
+    } else {
+        out[0] = event(lo, Kind::Start, tri);
+        out[1] = event(hi, Kind::End, tri);
+        2
+    }
+}
+
 /// A chosen split plane.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Split {
