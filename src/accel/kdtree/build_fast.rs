@@ -378,7 +378,7 @@ fn split_perfect(
     (top..top + left, top + left..arena.top)
 }
 
-/// Merges in place the sorted `buf[..na]` and the sorted, short `b` (no key in both) into
+/// Merges in place the sorted `buf[..na]` and the sorted `b` (no key in both) into
 /// `buf[..na + b.len()]`, from the end. Few new events: for each of `b`'s events, largest
 /// first, the run of `buf` above it is found by galloping search and moved up whole
 /// (`O(k log(n / k))` for `k` new events among `n`); many: element by element. Returns the
