@@ -1,8 +1,9 @@
 //! Build time (CPU), size and traversal work per ray of the other structures beside the binned
 //! BVH, single-threaded: `cargo run --release --example prof_accel MESH.tri RAYS.rays [NAMES]`
 //! (NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`, `KD_CT`, `KD_EB`,
-//! `KD_DEPTH`: the kd-tree's intersection cost, traversal cost, empty bonus and depth limit
-//! in place of the defaults). Run with `RAYON_NUM_THREADS=1` to build the BVH on one thread.
+//! `KD_DEPTH`, `KD_PERFECT`, `KD_LONGEST` (0 or 1): the kd-tree's intersection cost,
+//! traversal cost, empty bonus, depth limit, perfect splits and longest-axis sweep in place of
+//! the defaults). Run with `RAYON_NUM_THREADS=1` to build the BVH on one thread.
 use dynbvh::accel::{Accel, AccelKind, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 
@@ -20,10 +21,17 @@ fn main() {
     for name in names.split(',') {
         let c = cpu_s();
         let env = |k: &str| std::env::var(k).ok().map(|v| v.parse::<f32>().unwrap());
-        let ci = ["KD_CI", "KD_CT", "KD_EB", "KD_DEPTH"]
-            .iter()
-            .any(|k| env(k).is_some())
-            .then_some(());
+        let ci = [
+            "KD_CI",
+            "KD_CT",
+            "KD_EB",
+            "KD_DEPTH",
+            "KD_PERFECT",
+            "KD_LONGEST",
+        ]
+        .iter()
+        .any(|k| env(k).is_some())
+        .then_some(());
         let s: Box<dyn Accel> = if name == "bvh" {
             Box::new(MeshBvh::build(&mesh, &BuildParams::BINNED))
         } else if let (Some(()), "kdtree") = (ci, name) {
@@ -33,6 +41,8 @@ fn main() {
                 traversal_cost: env("KD_CT").unwrap_or(d.traversal_cost),
                 empty_bonus: env("KD_EB").unwrap_or(d.empty_bonus),
                 max_depth: env("KD_DEPTH").map(|v| v as usize).or(d.max_depth),
+                perfect_splits: env("KD_PERFECT").map_or(d.perfect_splits, |v| v != 0.0),
+                longest_axis_only: env("KD_LONGEST").map_or(d.longest_axis_only, |v| v != 0.0),
                 ..d
             };
             Box::new(KdTree::build(&mesh, &params))

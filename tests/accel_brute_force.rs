@@ -37,6 +37,19 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             ..KdParams::NAIVE
         },
     )));
+    // The other settings of perfect splits and of the axes swept, in both builders.
+    let d = KdParams::default();
+    for params in [KdParams::default(), KdParams::NAIVE] {
+        v.push(Box::new(KdTree::build(
+            mesh,
+            &KdParams {
+                perfect_splits: !d.perfect_splits,
+                longest_axis_only: !d.longest_axis_only,
+                intersection_cost: 1.0,
+                ..params
+            },
+        )));
+    }
     v.push(Box::new(Bih::build(mesh, &BihParams { max_leaf_size: 1 })));
     for density in [0.05, 8.0] {
         v.push(Box::new(Grid::build(
@@ -290,14 +303,32 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
         lattice_box(5),
         common::soup_with_nan_and_inf(),
     ] {
-        let fast = KdTree::build(&mesh, &KdParams::default());
-        let naive = KdTree::build(&mesh, &KdParams::NAIVE);
-        assert_eq!(naive.params().build, KdBuild::Naive);
-        assert_eq!(fast.nodes(), naive.nodes());
-        assert_eq!(fast.depth(), naive.depth());
-        assert_eq!(fast.reference_count(), naive.reference_count());
-        assert_eq!(fast.sah(), naive.sah());
-        assert!(fast.nodes() > 1);
+        for (perfect_splits, longest_axis_only) in
+            [(false, false), (false, true), (true, false), (true, true)]
+        {
+            let fast = KdTree::build(
+                &mesh,
+                &KdParams {
+                    perfect_splits,
+                    longest_axis_only,
+                    ..KdParams::default()
+                },
+            );
+            let naive = KdTree::build(
+                &mesh,
+                &KdParams {
+                    perfect_splits,
+                    longest_axis_only,
+                    ..KdParams::NAIVE
+                },
+            );
+            assert_eq!(naive.params().build, KdBuild::Naive);
+            assert_eq!(fast.nodes(), naive.nodes());
+            assert_eq!(fast.depth(), naive.depth());
+            assert_eq!(fast.reference_count(), naive.reference_count());
+            assert_eq!(fast.sah(), naive.sah());
+            assert!(fast.nodes() > 1);
+        }
     }
 }
 

@@ -7,37 +7,43 @@
 //! axis its start stays left and its end right, and it gets an end at the plane on the left and
 //! a start there on the right (all at one position, so sorted by triangle alone).
 //!
+//! With perfect splits a straddler is clipped to each child instead (`clip.rs`): its old
+//! events are dropped on every axis, and its new ones, sorted, are merged into each child's
+//! lists (section 4.3 and 5.2 of the paper).
+//!
 //! The lists live in one arena per axis used as a stack: a node's children's lists are
 //! written after everything in use, the left subtree is built, then the right, and the arena
 //! is cut back to where the children's lists began. After the root's lists nothing is
 //! allocated but the arenas' growth.
 
+use super::clip::split_clipped_boxes;
 use super::events::{
-    BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, event, kind_of, push_events,
-    sort_events, tri_of,
+    BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, clip_box, event, kind_of,
+    push_events, sort_events, tri_of, write_events,
 };
 use super::{Built, KdNode, KdParams};
 use crate::geom::Aabb;
+use glam::Vec3;
 use std::ops::Range;
 
 /// Builds the tree over the triangles whose boxes are not empty.
-pub(super) fn build(boxes: &[Aabb], bounds: &Aabb, params: &KdParams) -> Built {
+pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &KdParams) -> Built {
     let ids: Vec<u32> = (0..boxes.len() as u32)
         .filter(|&i| !boxes[i as usize].is_empty())
         .collect();
-    let mut b = Builder::new(boxes, bounds, params, ids.len());
+    let mut b = Builder::new(tris, boxes, bounds, params, ids.len());
     if ids.is_empty() {
         return b.finish();
     }
     let mut arena: [Arena; 3] = std::array::from_fn(|axis| {
-        let mut ev = Vec::with_capacity(2 * ids.len());
+        // The root's events (at most two a triangle) and room for a few levels of children
+        // (straddlers add events), zeroed by the allocator (fresh pages) rather than written.
+        let mut ev = vec![0; 8 * ids.len()];
+        let mut top = 0;
         for &i in &ids {
-            push_events(&mut ev, &boxes[i as usize], axis, i);
+            top += write_events(&mut ev[top..], &boxes[i as usize], axis, i);
         }
-        sort_events(&mut ev);
-        let top = ev.len();
-        // Room for a few levels of children (straddlers add events).
-        ev.resize(4 * top, 0);
+        sort_events(&mut ev[..top]);
         Arena { ev, top }
     });
     let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
@@ -67,16 +73,19 @@ impl Arena {
 }
 
 /// Per-node buffers, reused: the triangles straddling the plane and their new events on the
-/// split axis for each child.
+/// split axis for each child (with perfect splits, on every axis).
 #[derive(Default)]
 struct Scratch {
     straddlers: Vec<u32>,
     left: Vec<Event>,
     right: Vec<Event>,
+    new_left: [Vec<Event>; 3],
+    new_right: [Vec<Event>; 3],
 }
 
 /// The state shared by the whole build.
 pub(super) struct Builder<'a> {
+    pub(super) tris: &'a [[Vec3; 3]],
     pub(super) boxes: &'a [Aabb],
     pub(super) params: &'a KdParams,
     pub(super) nodes: Vec<KdNode>,
@@ -91,8 +100,15 @@ pub(super) struct Builder<'a> {
 }
 
 impl<'a> Builder<'a> {
-    pub(super) fn new(boxes: &'a [Aabb], bounds: &Aabb, params: &'a KdParams, n: usize) -> Self {
+    pub(super) fn new(
+        tris: &'a [[Vec3; 3]],
+        boxes: &'a [Aabb],
+        bounds: &Aabb,
+        params: &'a KdParams,
+        n: usize,
+    ) -> Self {
         Self {
+            tris,
             boxes,
             params,
             nodes: Vec::new(),
@@ -134,6 +150,21 @@ impl<'a> Builder<'a> {
             return None;
         }
         choose_split(events, n, cell, self.params)
+    }
+
+    /// With perfect splits, the boxes of straddler `t` in the two children (empty where it
+    /// misses the child); where rounding would drop it from both, its box clipped to each.
+    pub(super) fn straddler_boxes(&self, t: u32, cell: &Aabb, s: &Split) -> (Aabb, Aabb) {
+        let (tri, bx) = (&self.tris[t as usize], &self.boxes[t as usize]);
+        let (l, r) = split_clipped_boxes(tri, bx, cell, s.axis, s.pos);
+        if l.is_empty() && r.is_empty() {
+            let (mut left, mut right) = (*cell, *cell);
+            left.max[s.axis] = s.pos;
+            right.min[s.axis] = s.pos;
+            (clip_box(bx, &left), clip_box(bx, &right))
+        } else {
+            (l, r)
+        }
     }
 
     /// Makes node `index` a leaf over `tris`.
@@ -178,7 +209,7 @@ impl<'a> Builder<'a> {
             return;
         };
         scratch.straddlers.clear();
-        let (n_left, n_right) =
+        let (mut n_left, mut n_right) =
             classify(lists[s.axis], &s, &mut self.side, &mut scratch.straddlers);
         let (mut left_cell, mut right_cell) = (cell, cell);
         left_cell.max[s.axis] = s.pos;
@@ -189,6 +220,41 @@ impl<'a> Builder<'a> {
             (ranges.clone(), Default::default())
         } else if scratch.straddlers.is_empty() && n_left == 0 {
             (Default::default(), ranges.clone())
+        } else if self.params.perfect_splits {
+            // Every straddler is clipped to each child and gets new events on every axis there
+            // (none where it misses the child); its old events are dropped.
+            for a in 0..3 {
+                scratch.new_left[a].clear();
+                scratch.new_right[a].clear();
+            }
+            for &t in &scratch.straddlers {
+                let (l, r) = self.straddler_boxes(t, &cell, &s);
+                n_left -= usize::from(l.is_empty());
+                n_right -= usize::from(r.is_empty());
+                for a in 0..3 {
+                    if !l.is_empty() {
+                        push_events(&mut scratch.new_left[a], &l, a, t);
+                    }
+                    if !r.is_empty() {
+                        push_events(&mut scratch.new_right[a], &r, a, t);
+                    }
+                }
+            }
+            let mut left_ranges: [Range<usize>; 3] = Default::default();
+            let mut right_ranges: [Range<usize>; 3] = Default::default();
+            for a in 0..3 {
+                sort_events(&mut scratch.new_left[a]);
+                sort_events(&mut scratch.new_right[a]);
+                let (l, r) = split_perfect(
+                    &mut arena[a],
+                    ranges[a].clone(),
+                    &self.side,
+                    [&scratch.new_left[a], &scratch.new_right[a]],
+                );
+                left_ranges[a] = l;
+                right_ranges[a] = r;
+            }
+            (left_ranges, right_ranges)
         } else {
             // Triangles in both children: the straddlers' new events on the split axis, at the
             // plane, sorted by triangle.
@@ -279,6 +345,77 @@ fn split_by_side(
     (top..top + nl, top + nl..arena.top)
 }
 
+/// With perfect splits: writes past `arena.top` the events of `arena.ev[src]` of the
+/// triangles on one side only (left, then right), each side merged with the straddlers' new
+/// events `extra` for it (sorted), and returns their ranges (`top` moved past them). The
+/// straddlers' old events are dropped. One branch-free pass writes each event to both sides'
+/// room and advances the side it belongs to; each side is then merged in place from its end,
+/// and the right one moved down.
+fn split_perfect(
+    arena: &mut Arena,
+    src: Range<usize>,
+    side: &[u8],
+    extra: [&[Event]; 2],
+) -> (Range<usize>, Range<usize>) {
+    let len = src.len();
+    let (kl, kr) = (extra[0].len(), extra[1].len());
+    arena.reserve(2 * len + kl + kr);
+    let top = arena.top;
+    let (used, room) = arena.ev.split_at_mut(top);
+    let (tl, tr) = room[..2 * len + kl + kr].split_at_mut(len + kl);
+    let (mut nl, mut nr) = (0, 0);
+    for &e in &used[src] {
+        let s = side[tri_of(e) as usize];
+        tl[nl] = e;
+        tr[nr] = e;
+        nl += usize::from(s == LEFT);
+        nr += usize::from(s == RIGHT);
+    }
+    let left = merge_back(tl, nl, extra[0]);
+    let right = merge_back(tr, nr, extra[1]);
+    room.copy_within(len + kl..len + kl + right, left);
+    arena.top = top + left + right;
+    (top..top + left, top + left..arena.top)
+}
+
+/// Merges in place the sorted `buf[..na]` and the sorted `b` (no key in both) into
+/// `buf[..na + b.len()]`, from the end. Few new events: for each of `b`'s events, largest
+/// first, the run of `buf` above it is found by galloping search and moved up whole
+/// (`O(k log(n / k))` for `k` new events among `n`); many: element by element. Returns the
+/// length.
+fn merge_back(buf: &mut [Event], na: usize, b: &[Event]) -> usize {
+    if 4 * b.len() >= na {
+        // Many new events: an element-wise merge, without branches on the keys.
+        let (mut i, mut j) = (na, b.len());
+        while j > 0 {
+            let y = b[j - 1];
+            let take_a = i > 0 && buf[i - 1] > y;
+            let x = if take_a { buf[i - 1] } else { y };
+            buf[i + j - 1] = x;
+            i -= usize::from(take_a);
+            j -= usize::from(!take_a);
+        }
+        return na + b.len();
+    }
+    let mut end = na;
+    let mut out = na + b.len();
+    for &y in b.iter().rev() {
+        // Galloping back from `end`, then a binary search in the last step: O(log run).
+        let mut step = 1;
+        while step <= end && buf[end - step] > y {
+            step *= 2;
+        }
+        let low = end.saturating_sub(step);
+        let start = low + buf[low..end].partition_point(|&x| x < y);
+        let run = end - start;
+        buf.copy_within(start..end, out - run);
+        out -= run + 1;
+        buf[out] = y;
+        end = start;
+    }
+    na + b.len()
+}
+
 /// Writes past `arena.top` the left child's events on the split axis, `arena.ev[src]`'s first
 /// `cut` merged with the straddlers' new ends `extra[0]`, then the right child's, the rest
 /// merged with their new starts `extra[1]`; returns their ranges (`top` moved past them).
@@ -299,13 +436,25 @@ fn split_at_plane(
     (top..top + left, top + left..arena.top)
 }
 
+/// How many of the sorted `a`'s first events are below `y`: galloping from the start, then a
+/// binary search in the last step, `O(log answer)`.
+fn leading_below(a: &[Event], y: Event) -> usize {
+    let mut step = 1;
+    while step <= a.len() && a[step - 1] < y {
+        step *= 2;
+    }
+    let low = step / 2;
+    let high = step.min(a.len());
+    low + a[low..high].partition_point(|&x| x < y)
+}
+
 /// Writes to `out` the merge of the sorted `a` and the sorted, short `b` (new events; equal
 /// keys cannot occur, the triangles differ) and returns its length: before each of `b`'s
-/// events, the run of `a` below it is found by binary search and copied whole.
+/// events, the run of `a` below it is found by galloping search and copied whole.
 fn merge_runs(out: &mut [Event], a: &[Event], b: &[Event]) -> usize {
     let (mut rest, mut len) = (a, 0);
     for &y in b {
-        let run = rest.partition_point(|&x| x < y);
+        let run = leading_below(rest, y);
         out[len..len + run].copy_from_slice(&rest[..run]);
         out[len + run] = y;
         len += run + 1;

@@ -91,6 +91,21 @@ pub(super) fn push_events(out: &mut Vec<Event>, b: &Aabb, axis: usize, tri: u32)
     }
 }
 
+/// Writes the events of triangle `tri`'s box on `axis` at the start of `out`; returns how
+/// many (1 or 2), as [`push_events`] appends them.
+#[inline(always)]
+pub(super) fn write_events(out: &mut [Event], b: &Aabb, axis: usize, tri: u32) -> usize {
+    let (lo, hi) = (b.min[axis], b.max[axis]);
+    if lo == hi {
+        out[0] = event(lo, Kind::Planar, tri);
+        1
+    } else {
+        out[0] = event(lo, Kind::Start, tri);
+        out[1] = event(hi, Kind::End, tri);
+        2
+    }
+}
+
 /// A chosen split plane.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Split {
@@ -248,7 +263,8 @@ impl PlaneCost {
 /// lowest position), if it beats making a leaf of the `n` triangles.
 ///
 /// The planes that leave a child empty (at each axis's first and last event) are costed
-/// first; then the axes are swept in the order of a lower bound on their other splits' cost
+/// first; then the axes are swept (with [`KdParams::longest_axis_only`], the cell's longest
+/// axis alone unless no split so far beats the leaf) in the order of a lower bound on their other splits' cost
 /// ([`PlaneCost::both_sides_bound`]), and an axis whose bound is not below the best split so
 /// far (or the leaf) is not swept, since none of its other planes can win or tie.
 pub(super) fn choose_split(
@@ -277,8 +293,17 @@ pub(super) fn choose_split(
     let bounds = planes.each_ref().map(|p| p.both_sides_bound(n));
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| bounds[a].total_cmp(&bounds[b]));
-    for axis in order {
+    if params.longest_axis_only {
+        // As in pbrt: the cell's longest axis first (the lowest on ties); the others only
+        // when it offers no split that beats the leaf.
+        let longest = cell.largest_axis();
+        order.sort_by_key(|&a| a != longest);
+    }
+    for (k, axis) in order.into_iter().enumerate() {
         let limit = best(&per_axis).map_or(leaf_cost, |b| b.cost.min(leaf_cost));
+        if params.longest_axis_only && k > 0 && limit < leaf_cost {
+            break;
+        }
         if bounds[axis] < limit {
             per_axis[axis] = planes[axis].sweep(events[axis], n);
         }

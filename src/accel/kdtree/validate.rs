@@ -1,8 +1,9 @@
 //! The kd-tree's invariants: children stored after their parent, planes strictly inside their
 //! cells, every reference overlapping its leaf's cell, and every triangle reachable from the
 //! root wherever its box lies (on both sides of a plane it straddles, on one side of a plane
-//! it lies in).
+//! it lies in); with perfect splits, wherever the triangle clipped to the cell lies.
 
+use super::clip::clipped_box_exact;
 use super::events::clip_box;
 use super::{KdNode, KdTree, MAX_KD_DEPTH};
 use crate::accel::triangles::same_triangle;
@@ -97,7 +98,14 @@ impl KdTree {
         let (mut left, mut right) = (cell, cell);
         left.max[axis] = pos;
         right.min[axis] = pos;
-        let c = clip_box(b, &cell);
+        let c = if self.params.perfect_splits {
+            clipped_box_exact(&self.tris.tris[t as usize], b, &cell)
+        } else {
+            clip_box(b, &cell)
+        };
+        if c.is_empty() {
+            return true;
+        }
         let (lo, hi) = (c.min[axis], c.max[axis]);
         if lo == pos && hi == pos {
             return self.reaches(first, left, b, t) || self.reaches(first + 1, right, b, t);
