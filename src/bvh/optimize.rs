@@ -161,6 +161,7 @@ impl Topology {
         }
         let sibling = self.child[p as usize][1 - self.side(n)];
         let [l, r] = self.child[n as usize];
+        let scale = self.area(p);
         // Out go `n` and `p`: their areas leave the sum, the ancestors may shrink.
         let mut delta = -self.area(n) - self.area(p) + self.detach(n);
         // The larger child first (it has fewer good places).
@@ -177,7 +178,7 @@ impl Topology {
             self.insert(x, free, best);
             delta += cost;
         }
-        if -delta > MIN_GAIN * self.area(p) {
+        if -delta > MIN_GAIN * scale {
             return (Some(-delta), visits);
         }
         // Undo: take the children out again, rejoin them under `n`, put `n` back beside its
