@@ -60,10 +60,6 @@ fn main() {
     let c = cpu_s();
     let mut w8 = MeshBvh8::from_mesh_bvh(&bin);
     let c8 = (cpu_s() - c) * 1e3;
-    // The same tree without its compressed nodes (single rays then read the exact boxes).
-    w8.validate(&mesh).unwrap();
-    let mut w8e = w8.clone();
-    w8e.set_compressed(false);
     println!(
         "bvh4: collapse {c4:.1} ms, {} nodes, fill {:.2}, depth {}, {:.1} MiB; bvh8: collapse {c8:.1} ms, {} nodes, fill {:.2}, depth {}, {:.1} MiB",
         w4.nodes().len(),
@@ -124,31 +120,27 @@ fn main() {
             n = sample.len()
         );
         println!(
-            "  closest Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2} bvh8 exact boxes {:.2}",
+            "  closest Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2}",
             mrays(&rays, |r| bin.closest_hit(r).is_some()),
             mrays(&rays, |r| w4.closest_hit(r).is_some()),
-            mrays(&rays, |r| w8.closest_hit(r).is_some()),
-            mrays(&rays, |r| w8e.closest_hit(r).is_some())
+            mrays(&rays, |r| w8.closest_hit(r).is_some())
         );
         println!(
-            "  any     Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2} bvh8 exact boxes {:.2}",
+            "  any     Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2}",
             mrays(&rays, |r| bin.any_hit(r)),
             mrays(&rays, |r| w4.any_hit(r)),
-            mrays(&rays, |r| w8.any_hit(r)),
-            mrays(&rays, |r| w8e.any_hit(r))
+            mrays(&rays, |r| w8.any_hit(r))
         );
     }
     if let Some(def) = def {
         println!(
-            "refit ms cpu (1 thread): bin {:.2} bvh4 {:.2} bvh8 {:.2} bvh8 exact boxes {:.2}",
+            "refit ms cpu (1 thread): bin {:.2} bvh4 {:.2} bvh8 {:.2}",
             refit_ms(&mesh, &def, |m| bin.refit(m)),
             refit_ms(&mesh, &def, |m| w4.refit(m)),
-            refit_ms(&mesh, &def, |m| w8.refit(m)),
-            refit_ms(&mesh, &def, |m| w8e.refit(m))
+            refit_ms(&mesh, &def, |m| w8.refit(m))
         );
         // The last refit went to the deformed mesh.
         w8.validate(&def).unwrap();
-        w8e.validate(&def).unwrap();
         w4.validate(&def).unwrap();
     }
 }

@@ -12,11 +12,11 @@ use wide::{f32x4, f32x8};
 #[derive(Clone, Copy, Debug)]
 pub(super) struct RayLanes {
     /// Origin subtracted from bound row `i` (rows min x, y, z, max x, y, z).
-    pub(super) origin: [f32; 6],
-    pub(super) inv: [f32; 3],
-    pub(super) tmin: f32,
-    pub(super) near: [usize; 3],
-    pub(super) far: [usize; 3],
+    origin: [f32; 6],
+    inv: [f32; 3],
+    tmin: f32,
+    near: [usize; 3],
+    far: [usize; 3],
     /// The slab distances may be NaN (a NaN or infinite origin or direction, a NaN range):
     /// an empty lane's infinite bounds can then pass the test, so the traversal masks the
     /// test's answer with the occupied lanes.

@@ -19,7 +19,6 @@ mod closest_point;
 pub(crate) use closest_point::Placed;
 mod lanes;
 mod packet;
-mod quant;
 mod refit;
 mod traverse;
 
@@ -171,11 +170,6 @@ pub struct WideBvh<const K: usize> {
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
     /// path of each node's child count minus one).
     stack_need: usize,
-    /// Compressed copies of `nodes` for single-ray traversal (8-wide trees only; empty when
-    /// some node's box has no exact grid, and the traversal then reads `nodes`).
-    qnodes: Vec<quant::QNode<K>>,
-    /// Set by [`WideBvh::set_compressed`]`(false)`: no compressed nodes are kept.
-    exact_only: bool,
     /// Scratch of [`WideBvh::collapse_from`]: the triangle slots under each binary node.
     ranges: Vec<(u32, u32)>,
     /// Scratch of the stack-need computation.
@@ -252,7 +246,6 @@ impl<const K: usize> WideBvh<K> {
         );
         let caps = (self.nodes.capacity(), self.blocks.capacity());
         self.nodes.clear();
-        self.qnodes.clear();
         self.blocks.clear();
         self.block_indices.clear();
         self.prim_count = bvh.prim_count();
@@ -298,19 +291,10 @@ impl<const K: usize> WideBvh<K> {
         headroom(&mut self.blocks, caps.1);
         headroom(&mut self.block_indices, caps.1);
         self.refit_boxes();
-        self.quantize();
         let mut need = std::mem::take(&mut self.need);
         self.stack_need = self.stack_need_with(&mut need);
         self.need = need;
         assert!(self.stack_need < traverse::BIG_STACK, "tree too deep");
-    }
-
-    /// Whether single rays walk compressed copies of the 8-wide nodes (8-bit child boxes on a
-    /// per-node grid, two cache lines a node instead of four; the default) or the exact boxes
-    /// only (5% less memory). Both give the same hits. No effect on 4-wide trees.
-    pub fn set_compressed(&mut self, on: bool) {
-        self.exact_only = !on;
-        self.quantize();
     }
 
     /// The nodes; node 0 is the root (none for the empty mesh). A leaf child's `first` and
@@ -342,7 +326,6 @@ impl<const K: usize> WideBvh<K> {
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.qnodes.as_slice())
             + std::mem::size_of_val(self.blocks.as_slice())
             + std::mem::size_of_val(self.block_indices.as_slice())
     }
@@ -466,52 +449,6 @@ impl<const K: usize> WideBvh<K> {
         }
         if self.stack_need != self.compute_stack_need() {
             return Err("stale stack bound".into());
-        }
-        self.check_quantized()
-    }
-
-    /// Rewrites the compressed nodes from `nodes` (in place when their count is unchanged, so
-    /// a refit allocates nothing). Only 8-wide trees are compressed: a 4-wide node is as small
-    /// exact as compressed (two cache lines).
-    pub(super) fn quantize(&mut self) {
-        if K != 8 || self.exact_only {
-            self.qnodes.clear();
-            return;
-        }
-        if self.qnodes.len() != self.nodes.len() {
-            let before = self.qnodes.capacity();
-            self.qnodes.clear();
-            self.qnodes.resize(self.nodes.len(), quant::QNode::EMPTY);
-            headroom(&mut self.qnodes, before);
-        }
-        for (q, n) in self.qnodes.iter_mut().zip(&self.nodes) {
-            let Some(e) = quant::QNode::encode(n) else {
-                self.qnodes.clear();
-                return;
-            };
-            *q = e;
-        }
-    }
-
-    /// The compressed nodes, when present, hold each lane's exact box and its child.
-    fn check_quantized(&self) -> Result<(), String> {
-        if self.qnodes.is_empty() {
-            return Ok(());
-        }
-        if self.qnodes.len() != self.nodes.len() {
-            return Err("compressed node count differs".into());
-        }
-        for (i, (q, n)) in self.qnodes.iter().zip(&self.nodes).enumerate() {
-            if q.child != n.child || q.occupied != n.occupied() {
-                return Err(format!("compressed node {i} has stale children"));
-            }
-            for k in 0..K {
-                if q.occupied & (1 << k) != 0 && !q.lane_box(k).contains(&n.lane_bounds(k)) {
-                    return Err(format!(
-                        "compressed lane {k} of node {i} does not hold the exact box"
-                    ));
-                }
-            }
         }
         Ok(())
     }

@@ -59,7 +59,6 @@ impl<const K: usize> WideBvh<K> {
             leaf_pass(&mut self.nodes, &mut g);
         }
         interior_pass(&mut self.nodes);
-        self.quantize();
     }
 
     /// Recomputes every box from the triangle blocks as they are.

@@ -5,7 +5,6 @@
 //! reports exactly the binary tree's and brute force's distance.
 
 use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab};
-use super::quant::slab_q;
 use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::Counters;
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
@@ -71,20 +70,10 @@ impl<const K: usize> WideBvh<K> {
     /// leaf's first block (asking for every block of a leaf traced no faster).
     #[inline(always)]
     pub(super) fn prefetch(&self, c: u32) {
-        self.prefetch_q::<false>(c);
-    }
-
-    /// [`WideBvh::prefetch`] of the compressed node when `Q`.
-    #[inline(always)]
-    fn prefetch_q<const Q: bool>(&self, c: u32) {
         if c & LEAF_BIT != 0 {
             let (first, _) = leaf_range(c);
             if let Some(b) = self.blocks.get(first as usize) {
                 crate::simd::prefetch_all(b);
-            }
-        } else if Q {
-            if let Some(n) = self.qnodes.get(c as usize) {
-                crate::simd::prefetch_all(n);
             }
         } else if let Some(n) = self.nodes.get(c as usize) {
             crate::simd::prefetch_all(n);
@@ -100,36 +89,15 @@ impl<const K: usize> WideBvh<K> {
         &self,
         start: u32,
         ray: &Ray,
-        tmax: f32,
-        counters: &mut impl Counters,
-    ) -> Best {
-        let lanes = RayLanes::new(ray);
-        // The compressed nodes when present; rays with non-finite values take the exact boxes,
-        // whose empty lanes need the occupancy mask applied only for them.
-        if self.qnodes.len() == self.nodes.len() && !lanes.nonfinite {
-            self.walk::<ANY, N, true>(start, ray, &lanes, tmax, counters)
-        } else {
-            self.walk::<ANY, N, false>(start, ray, &lanes, tmax, counters)
-        }
-    }
-
-    /// [`WideBvh::traverse`] on the compressed nodes (`Q`) or the exact ones.
-    #[inline(always)]
-    fn walk<const ANY: bool, const N: usize, const Q: bool>(
-        &self,
-        start: u32,
-        ray: &Ray,
-        lanes: &RayLanes,
         mut tmax: f32,
         counters: &mut impl Counters,
     ) -> Best {
         let nodes = self.nodes.as_slice();
-        let qnodes = self.qnodes.as_slice();
         if nodes.is_empty() {
             return None;
         }
         let blocks = self.blocks.as_slice();
-        let lanes = *lanes;
+        let lanes = RayLanes::new(ray);
         let tri_lanes = TriLanes::new(ray);
         let pre = RayTriPrecomp::new(ray.dir);
         let mut best: Best = None;
@@ -179,21 +147,15 @@ impl<const K: usize> WideBvh<K> {
                     }
                 }
             } else {
-                let (mut mask, child) = if Q {
-                    let node = &qnodes[cur as usize];
-                    (slab_q(node, &lanes, tmax, &mut dist), &node.child)
-                } else {
-                    let node = &nodes[cur as usize];
-                    let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
-                    if lanes.nonfinite {
-                        mask &= node.occupied();
-                    }
-                    (mask, &node.child)
-                };
+                let node = &nodes[cur as usize];
+                let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
+                if lanes.nonfinite {
+                    mask &= node.occupied();
+                }
                 if mask != 0 {
                     let hits = mask.count_ones();
                     if hits == 1 {
-                        cur = child[mask.trailing_zeros() as usize];
+                        cur = node.child[mask.trailing_zeros() as usize];
                         continue;
                     }
                     if ANY {
@@ -203,13 +165,13 @@ impl<const K: usize> WideBvh<K> {
                         while mask != 0 {
                             let k = mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            stack[sp] = (child[k], dist[k]);
+                            stack[sp] = (node.child[k], dist[k]);
                             if PREFETCH {
-                                self.prefetch_q::<Q>(stack[sp].0);
+                                self.prefetch(stack[sp].0);
                             }
                             sp += 1;
                         }
-                        cur = child[first];
+                        cur = node.child[first];
                         continue;
                     }
                     // Sort the hit lanes by entry distance, farthest first, onto the stack.
@@ -217,9 +179,9 @@ impl<const K: usize> WideBvh<K> {
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        let e = (child[k], dist[k]);
+                        let e = (node.child[k], dist[k]);
                         if PREFETCH {
-                            self.prefetch_q::<Q>(e.0);
+                            self.prefetch(e.0);
                         }
                         let mut j = sp;
                         while j > base && stack[j - 1].1 < e.1 {
