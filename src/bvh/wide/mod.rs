@@ -253,6 +253,11 @@ impl<const K: usize> WideBvh<K> {
         if bvh.nodes().is_empty() {
             return;
         }
+        // Rays walk the nodes and blocks in random order: give new storage huge pages (an
+        // estimate for the nodes, more than the trees built so far need; the exact count for
+        // the blocks below), with the quarter of headroom of `headroom`.
+        let est = bvh.prim_count() / (2 * K) + 1;
+        crate::simd::reserve_huge(&mut self.nodes, est + est / 4);
         let mut ranges = std::mem::take(&mut self.ranges);
         let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
         let root = Item::Node(0);
@@ -265,6 +270,15 @@ impl<const K: usize> WideBvh<K> {
         // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
         // subtree's blocks are contiguous too).
         let prims = bvh.prim_indices();
+        let need: usize = (self.nodes.iter())
+            .flat_map(|n| (0..K).map(|k| n.child(k)))
+            .map(|c| match c {
+                Child::Leaf { count, .. } => count.div_ceil(4) as usize,
+                _ => 0,
+            })
+            .sum();
+        crate::simd::reserve_huge(&mut self.blocks, need + need / 4);
+        crate::simd::reserve_huge(&mut self.block_indices, need + need / 4);
         for n in &mut self.nodes {
             for k in 0..K {
                 if let Child::Leaf { first, count } = n.child(k) {
