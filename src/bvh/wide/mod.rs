@@ -167,6 +167,8 @@ pub struct WideBvh<const K: usize> {
     /// The vertex indices of each block lane, for refit (`[UNUSED; 3]` for unused lanes).
     block_indices: Vec<[[u32; 3]; 4]>,
     prim_count: usize,
+    /// Largest coordinate magnitude of the root box (for the traversal's choice of box test).
+    coord_max: f32,
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
     /// path of each node's child count minus one).
     stack_need: usize,
@@ -305,6 +307,7 @@ impl<const K: usize> WideBvh<K> {
         headroom(&mut self.blocks, caps.1);
         headroom(&mut self.block_indices, caps.1);
         self.refit_boxes();
+        self.update_coord_max();
         let mut need = std::mem::take(&mut self.need);
         self.stack_need = self.stack_need_with(&mut need);
         self.need = need;
@@ -397,6 +400,22 @@ impl<const K: usize> WideBvh<K> {
             need[i] = used.saturating_sub(1) + below;
         }
         need.first().copied().unwrap_or(0)
+    }
+
+    /// For benchmarks: single rays use the plain slab test (`(b - o) * inv`, two operations a
+    /// plane) instead of the fused multiply-add form, until the next refit or collapse.
+    #[doc(hidden)]
+    pub fn bench_plain_slab(&mut self) {
+        self.coord_max = f32::NAN;
+    }
+
+    /// Sets `coord_max` from the root box.
+    pub(super) fn update_coord_max(&mut self) {
+        let b = self.bounds();
+        self.coord_max = b.min.abs().max(b.max.abs()).max_element();
+        if b.min.is_nan() || b.max.is_nan() {
+            self.coord_max = f32::NAN;
+        }
     }
 
     /// Checks the invariants of the module docs against `mesh`: the message names the first
