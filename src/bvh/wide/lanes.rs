@@ -514,3 +514,77 @@ pub(super) fn bound_lanes(blocks: &[TriBlock]) -> Aabb {
     let hi = hi.map(|v| v.to_array().into_iter().fold(f32::NEG_INFINITY, fmax));
     Aabb::new(Vec3::from(lo), Vec3::from(hi))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (xorshift), to avoid a dependency in unit tests.
+    fn next(s: &mut u64) -> f32 {
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        (*s >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
+    /// aimed at box corners, edges and faces (where rounding decides), at every scale.
+    #[test]
+    fn fma_slab_accepts_what_the_plain_test_accepts() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut checked = 0;
+        for scale in [1e-20f32, 1e-3, 1.0, 1e3, 1e12] {
+            for _ in 0..20_000 {
+                let mut r = || next(&mut s) * 2.0 - 1.0;
+                let c = Vec3::new(r(), r(), r()) * scale;
+                let h = Vec3::new(r().abs(), r().abs(), r().abs()) * scale * 0.1;
+                let b = Aabb::new(c - h, c + h);
+                // A point on the box's surface (a corner, an edge or a face) as the target.
+                let pick = |v: f32, lo: f32, hi: f32| {
+                    if v < -0.3 {
+                        lo
+                    } else if v > 0.3 {
+                        hi
+                    } else {
+                        lo + (hi - lo) * (v + 0.5)
+                    }
+                };
+                let target = Vec3::new(
+                    pick(r(), b.min.x, b.max.x),
+                    pick(r(), b.min.y, b.max.y),
+                    pick(r(), b.min.z, b.max.z),
+                );
+                let o = c + Vec3::new(r(), r(), r()) * scale * (1.0 + 1e4 * r().abs());
+                let ray = Ray::new(o, target - o);
+                let lanes = RayLanes::new(&ray);
+                if !lanes.fma_ok(scale * 4.0) {
+                    continue;
+                }
+                let mut bounds = [[f32::INFINITY; 8]; 6];
+                for (i, v) in [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]
+                    .into_iter()
+                    .enumerate()
+                {
+                    bounds[i][3] = v;
+                }
+                for row in bounds.iter_mut().skip(3) {
+                    for (k, v) in row.iter_mut().enumerate() {
+                        if k != 3 {
+                            *v = f32::NEG_INFINITY;
+                        }
+                    }
+                }
+                let mut d = [0f32; 8];
+                let plain = slab(&bounds, &lanes, ray.tmax, &mut d);
+                let fma = slab_fma(&bounds, &lanes, ray.tmax, &mut d);
+                assert_eq!(plain & !0b1000, 0);
+                assert_eq!(fma & !0b1000, 0, "an empty lane passed");
+                if ray.hit_box(b.min, b.max, ray.tmax).is_some() {
+                    assert_eq!(fma, 0b1000, "missed {b:?} from {o:?} to {target:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 50_000, "{checked}");
+    }
+}
