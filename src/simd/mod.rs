@@ -59,17 +59,18 @@ fn prefetch_addr(p: *const u8) {
 /// Smallest allocation [`reserve_huge`] asks huge pages for: one 2 MiB huge page.
 const HUGE_PAGE: usize = 2 << 20;
 
-/// `Vec::reserve_exact(additional)`, except that a new buffer of at least 2 MiB is asked to be
+/// Room for `additional` more elements in `v`: nothing happens when it has that room already;
+/// otherwise a new buffer with `headroom` more than that, which (when at least 2 MiB) is asked to be
 /// backed by transparent huge pages (Linux `madvise(MADV_HUGEPAGE)`) before anything is written
 /// to it. For arrays that rays walk in random order (the wide trees' nodes and triangle
 /// blocks): a 2 MiB page takes one TLB entry where 4 KiB pages take 512, and random rays over a
 /// million-triangle tree otherwise miss the TLB on most node and block loads. A hint only: where
 /// huge pages are off (or on other systems) nothing changes.
-pub fn reserve_huge<T>(v: &mut Vec<T>, additional: usize) {
+pub fn reserve_huge<T>(v: &mut Vec<T>, additional: usize, headroom: usize) {
     if v.capacity() - v.len() >= additional {
         return;
     }
-    let mut fresh: Vec<T> = Vec::with_capacity(v.len() + additional);
+    let mut fresh: Vec<T> = Vec::with_capacity(v.len() + additional + headroom);
     advise_huge(
         fresh.as_mut_ptr().cast::<u8>(),
         fresh.capacity() * std::mem::size_of::<T>(),

@@ -255,11 +255,14 @@ impl<const K: usize> WideBvh<K> {
         if bvh.nodes().is_empty() {
             return;
         }
-        // Rays walk the nodes and blocks in random order: give new storage huge pages (an
-        // estimate for the nodes, more than the trees built so far need; the exact count for
-        // the blocks below), with the quarter of headroom of `headroom`.
-        let est = bvh.prim_count() / (2 * K) + 1;
-        crate::simd::reserve_huge(&mut self.nodes, est + est / 4);
+        // Rays walk the nodes and blocks in random order: give new storage huge pages (for
+        // the nodes of a fresh tree an estimate, more than the trees built so far need; the
+        // exact count for the blocks below), with the quarter of headroom of `headroom`.
+        // Storage that has room (a rebuild's, or a clone's exact fit) is kept as it is.
+        if self.nodes.capacity() == 0 {
+            let est = bvh.prim_count() / (2 * K) + 1;
+            crate::simd::reserve_huge(&mut self.nodes, est, est / 4);
+        }
         let mut ranges = std::mem::take(&mut self.ranges);
         let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
         let root = Item::Node(0);
@@ -279,8 +282,8 @@ impl<const K: usize> WideBvh<K> {
                 _ => 0,
             })
             .sum();
-        crate::simd::reserve_huge(&mut self.blocks, need + need / 4);
-        crate::simd::reserve_huge(&mut self.block_indices, need + need / 4);
+        crate::simd::reserve_huge(&mut self.blocks, need, need / 4);
+        crate::simd::reserve_huge(&mut self.block_indices, need, need / 4);
         for n in &mut self.nodes {
             for k in 0..K {
                 if let Child::Leaf { first, count } = n.child(k) {
