@@ -1086,6 +1086,24 @@ fn variants() -> Vec<Variant> {
             },
         },
         Variant {
+            // The same tree as before huge pages and the multiply-add slab test: copied by
+            // `Clone` (4 KiB pages) and set to the plain slab test (a refit restores it, so
+            // only its rays are "before"; the copy is inside its build time).
+            name: "dynbvh bvh8 (4k pages, plain slab)",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    let w = dynbvh::bvh::MeshBvh8::from_mesh_bvh(&MeshBvh::build(
+                        &m,
+                        &BuildParams::BINNED,
+                    ));
+                    let mut c = w.clone();
+                    drop(w);
+                    c.bench_plain_slab();
+                    DynWide(c)
+                })
+            },
+        },
+        Variant {
             name: "dynbvh packets",
             make: |i| {
                 measured(i, |m: TriMesh| {

@@ -60,6 +60,20 @@ fn main() {
     let c = cpu_s();
     let mut w8 = MeshBvh8::from_mesh_bvh(&bin);
     let c8 = (cpu_s() - c) * 1e3;
+    // The same tree copied by `Clone`, whose buffers get no huge-page hint (4 KiB pages where
+    // transparent huge pages are in `madvise` mode).
+    let w8s = w8.clone();
+    // The same tree with the plain slab test, in huge pages as `w8`.
+    let mut w8p = MeshBvh8::from_mesh_bvh(&bin);
+    w8p.bench_plain_slab();
+    let huge = std::fs::read_to_string("/proc/self/smaps_rollup")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("AnonHugePages"))
+                .map(str::to_owned)
+        });
+    println!("{}", huge.unwrap_or_default());
     println!(
         "bvh4: collapse {c4:.1} ms, {} nodes, fill {:.2}, depth {}, {:.1} MiB; bvh8: collapse {c8:.1} ms, {} nodes, fill {:.2}, depth {}, {:.1} MiB",
         w4.nodes().len(),
@@ -120,16 +134,20 @@ fn main() {
             n = sample.len()
         );
         println!(
-            "  closest Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2}",
+            "  closest Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2} bvh8 4k pages {:.2} bvh8 plain slab {:.2}",
             mrays(&rays, |r| bin.closest_hit(r).is_some()),
             mrays(&rays, |r| w4.closest_hit(r).is_some()),
-            mrays(&rays, |r| w8.closest_hit(r).is_some())
+            mrays(&rays, |r| w8.closest_hit(r).is_some()),
+            mrays(&rays, |r| w8s.closest_hit(r).is_some()),
+            mrays(&rays, |r| w8p.closest_hit(r).is_some())
         );
         println!(
-            "  any     Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2}",
+            "  any     Mrays/s cpu: bin {:.2} bvh4 {:.2} bvh8 {:.2} bvh8 4k pages {:.2} bvh8 plain slab {:.2}",
             mrays(&rays, |r| bin.any_hit(r)),
             mrays(&rays, |r| w4.any_hit(r)),
-            mrays(&rays, |r| w8.any_hit(r))
+            mrays(&rays, |r| w8.any_hit(r)),
+            mrays(&rays, |r| w8s.any_hit(r)),
+            mrays(&rays, |r| w8p.any_hit(r))
         );
     }
     if let Some(def) = def {

@@ -321,9 +321,9 @@ impl Accel for Embree {
                 p.org_y[k] = r.org[1];
                 p.org_z[k] = r.org[2];
                 p.tnear[k] = r.tnear;
-                p.dir_x[k] = r.dir()[0];
-                p.dir_y[k] = r.dir()[1];
-                p.dir_z[k] = r.dir()[2];
+                p.dir_x[k] = r.dir[0];
+                p.dir_y[k] = r.dir[1];
+                p.dir_z[k] = r.dir[2];
                 p.tfar[k] = r.tfar;
                 p.geom_id[k] = RTC_INVALID_GEOMETRY_ID;
             }

@@ -1,7 +1,8 @@
 //! SIMD kernels of the packet traversal (`packet`: the `wide` crate, AVX-512, AVX or
 //! plain-array fallbacks chosen at compile time; the wide tree's are in
 //! `src/bvh/wide/lanes.rs`), and the crate's few `unsafe` operations, each behind a safe
-//! function: cache prefetch hints, which have no safe equivalent.
+//! function: cache prefetch hints and the huge-page hint of [`reserve_huge`], which have no
+//! safe equivalent.
 
 pub mod packet;
 
@@ -53,4 +54,50 @@ fn prefetch_addr(p: *const u8) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
+}
+
+/// Smallest allocation [`reserve_huge`] asks huge pages for: one 2 MiB huge page.
+const HUGE_PAGE: usize = 2 << 20;
+
+/// Room for `additional` more elements in `v`: nothing happens when it has that room already;
+/// otherwise a new buffer with `headroom` more than that, which (when at least 2 MiB) is asked to be
+/// backed by transparent huge pages (Linux `madvise(MADV_HUGEPAGE)`) before anything is written
+/// to it. For arrays that rays walk in random order (the wide trees' nodes and triangle
+/// blocks): a 2 MiB page takes one TLB entry where 4 KiB pages take 512, and random rays over a
+/// million-triangle tree otherwise miss the TLB on most node and block loads. A hint only: where
+/// huge pages are off (or on other systems) nothing changes.
+pub fn reserve_huge<T>(v: &mut Vec<T>, additional: usize, headroom: usize) {
+    if v.capacity() - v.len() >= additional {
+        return;
+    }
+    let mut fresh: Vec<T> = Vec::with_capacity(v.len() + additional + headroom);
+    advise_huge(
+        fresh.as_mut_ptr().cast::<u8>(),
+        fresh.capacity() * std::mem::size_of::<T>(),
+    );
+    fresh.append(v);
+    *v = fresh;
+}
+
+/// Asks for huge pages over the whole pages inside `len` bytes from `p` (an allocation of
+/// ours, nothing of it written yet).
+fn advise_huge(p: *mut u8, len: usize) {
+    const PAGE: usize = 4096;
+    let start = (p as usize).next_multiple_of(PAGE);
+    let end = (p as usize + len) / PAGE * PAGE;
+    if end < start + HUGE_PAGE {
+        return;
+    }
+    #[cfg(target_os = "linux")]
+    // SAFETY: MADV_HUGEPAGE changes only how the kernel backs the pages of the range, never
+    // their contents or who may access them; the range is page-aligned and lies inside the
+    // caller's live allocation. Failure (THP not built into the kernel) leaves the pages as
+    // they were, so the result is ignored.
+    unsafe {
+        libc::madvise(
+            p.wrapping_add(start - p as usize).cast(),
+            end - start,
+            libc::MADV_HUGEPAGE,
+        );
+    }
 }

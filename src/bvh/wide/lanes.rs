@@ -21,7 +21,15 @@ pub(super) struct RayLanes {
     /// an empty lane's infinite bounds can then pass the test, so the traversal masks the
     /// test's answer with the occupied lanes.
     pub(super) nonfinite: bool,
+    /// `-(origin * inv)` of each bound row's axis, moved away from the box by a few ulps
+    /// (down for the near rows, up for the far ones): the offsets of [`slab_fma`].
+    neg_c: [f32; 6],
+    /// Largest `|origin * inv|` over the axes, for [`RayLanes::fma_ok`].
+    c_max: f32,
 }
+
+/// The pad of [`RayLanes`]'s `neg_c`: `4u` relative (u = 2^-24, the unit roundoff).
+const C_PAD: f32 = 1.0 / 4_194_304.0;
 
 impl RayLanes {
     #[inline(always)]
@@ -37,7 +45,25 @@ impl RayLanes {
                 far[a] = a;
             }
         }
+        // Each plane distance (b - o) / d is computed as fma(b, inv, -c) with c = o * inv
+        // rounded: beside the relative rounding of `inv` and of the fma (which the far
+        // distance's `FAR_SCALE` covers, as for the exact test), the rounding of `c` adds an
+        // absolute error of at most u |c|, and (without a fused multiply-add) the product's
+        // another u (|t| + |c|). Moving c by 4u |c| (and at least the smallest normal, against
+        // underflow) towards the outside of every slab keeps the test conservative.
+        let mut neg_c = [0f32; 6];
+        let mut c_max = 0f32;
+        for a in 0..3 {
+            let c = ray.origin[a] * ray.inv_dir[a];
+            let pad = (c.abs() * C_PAD).max(f32::MIN_POSITIVE);
+            // A larger c gives a smaller distance: the near row gets the larger.
+            neg_c[near[a]] = -(c + pad);
+            neg_c[far[a]] = -(c - pad);
+            c_max = c_max.max(c.abs());
+        }
         Self {
+            neg_c,
+            c_max,
             origin: [
                 ray.slab_lo.x,
                 ray.slab_lo.y,
@@ -55,6 +81,71 @@ impl RayLanes {
                 || ray.tmin.is_nan()
                 || ray.tmax.is_nan(),
         }
+    }
+}
+
+impl RayLanes {
+    /// True when [`slab_fma`] may be used for boxes whose coordinates are at most `coord_max`
+    /// in magnitude: the ray moves along every axis (no infinite reciprocal), is finite, and no
+    /// product `b * inv` or offset comes near overflow (a NaN `coord_max` answers false).
+    #[inline(always)]
+    pub(super) fn fma_ok(&self, coord_max: f32) -> bool {
+        const LIMIT: f32 = f32::MAX / 8.0;
+        let inv_max = self.inv[0]
+            .abs()
+            .max(self.inv[1].abs())
+            .max(self.inv[2].abs());
+        !self.nonfinite && self.c_max < LIMIT && coord_max * inv_max < LIMIT
+    }
+}
+
+/// [`slab`] with each plane distance one fused multiply-add, `b * inv - c` (half the
+/// arithmetic of `(b - o) * inv`), for rays that pass [`RayLanes::fma_ok`]: conservative by the
+/// padded offsets (see [`RayLanes::new`]); the far distance gets the same `FAR_SCALE`. The
+/// entry distances it writes may be a few ulps of `|o / d|` below [`slab`]'s.
+#[inline(always)]
+pub(super) fn slab_fma<const K: usize>(
+    bounds: &[[f32; K]; 6],
+    r: &RayLanes,
+    tmax: f32,
+    dist: &mut [f32; K],
+) -> u32 {
+    if K == 8 {
+        let row = |i: usize| -> f32x8 {
+            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
+            f32x8::from(*a)
+        };
+        let t = |a: usize, plane: usize| {
+            row(plane).mul_add(f32x8::splat(r.inv[a]), f32x8::splat(r.neg_c[plane]))
+        };
+        let tn = t(0, r.near[0])
+            .fast_max(t(1, r.near[1]))
+            .fast_max(t(2, r.near[2]).fast_max(f32x8::splat(r.tmin)));
+        let tf = t(0, r.far[0])
+            .fast_min(t(1, r.far[1]))
+            .fast_min(t(2, r.far[2]).fast_min(f32x8::splat(tmax)))
+            * f32x8::splat(FAR_SCALE);
+        dist.as_mut_slice().copy_from_slice(&tn.to_array());
+        tn.simd_le(tf).to_bitmask()
+    } else if K == 4 {
+        let row = |i: usize| -> f32x4 {
+            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
+            f32x4::from(*a)
+        };
+        let t = |a: usize, plane: usize| {
+            row(plane).mul_add(f32x4::splat(r.inv[a]), f32x4::splat(r.neg_c[plane]))
+        };
+        let tn = t(0, r.near[0])
+            .fast_max(t(1, r.near[1]))
+            .fast_max(t(2, r.near[2]).fast_max(f32x4::splat(r.tmin)));
+        let tf = t(0, r.far[0])
+            .fast_min(t(1, r.far[1]))
+            .fast_min(t(2, r.far[2]).fast_min(f32x4::splat(tmax)))
+            * f32x4::splat(FAR_SCALE);
+        dist.as_mut_slice().copy_from_slice(&tn.to_array());
+        tn.simd_le(tf).to_bitmask()
+    } else {
+        slab(bounds, r, tmax, dist)
     }
 }
 
@@ -422,4 +513,78 @@ pub(super) fn bound_lanes(blocks: &[TriBlock]) -> Aabb {
     let lo = lo.map(|v| v.to_array().into_iter().fold(f32::INFINITY, fmin));
     let hi = hi.map(|v| v.to_array().into_iter().fold(f32::NEG_INFINITY, fmax));
     Aabb::new(Vec3::from(lo), Vec3::from(hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (xorshift), to avoid a dependency in unit tests.
+    fn next(s: &mut u64) -> f32 {
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        (*s >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
+    /// aimed at box corners, edges and faces (where rounding decides), at every scale.
+    #[test]
+    fn fma_slab_accepts_what_the_plain_test_accepts() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut checked = 0;
+        for scale in [1e-20f32, 1e-3, 1.0, 1e3, 1e12] {
+            for _ in 0..20_000 {
+                let mut r = || next(&mut s) * 2.0 - 1.0;
+                let c = Vec3::new(r(), r(), r()) * scale;
+                let h = Vec3::new(r().abs(), r().abs(), r().abs()) * scale * 0.1;
+                let b = Aabb::new(c - h, c + h);
+                // A point on the box's surface (a corner, an edge or a face) as the target.
+                let pick = |v: f32, lo: f32, hi: f32| {
+                    if v < -0.3 {
+                        lo
+                    } else if v > 0.3 {
+                        hi
+                    } else {
+                        lo + (hi - lo) * (v + 0.5)
+                    }
+                };
+                let target = Vec3::new(
+                    pick(r(), b.min.x, b.max.x),
+                    pick(r(), b.min.y, b.max.y),
+                    pick(r(), b.min.z, b.max.z),
+                );
+                let o = c + Vec3::new(r(), r(), r()) * scale * (1.0 + 1e4 * r().abs());
+                let ray = Ray::new(o, target - o);
+                let lanes = RayLanes::new(&ray);
+                if !lanes.fma_ok(scale * 4.0) {
+                    continue;
+                }
+                let mut bounds = [[f32::INFINITY; 8]; 6];
+                for (i, v) in [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z]
+                    .into_iter()
+                    .enumerate()
+                {
+                    bounds[i][3] = v;
+                }
+                for row in bounds.iter_mut().skip(3) {
+                    for (k, v) in row.iter_mut().enumerate() {
+                        if k != 3 {
+                            *v = f32::NEG_INFINITY;
+                        }
+                    }
+                }
+                let mut d = [0f32; 8];
+                let plain = slab(&bounds, &lanes, ray.tmax, &mut d);
+                let fma = slab_fma(&bounds, &lanes, ray.tmax, &mut d);
+                assert_eq!(plain & !0b1000, 0);
+                assert_eq!(fma & !0b1000, 0, "an empty lane passed");
+                if ray.hit_box(b.min, b.max, ray.tmax).is_some() {
+                    assert_eq!(fma, 0b1000, "missed {b:?} from {o:?} to {target:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 50_000, "{checked}");
+    }
 }

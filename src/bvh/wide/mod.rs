@@ -167,6 +167,8 @@ pub struct WideBvh<const K: usize> {
     /// The vertex indices of each block lane, for refit (`[UNUSED; 3]` for unused lanes).
     block_indices: Vec<[[u32; 3]; 4]>,
     prim_count: usize,
+    /// Largest coordinate magnitude of the root box (for the traversal's choice of box test).
+    coord_max: f32,
     /// Most entries the traversal stack can hold at once (the largest sum over a root-to-leaf
     /// path of each node's child count minus one).
     stack_need: usize,
@@ -253,6 +255,14 @@ impl<const K: usize> WideBvh<K> {
         if bvh.nodes().is_empty() {
             return;
         }
+        // Rays walk the nodes and blocks in random order: give new storage huge pages (for
+        // the nodes of a fresh tree an estimate, more than the trees built so far need; the
+        // exact count for the blocks below), with the quarter of headroom of `headroom`.
+        // Storage that has room (a rebuild's, or a clone's exact fit) is kept as it is.
+        if self.nodes.capacity() == 0 {
+            let est = bvh.prim_count() / (2 * K) + 1;
+            crate::simd::reserve_huge(&mut self.nodes, est, est / 4);
+        }
         let mut ranges = std::mem::take(&mut self.ranges);
         let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
         let root = Item::Node(0);
@@ -265,6 +275,15 @@ impl<const K: usize> WideBvh<K> {
         // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
         // subtree's blocks are contiguous too).
         let prims = bvh.prim_indices();
+        let need: usize = (self.nodes.iter())
+            .flat_map(|n| (0..K).map(|k| n.child(k)))
+            .map(|c| match c {
+                Child::Leaf { count, .. } => count.div_ceil(4) as usize,
+                _ => 0,
+            })
+            .sum();
+        crate::simd::reserve_huge(&mut self.blocks, need, need / 4);
+        crate::simd::reserve_huge(&mut self.block_indices, need, need / 4);
         for n in &mut self.nodes {
             for k in 0..K {
                 if let Child::Leaf { first, count } = n.child(k) {
@@ -291,6 +310,7 @@ impl<const K: usize> WideBvh<K> {
         headroom(&mut self.blocks, caps.1);
         headroom(&mut self.block_indices, caps.1);
         self.refit_boxes();
+        self.update_coord_max();
         let mut need = std::mem::take(&mut self.need);
         self.stack_need = self.stack_need_with(&mut need);
         self.need = need;
@@ -383,6 +403,22 @@ impl<const K: usize> WideBvh<K> {
             need[i] = used.saturating_sub(1) + below;
         }
         need.first().copied().unwrap_or(0)
+    }
+
+    /// For benchmarks: single rays use the plain slab test (`(b - o) * inv`, two operations a
+    /// plane) instead of the fused multiply-add form, until the next refit or collapse.
+    #[doc(hidden)]
+    pub fn bench_plain_slab(&mut self) {
+        self.coord_max = f32::NAN;
+    }
+
+    /// Sets `coord_max` from the root box.
+    pub(super) fn update_coord_max(&mut self) {
+        let b = self.bounds();
+        self.coord_max = b.min.abs().max(b.max.abs()).max_element();
+        if b.min.is_nan() || b.max.is_nan() {
+            self.coord_max = f32::NAN;
+        }
     }
 
     /// Checks the invariants of the module docs against `mesh`: the message names the first

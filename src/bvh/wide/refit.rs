@@ -59,6 +59,7 @@ impl<const K: usize> WideBvh<K> {
             leaf_pass(&mut self.nodes, &mut g);
         }
         interior_pass(&mut self.nodes);
+        self.update_coord_max();
     }
 
     /// Recomputes every box from the triangle blocks as they are.

@@ -4,7 +4,7 @@
 //! beyond the closest hit so far). Leaf triangles use the crate's watertight test, so the tree
 //! reports exactly the binary tree's and brute force's distance.
 
-use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab};
+use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab, slab_fma};
 use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::Counters;
 use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
@@ -89,6 +89,26 @@ impl<const K: usize> WideBvh<K> {
         &self,
         start: u32,
         ray: &Ray,
+        tmax: f32,
+        counters: &mut impl Counters,
+    ) -> Best {
+        let lanes = RayLanes::new(ray);
+        // One fused multiply-add a plane for the rays it is safe for (nearly all), else the
+        // exact test.
+        if lanes.fma_ok(self.coord_max) {
+            self.walk::<ANY, N, true>(start, ray, &lanes, tmax, counters)
+        } else {
+            self.walk::<ANY, N, false>(start, ray, &lanes, tmax, counters)
+        }
+    }
+
+    /// [`WideBvh::traverse`] with the node test [`slab_fma`] (`FMA`) or [`slab`].
+    #[inline(always)]
+    fn walk<const ANY: bool, const N: usize, const FMA: bool>(
+        &self,
+        start: u32,
+        ray: &Ray,
+        lanes: &RayLanes,
         mut tmax: f32,
         counters: &mut impl Counters,
     ) -> Best {
@@ -97,7 +117,7 @@ impl<const K: usize> WideBvh<K> {
             return None;
         }
         let blocks = self.blocks.as_slice();
-        let lanes = RayLanes::new(ray);
+        let lanes = *lanes;
         let tri_lanes = TriLanes::new(ray);
         let pre = RayTriPrecomp::new(ray.dir);
         let mut best: Best = None;
@@ -148,7 +168,11 @@ impl<const K: usize> WideBvh<K> {
                 }
             } else {
                 let node = &nodes[cur as usize];
-                let mut mask = slab(&node.bounds, &lanes, tmax, &mut dist);
+                let mut mask = if FMA {
+                    slab_fma(&node.bounds, &lanes, tmax, &mut dist)
+                } else {
+                    slab(&node.bounds, &lanes, tmax, &mut dist)
+                };
                 if lanes.nonfinite {
                     mask &= node.occupied();
                 }
