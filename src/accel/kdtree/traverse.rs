@@ -3,13 +3,19 @@
 //! child only, `d < tn` the far child only, otherwise both, near first (widened as in
 //! `accel::interval`). Every hit is kept; a pending far child is dropped once it starts beyond
 //! the best hit, so the first hit found in the near cells is the answer.
+//!
+//! In a leaf, a triangle is tested only when the ray's interval in the leaf's cell meets the
+//! box of its corners: a hit outside the cell lies in another cell the ray crosses, which holds
+//! the triangle too and is visited unless a closer hit ends the walk first. Most of a leaf's
+//! triangles are rejected so by a slab test, cheaper than the watertight test.
 
 use super::{KdTree, MAX_KD_DEPTH};
 use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
-use crate::geom::{Hit, Ray};
+use crate::geom::{FAR_SCALE, Hit, Ray};
+use glam::Vec3;
 
 /// A node still to visit and the ray's interval in it, already widened (`tn` lowered and `tf`
 /// raised by [`PLANE_SLACK`](crate::accel::interval) once more), so that the descent compares a
@@ -54,7 +60,7 @@ impl KdRay {
 
 impl KdTree {
     /// Walks down from `p.node` over `[p.tn, p.tf]` to the first leaf, pushing the far children
-    /// it passes; returns the leaf. The child is chosen without a branch; only crossing both
+    /// it passes; returns the leaf and the ray's interval in it. The child is chosen without a branch; only crossing both
     /// children (which pushes) branches.
     #[inline(always)]
     fn descend(
@@ -64,13 +70,14 @@ impl KdTree {
         stack: &mut [Pending; MAX_KD_DEPTH],
         sp: &mut usize,
         c: &mut impl Counters,
-    ) -> usize {
+    ) -> Pending {
         let mut node = p.node as usize;
         loop {
             c.node();
             let n = self.nodes[node];
             if n.is_leaf() {
-                return node;
+                p.node = node as u32;
+                return p;
             }
             let axis = n.axis();
             let d = (n.split() - ray.origin[axis]) * ray.inv_dir[axis];
@@ -107,10 +114,11 @@ impl KdTree {
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
+            let at = self.descend(&kray, next, &mut stack, &mut sp, c);
+            let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if !mailbox.seen(prim) {
+                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) {
                     q.test(tri, prim, c);
                 }
             }
@@ -142,10 +150,11 @@ impl KdTree {
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
+            let at = self.descend(&kray, next, &mut stack, &mut sp, c);
+            let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if !mailbox.seen(prim) && q.test(tri, c) {
+                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) && q.test(tri, c) {
                     return true;
                 }
             }
@@ -156,4 +165,19 @@ impl KdTree {
             next = stack[sp];
         }
     }
+}
+
+/// Whether the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of `tri`'s
+/// corners: the slab test of `interval::box_interval`, widened the same way. A triangle with a
+/// NaN coordinate, whose box the vector `min`/`max` may get wrong, can never be hit by the
+/// watertight test, so skipping it changes nothing; a NaN distance drops out of `max`/`min`.
+#[inline(always)]
+fn meets_box(ray: &Ray, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
+    let lo = tri[0].min(tri[1]).min(tri[2]);
+    let hi = tri[0].max(tri[1]).max(tri[2]);
+    let t0 = (lo - ray.slab_lo) * ray.inv_dir;
+    let t1 = (hi - ray.slab_hi) * ray.inv_dir;
+    let near = lower(t0.min(t1).max_element()).max(tn);
+    let far = upper(t0.max(t1).min_element() * FAR_SCALE).min(tf);
+    near <= far
 }
