@@ -63,11 +63,11 @@ impl KdTree {
     /// it passes; returns the leaf and the ray's interval in it. The child is chosen without a branch; only crossing both
     /// children (which pushes) branches.
     #[inline(always)]
-    fn descend(
+    fn descend<const N: usize>(
         &self,
         ray: &KdRay,
         mut p: Pending,
-        stack: &mut [Pending; MAX_KD_DEPTH],
+        stack: &mut [Pending; N],
         sp: &mut usize,
         c: &mut impl Counters,
     ) -> Pending {
@@ -101,15 +101,23 @@ impl KdTree {
         }
     }
 
-    /// The closest hit, counting the work.
+    /// The closest hit, counting the work, on a stack of `N` entries (`N` at least the depth).
     pub(super) fn closest(&self, ray: &Ray, c: &mut impl Counters) -> Option<Hit> {
+        if self.depth <= SHORT_STACK {
+            self.closest_on::<SHORT_STACK>(ray, c)
+        } else {
+            self.closest_on::<MAX_KD_DEPTH>(ray, c)
+        }
+    }
+
+    fn closest_on<const N: usize>(&self, ray: &Ray, c: &mut impl Counters) -> Option<Hit> {
         if self.nodes.is_empty() {
             return None;
         }
         let (tn, tf) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax)?;
         let mut q = Closest::new(ray);
         let mut mailbox = Mailbox::new();
-        let mut stack = [Pending::default(); MAX_KD_DEPTH];
+        let mut stack = [Pending::default(); N];
         let mut sp = 0;
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
@@ -137,6 +145,14 @@ impl KdTree {
 
     /// Whether anything is hit, counting the work.
     pub(super) fn any(&self, ray: &Ray, c: &mut impl Counters) -> bool {
+        if self.depth <= SHORT_STACK {
+            self.any_on::<SHORT_STACK>(ray, c)
+        } else {
+            self.any_on::<MAX_KD_DEPTH>(ray, c)
+        }
+    }
+
+    fn any_on<const N: usize>(&self, ray: &Ray, c: &mut impl Counters) -> bool {
         if self.nodes.is_empty() {
             return false;
         }
@@ -145,7 +161,7 @@ impl KdTree {
         };
         let q = AnyHit::new(ray);
         let mut mailbox = Mailbox::new();
-        let mut stack = [Pending::default(); MAX_KD_DEPTH];
+        let mut stack = [Pending::default(); N];
         let mut sp = 0;
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
@@ -181,3 +197,7 @@ fn meets_box(ray: &Ray, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
     let far = upper(t0.max(t1).min_element() * FAR_SCALE).min(tf);
     near <= far
 }
+
+/// Stack entries for trees no deeper than this (the default depth limit at 4M triangles is 37):
+/// the stack is zeroed for every ray, and a shorter one costs less.
+const SHORT_STACK: usize = 40;
