@@ -201,3 +201,51 @@ fn meets_box(ray: &Ray, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
 /// Stack entries for trees no deeper than this (the default depth limit at 4M triangles is 37):
 /// the stack is zeroed for every ray, and a shorter one costs less.
 const SHORT_STACK: usize = 40;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::{RayTriPrecomp, intersect_triangle};
+
+    /// Every hit the watertight test reports inside an interval is kept by `meets_box` over
+    /// that interval, also for rays along an axis and intervals that end just past the hit.
+    #[test]
+    fn triangle_box_test_keeps_every_hit() {
+        let mut seed = 0x2545_f491_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let mut hits = 0;
+        for i in 0..20_000 {
+            let tri = [(); 3].map(|()| Vec3::new(next(), next(), next()));
+            let origin = Vec3::new(next(), next(), next()) * 3.0;
+            let mut dir =
+                (tri[0] + tri[1] + tri[2]) / 3.0 - origin + Vec3::new(next(), next(), next()) * 0.3;
+            if i % 4 == 0 {
+                // Along one axis only.
+                let a = i / 4 % 3;
+                dir = Vec3::ZERO;
+                dir[a] = if next() > 0.0 { 1.0 } else { -1.0 };
+            }
+            let ray = Ray::new(origin, dir);
+            let pre = RayTriPrecomp::new(ray.dir);
+            let Some((t, _, _)) =
+                intersect_triangle(&ray, &pre, tri[0], tri[1], tri[2], f32::INFINITY)
+            else {
+                continue;
+            };
+            hits += 1;
+            let (below, above) = (t * (1.0 - 1.0 / 4096.0), t * (1.0 + 1.0 / 4096.0));
+            for (tn, tf) in [
+                (0.0, f32::INFINITY),
+                (below, above),
+                (0.0, above),
+                (below, 2.0 * t),
+            ] {
+                assert!(meets_box(&ray, &tri, tn, tf), "ray {i}: hit at {t} dropped");
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
+    }
+}
