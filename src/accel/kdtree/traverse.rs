@@ -3,13 +3,19 @@
 //! child only, `d < tn` the far child only, otherwise both, near first (widened as in
 //! `accel::interval`). Every hit is kept; a pending far child is dropped once it starts beyond
 //! the best hit, so the first hit found in the near cells is the answer.
+//!
+//! In a leaf, a triangle is tested only when the ray's interval in the leaf's cell meets the
+//! box of its corners: a hit outside the cell lies in another cell the ray crosses, which holds
+//! the triangle too and is visited unless a closer hit ends the walk first. Most of a leaf's
+//! triangles are rejected so by a slab test, cheaper than the watertight test.
 
 use super::{KdTree, MAX_KD_DEPTH};
 use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
-use crate::geom::{Hit, Ray};
+use crate::geom::{FAR_SCALE, Hit, Ray};
+use glam::Vec3;
 
 /// A node still to visit and the ray's interval in it, already widened (`tn` lowered and `tf`
 /// raised by [`PLANE_SLACK`](crate::accel::interval) once more), so that the descent compares a
@@ -54,23 +60,24 @@ impl KdRay {
 
 impl KdTree {
     /// Walks down from `p.node` over `[p.tn, p.tf]` to the first leaf, pushing the far children
-    /// it passes; returns the leaf. The child is chosen without a branch; only crossing both
+    /// it passes; returns the leaf and the ray's interval in it. The child is chosen without a branch; only crossing both
     /// children (which pushes) branches.
     #[inline(always)]
-    fn descend(
+    fn descend<const N: usize>(
         &self,
         ray: &KdRay,
         mut p: Pending,
-        stack: &mut [Pending; MAX_KD_DEPTH],
+        stack: &mut [Pending; N],
         sp: &mut usize,
         c: &mut impl Counters,
-    ) -> usize {
+    ) -> Pending {
         let mut node = p.node as usize;
         loop {
             c.node();
             let n = self.nodes[node];
             if n.is_leaf() {
-                return node;
+                p.node = node as u32;
+                return p;
             }
             let axis = n.axis();
             let d = (n.split() - ray.origin[axis]) * ray.inv_dir[axis];
@@ -94,23 +101,32 @@ impl KdTree {
         }
     }
 
-    /// The closest hit, counting the work.
+    /// The closest hit, counting the work, on a stack of `N` entries (`N` at least the depth).
     pub(super) fn closest(&self, ray: &Ray, c: &mut impl Counters) -> Option<Hit> {
+        if self.depth <= SHORT_STACK {
+            self.closest_on::<SHORT_STACK>(ray, c)
+        } else {
+            self.closest_on::<MAX_KD_DEPTH>(ray, c)
+        }
+    }
+
+    fn closest_on<const N: usize>(&self, ray: &Ray, c: &mut impl Counters) -> Option<Hit> {
         if self.nodes.is_empty() {
             return None;
         }
         let (tn, tf) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax)?;
         let mut q = Closest::new(ray);
         let mut mailbox = Mailbox::new();
-        let mut stack = [Pending::default(); MAX_KD_DEPTH];
+        let mut stack = [Pending::default(); N];
         let mut sp = 0;
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
+            let at = self.descend(&kray, next, &mut stack, &mut sp, c);
+            let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if !mailbox.seen(prim) {
+                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) {
                     q.test(tri, prim, c);
                 }
             }
@@ -129,6 +145,14 @@ impl KdTree {
 
     /// Whether anything is hit, counting the work.
     pub(super) fn any(&self, ray: &Ray, c: &mut impl Counters) -> bool {
+        if self.depth <= SHORT_STACK {
+            self.any_on::<SHORT_STACK>(ray, c)
+        } else {
+            self.any_on::<MAX_KD_DEPTH>(ray, c)
+        }
+    }
+
+    fn any_on<const N: usize>(&self, ray: &Ray, c: &mut impl Counters) -> bool {
         if self.nodes.is_empty() {
             return false;
         }
@@ -137,15 +161,16 @@ impl KdTree {
         };
         let q = AnyHit::new(ray);
         let mut mailbox = Mailbox::new();
-        let mut stack = [Pending::default(); MAX_KD_DEPTH];
+        let mut stack = [Pending::default(); N];
         let mut sp = 0;
         let kray = KdRay::new(ray);
         let mut next = Pending::root(tn, tf);
         loop {
-            let leaf = self.nodes[self.descend(&kray, next, &mut stack, &mut sp, c)];
+            let at = self.descend(&kray, next, &mut stack, &mut sp, c);
+            let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
             for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if !mailbox.seen(prim) && q.test(tri, c) {
+                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) && q.test(tri, c) {
                     return true;
                 }
             }
@@ -155,5 +180,72 @@ impl KdTree {
             sp -= 1;
             next = stack[sp];
         }
+    }
+}
+
+/// Whether the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of `tri`'s
+/// corners: the slab test of `interval::box_interval`, widened the same way. A triangle with a
+/// NaN coordinate, whose box the vector `min`/`max` may get wrong, can never be hit by the
+/// watertight test, so skipping it changes nothing; a NaN distance drops out of `max`/`min`.
+#[inline(always)]
+fn meets_box(ray: &Ray, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
+    let lo = tri[0].min(tri[1]).min(tri[2]);
+    let hi = tri[0].max(tri[1]).max(tri[2]);
+    let t0 = (lo - ray.slab_lo) * ray.inv_dir;
+    let t1 = (hi - ray.slab_hi) * ray.inv_dir;
+    let near = lower(t0.min(t1).max_element()).max(tn);
+    let far = upper(t0.max(t1).min_element() * FAR_SCALE).min(tf);
+    near <= far
+}
+
+/// Stack entries for trees no deeper than this (the default depth limit at 4M triangles is 37):
+/// the stack is zeroed for every ray, and a shorter one costs less.
+const SHORT_STACK: usize = 40;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::{RayTriPrecomp, intersect_triangle};
+
+    /// Every hit the watertight test reports inside an interval is kept by `meets_box` over
+    /// that interval, also for rays along an axis and intervals that end just past the hit.
+    #[test]
+    fn triangle_box_test_keeps_every_hit() {
+        let mut seed = 0x2545_f491_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let mut hits = 0;
+        for i in 0..20_000 {
+            let tri = [(); 3].map(|()| Vec3::new(next(), next(), next()));
+            let origin = Vec3::new(next(), next(), next()) * 3.0;
+            let mut dir =
+                (tri[0] + tri[1] + tri[2]) / 3.0 - origin + Vec3::new(next(), next(), next()) * 0.3;
+            if i % 4 == 0 {
+                // Along one axis only.
+                let a = i / 4 % 3;
+                dir = Vec3::ZERO;
+                dir[a] = if next() > 0.0 { 1.0 } else { -1.0 };
+            }
+            let ray = Ray::new(origin, dir);
+            let pre = RayTriPrecomp::new(ray.dir);
+            let Some((t, _, _)) =
+                intersect_triangle(&ray, &pre, tri[0], tri[1], tri[2], f32::INFINITY)
+            else {
+                continue;
+            };
+            hits += 1;
+            let (below, above) = (t * (1.0 - 1.0 / 4096.0), t * (1.0 + 1.0 / 4096.0));
+            for (tn, tf) in [
+                (0.0, f32::INFINITY),
+                (below, above),
+                (0.0, above),
+                (below, 2.0 * t),
+            ] {
+                assert!(meets_box(&ray, &tri, tn, tf), "ray {i}: hit at {t} dropped");
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
     }
 }
