@@ -1,0 +1,203 @@
+//! The SAH-optimal collapse of a binary tree into a wide one, by dynamic programming (Ylitie,
+//! Karras & Laine 2017, "Efficient incoherent ray traversal on GPUs through compressed wide
+//! BVHs", sections 3.1 and 3.2).
+//!
+//! For every binary node `n` and `j` in `1 ..= K`, `cost(n, j)` is the least SAH cost of
+//! representing `n`'s subtree as a forest of at most `j` roots, each root a wide leaf (a subtree
+//! of at most [`MAX_WIDE_LEAF`] triangles) or a wide node whose lanes are again such a forest
+//! of at most `K` roots. Costs come bottom-up (children first, by recursion, so only one path's
+//! costs live at a time); each node keeps its choices (leaf, wide node, or how many roots go to
+//! the left child) in one word, from which the wide tree is written top-down, depth first, as
+//! the greedy collapse writes it. Leaf sizes are chosen here, not by the binary builder.
+
+use super::{Collapse, Item, MAX_WIDE_LEAF, WideNode, encode_leaf};
+
+/// Costs of the wide SAH that [`super::CollapseMethod::Sah`] minimises: each is paid by a ray
+/// that enters a box, weighted by the box's surface area.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WideCost {
+    /// Testing a ray against one wide node's child boxes.
+    pub node: f32,
+    /// Entering a leaf lane.
+    pub leaf: f32,
+    /// Testing one block of four triangles (a leaf of `n` triangles has `ceil(n / 4)`).
+    pub block: f32,
+    /// Each triangle of a leaf.
+    pub tri: f32,
+}
+
+impl WideCost {
+    /// The costs [`super::CollapseMethod::SAH`] uses.
+    pub const DEFAULT: Self = Self {
+        node: 1.0,
+        leaf: 0.0,
+        block: 0.0,
+        tri: 0.3,
+    };
+
+    /// Cost of a leaf lane of `count` triangles, per unit of its box's area.
+    #[must_use]
+    pub fn leaf_cost(&self, count: u32) -> f32 {
+        self.leaf + self.block * count.div_ceil(4) as f32 + self.tri * count as f32
+    }
+}
+
+/// Choice of a `(node, j)` entry: one wide leaf lane (for a binary leaf larger than a wide
+/// leaf: as many lanes as it needs).
+const LEAF: u64 = 0;
+/// Choice of a `(node, j)` entry: one wide node. Values `1 .. K` are a distribution, that many
+/// roots to the left child and the rest to the right.
+const WIDE: u64 = 15;
+/// Bits of the choice word below the wide node's own split of `K` roots.
+const SPLIT_SHIFT: u32 = 32;
+
+/// A lane of a wide node being written.
+#[derive(Clone, Copy)]
+enum Lane {
+    Leaf(u32, u32),
+    Wide(u32),
+}
+
+/// The dynamic program over one binary tree.
+pub(super) struct Dp<'a, 'b> {
+    pub(super) c: &'a Collapse<'b>,
+    pub(super) cost: WideCost,
+    /// Per binary node: the choice of `(node, j)` in bits `4 (j - 1) ..`, and the split of the
+    /// node's `K` roots when it becomes a wide node at bit [`SPLIT_SHIFT`].
+    pub(super) choice: &'a mut [u64],
+    /// One over the root's area: costs are relative to it, so that they stay finite.
+    pub(super) inv_root: f64,
+}
+
+impl Dp<'_, '_> {
+    /// Fills the choices of binary node `i`'s subtree and returns `cost(i, j)` for
+    /// `j = 1 ..= K` (relative to the root's area).
+    pub(super) fn solve<const K: usize>(&mut self, i: u32) -> [f32; K] {
+        let n = *self.c.binary(i);
+        let a = (n.bounds().half_area_f64() * self.inv_root) as f32;
+        let count = self.c.ranges[i as usize].1;
+        if n.is_leaf() {
+            if count <= MAX_WIDE_LEAF {
+                self.choice[i as usize] = LEAF;
+                return [a * self.cost.leaf_cost(count); K];
+            }
+            // Too large for one lane: several lanes of this area (an upper bound) if there is
+            // room for them, else a wide node of them (written by the greedy collapse).
+            let pieces = count.div_ceil(MAX_WIDE_LEAF);
+            let lanes = a * self.pieces_cost(count, pieces);
+            let mut out = [a * self.cost.node + lanes; K];
+            let mut ch = 0;
+            for (j, o) in out.iter_mut().enumerate() {
+                if j + 1 >= pieces as usize {
+                    *o = lanes;
+                } else {
+                    ch |= WIDE << (4 * j);
+                }
+            }
+            self.choice[i as usize] = ch;
+            return out;
+        }
+        let l = self.solve::<K>(n.first);
+        let r = self.solve::<K>(n.first + 1);
+        // dist[j - 1]: at most j roots shared between the children, each child at least one.
+        let mut dist = [f32::INFINITY; K];
+        let mut split = [1u64; K];
+        for j in 2..=K {
+            for k in 1..j {
+                let c = l[k - 1] + r[j - k - 1];
+                if k == 1 || c < dist[j - 1] {
+                    dist[j - 1] = c;
+                    split[j - 1] = k as u64;
+                }
+            }
+        }
+        let wide = a * self.cost.node + dist[K - 1];
+        let mut out = [0f32; K];
+        let mut prev = WIDE;
+        out[0] = wide;
+        if count <= MAX_WIDE_LEAF {
+            let leaf = a * self.cost.leaf_cost(count);
+            if leaf <= wide {
+                out[0] = leaf;
+                prev = LEAF;
+            }
+        }
+        let mut ch = prev;
+        for j in 2..=K {
+            if dist[j - 1] < out[j - 2] {
+                out[j - 1] = dist[j - 1];
+                prev = split[j - 1];
+            } else {
+                out[j - 1] = out[j - 2];
+            }
+            ch |= prev << (4 * (j - 1));
+        }
+        self.choice[i as usize] = ch | split[K - 1] << SPLIT_SHIFT;
+        out
+    }
+
+    /// Cost per unit area of a binary leaf of `count` triangles as `pieces` leaf lanes.
+    fn pieces_cost(&self, count: u32, pieces: u32) -> f32 {
+        (0..pieces)
+            .map(|p| self.cost.leaf_cost(piece(0, count, pieces, p).1))
+            .sum()
+    }
+
+    /// Writes binary node `i` (whose choice was a wide node) as a wide node and its subtree,
+    /// depth first; returns its index.
+    pub(super) fn write<const K: usize>(&self, i: u32, out: &mut Vec<WideNode<K>>) -> u32 {
+        let n = *self.c.binary(i);
+        if n.is_leaf() {
+            // A binary leaf of more than K wide leaves' triangles.
+            return self.c.node(&self.c.open(Item::Node(i)), out);
+        }
+        let mut lanes = [Lane::Wide(0); K];
+        let mut len = 0;
+        let k = (self.choice[i as usize] >> SPLIT_SHIFT) as usize;
+        self.lanes(n.first, k, &mut lanes, &mut len);
+        self.lanes(n.first + 1, K - k, &mut lanes, &mut len);
+        let idx = out.len();
+        out.push(WideNode::EMPTY);
+        for (k, lane) in lanes[..len].iter().enumerate() {
+            out[idx].child[k] = match *lane {
+                Lane::Leaf(first, count) => encode_leaf(first, count),
+                Lane::Wide(c) => self.write(c, out),
+            };
+        }
+        idx as u32
+    }
+
+    /// Appends the at most `j` roots that represent binary node `i`'s subtree.
+    fn lanes<const K: usize>(&self, i: u32, j: usize, lanes: &mut [Lane; K], len: &mut usize) {
+        match (self.choice[i as usize] >> (4 * (j - 1))) & 15 {
+            LEAF => {
+                let (first, count) = self.c.ranges[i as usize];
+                let pieces = count.div_ceil(MAX_WIDE_LEAF);
+                for p in 0..pieces {
+                    let (f, n) = piece(first, count, pieces, p);
+                    lanes[*len] = Lane::Leaf(f, n);
+                    *len += 1;
+                }
+            }
+            WIDE => {
+                lanes[*len] = Lane::Wide(i);
+                *len += 1;
+            }
+            k => {
+                let n = self.c.binary(i);
+                let k = k as usize;
+                self.lanes(n.first, k, lanes, len);
+                self.lanes(n.first + 1, j - k, lanes, len);
+            }
+        }
+    }
+}
+
+/// Piece `p` of `pieces` nearly equal pieces of the slots `first .. first + count`.
+fn piece(first: u32, count: u32, pieces: u32, p: u32) -> (u32, u32) {
+    let (a, b) = (
+        (u64::from(count) * u64::from(p) / u64::from(pieces)) as u32,
+        (u64::from(count) * u64::from(p + 1) / u64::from(pieces)) as u32,
+    );
+    (first + a, b - a)
+}
