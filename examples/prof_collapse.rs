@@ -54,6 +54,14 @@ fn main() {
             methods.push((format!("sah({c})"), CollapseMethod::Sah(cost)));
         }
     }
+    if std::env::var_os("COLLAPSE_ONLY").is_some() {
+        // For profilers: nothing but SAH collapses.
+        let mut w = MeshBvh8::from_mesh_bvh_with(&bin, methods[1].1);
+        for _ in 0..20 {
+            w.collapse_from(&bin);
+        }
+        return;
+    }
     let mut trees = Vec::new();
     for (name, m) in &methods {
         let mut w = MeshBvh8::from_mesh_bvh_with(&bin, *m);

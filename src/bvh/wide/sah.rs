@@ -31,8 +31,8 @@ impl WideCost {
     pub const DEFAULT: Self = Self {
         node: 1.0,
         leaf: 0.0,
-        block: 0.0,
-        tri: 0.3,
+        block: 1.0,
+        tri: 0.0,
     };
 
     /// Cost of a leaf lane of `count` triangles, per unit of its box's area.
@@ -99,16 +99,17 @@ impl Dp<'_, '_> {
         }
         let l = self.solve::<K>(n.first);
         let r = self.solve::<K>(n.first + 1);
-        // dist[j - 1]: at most j roots shared between the children, each child at least one.
+        // dist[j - 1]: at most j roots shared between the children, each child at least one;
+        // split[j - 1]: how many of them go to the left child (the fewest among equal costs).
+        // The inner loop runs over j, branch free, so that it vectorises.
         let mut dist = [f32::INFINITY; K];
-        let mut split = [1u64; K];
-        for j in 2..=K {
-            for k in 1..j {
+        let mut split = [1u32; K];
+        for k in 1..K {
+            for j in k + 1..=K {
                 let c = l[k - 1] + r[j - k - 1];
-                if k == 1 || c < dist[j - 1] {
-                    dist[j - 1] = c;
-                    split[j - 1] = k as u64;
-                }
+                let better = c < dist[j - 1];
+                dist[j - 1] = if better { c } else { dist[j - 1] };
+                split[j - 1] = if better { k as u32 } else { split[j - 1] };
             }
         }
         let wide = a * self.cost.node + dist[K - 1];
@@ -126,13 +127,13 @@ impl Dp<'_, '_> {
         for j in 2..=K {
             if dist[j - 1] < out[j - 2] {
                 out[j - 1] = dist[j - 1];
-                prev = split[j - 1];
+                prev = u64::from(split[j - 1]);
             } else {
                 out[j - 1] = out[j - 2];
             }
             ch |= prev << (4 * (j - 1));
         }
-        self.choice[i as usize] = ch | split[K - 1] << SPLIT_SHIFT;
+        self.choice[i as usize] = ch | u64::from(split[K - 1]) << SPLIT_SHIFT;
         out
     }
 
@@ -200,4 +201,121 @@ fn piece(first: u32, count: u32, pieces: u32, p: u32) -> (u32, u32) {
         (u64::from(count) * u64::from(p + 1) / u64::from(pieces)) as u32,
     );
     (first + a, b - a)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{CollapseMethod, MERGE, WideBvh};
+    use super::*;
+    use crate::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
+    use crate::geom::{Ray, TriMesh, shapes};
+    use glam::Vec3;
+
+    /// A small deterministic generator (xorshift), to avoid a dependency in unit tests.
+    fn next(s: &mut u64) -> f32 {
+        *s ^= *s << 13;
+        *s ^= *s >> 7;
+        *s ^= *s << 17;
+        (*s >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    fn soup(n: usize, s: &mut u64) -> TriMesh {
+        let tris: Vec<[Vec3; 3]> = (0..n)
+            .map(|_| {
+                let mut r = || next(s);
+                let c = Vec3::new(r(), r(), r()) * 10.0;
+                let e = 0.05 + r();
+                [
+                    c,
+                    c + Vec3::new(e, r() * e, 0.0),
+                    c + Vec3::new(0.0, e, r() * e),
+                ]
+            })
+            .collect();
+        TriMesh::from_soup(&tris)
+    }
+
+    fn costs() -> [WideCost; 3] {
+        [
+            WideCost::DEFAULT,
+            WideCost {
+                node: 1.0,
+                leaf: 0.0,
+                block: 0.0,
+                tri: 0.3,
+            },
+            WideCost {
+                node: 1.0,
+                leaf: 0.5,
+                block: 0.7,
+                tri: 0.1,
+            },
+        ]
+    }
+
+    /// The SAH collapse's tree costs what the dynamic program says (so it is written as
+    /// chosen), no more than the greedy collapse's (whose trees it could have chosen: binary
+    /// leaves here hold at most 8 triangles), and answers rays as brute force does.
+    fn check<const K: usize>(mesh: &TriMesh, params: &BuildParams, s: &mut u64) {
+        let bin = MeshBvh::build(mesh, params);
+        let bvh = bin.bvh();
+        assert!(bvh.nodes().len() > 1);
+        for cost in costs() {
+            let greedy = WideBvh::<K>::from_mesh_bvh_with(&bin, CollapseMethod::Greedy);
+            let dp = WideBvh::<K>::from_mesh_bvh_with(&bin, CollapseMethod::Sah(cost));
+            dp.validate(mesh).unwrap();
+            let (g, d) = (greedy.sah_cost(cost), dp.sah_cost(cost));
+            assert!(d <= g * (1.0 + 1e-5), "BVH{K} {cost:?}: dp {d} greedy {g}");
+            let mut ranges = Vec::new();
+            let c = Collapse::new(bvh, &bin.tris, MERGE, &mut ranges);
+            let mut choice = vec![0; bvh.nodes().len()];
+            let a = bvh.nodes()[0].bounds().half_area_f64();
+            let mut dp_run = Dp {
+                c: &c,
+                cost,
+                choice: &mut choice,
+                inv_root: 1.0 / a,
+            };
+            let optimum = f64::from(dp_run.solve::<K>(0)[0]);
+            assert!(
+                (optimum - d).abs() <= 1e-4 * d,
+                "BVH{K} {cost:?}: dp says {optimum}, tree costs {d}"
+            );
+            let b = mesh.bounds();
+            for _ in 0..300 {
+                let mut r = || next(s);
+                let o = b.center() + Vec3::new(r() - 0.5, r() - 0.5, r() - 0.5) * 3.0 * b.extent();
+                let t = b.min + Vec3::new(r(), r(), r()) * b.extent();
+                let ray = Ray::new(o, t - o);
+                let want = brute_force_closest(mesh, &ray).map(|h| h.t);
+                assert_eq!(dp.closest_hit(&ray).map(|h| h.t), want, "{ray:?}");
+                assert_eq!(dp.any_hit(&ray), brute_force_any(mesh, &ray), "{ray:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn sah_collapse_is_optimal_and_exact() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let meshes = [
+            shapes::icosphere(3),
+            shapes::bumpy_sphere(3000),
+            soup(2000, &mut s),
+            soup(40, &mut s),
+        ];
+        for mesh in &meshes {
+            for params in [
+                BuildParams::BINNED,
+                BuildParams::SWEEP,
+                BuildParams::MEDIAN,
+                BuildParams {
+                    max_leaf_size: 1,
+                    ..BuildParams::BINNED
+                },
+            ] {
+                check::<8>(mesh, &params, &mut s);
+                check::<4>(mesh, &params, &mut s);
+            }
+        }
+    }
 }
