@@ -123,14 +123,13 @@ impl Dp<'_, '_> {
                 prev = LEAF;
             }
         }
+        // More roots allowed: the best distribution, unless fewer roots cost no more. Masks
+        // rather than branches: which way this goes is data dependent.
         let mut ch = prev;
         for j in 2..=K {
-            if dist[j - 1] < out[j - 2] {
-                out[j - 1] = dist[j - 1];
-                prev = u64::from(split[j - 1]);
-            } else {
-                out[j - 1] = out[j - 2];
-            }
+            let take = u64::from(dist[j - 1] < out[j - 2]).wrapping_neg();
+            out[j - 1] = dist[j - 1].min(out[j - 2]);
+            prev = (u64::from(split[j - 1]) & take) | (prev & !take);
             ch |= prev << (4 * (j - 1));
         }
         self.choice[i as usize] = ch | u64::from(split[K - 1]) << SPLIT_SHIFT;
