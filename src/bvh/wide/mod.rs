@@ -1,10 +1,12 @@
 //! Wide BVHs (4 or 8 children per node) made from the binary BVH by collapsing, with the child
 //! boxes stored structure-of-arrays so that one SIMD operation tests a ray against all of them.
 //!
-//! Collapsing: a wide node starts from a binary node's two children and repeatedly replaces the
-//! child with the largest surface area by its own two children, until it has `K` children or
-//! only leaves are left. Binary leaves become wide leaves unchanged, so the triangles keep the
-//! binary tree's leaf order (and the [`MeshBvh`]'s leaf-ordered copy of them).
+//! Collapsing ([`CollapseMethod::Greedy`], the default): a wide node starts from a binary
+//! node's two children and repeatedly replaces the child with the largest surface area by its
+//! own two children, until it has `K` children or only leaves are left. Binary leaves become
+//! wide leaves unchanged, so the triangles keep the binary tree's leaf order (and the
+//! [`MeshBvh`]'s leaf-ordered copy of them). [`CollapseMethod::Sah`] instead chooses the cut of
+//! least SAH cost by dynamic programming (`sah.rs`); it writes the same layout.
 //!
 //! Invariants (checked by [`WideBvh::validate`]):
 //! - node 0 is the root; every interior child index is greater than its parent's (children after
