@@ -1086,6 +1086,19 @@ fn variants() -> Vec<Variant> {
             },
         },
         Variant {
+            // The binary tree collapsed by the SAH-optimal dynamic program instead of the
+            // greedy pull-up (`docs/wide.md`, issue 17, third session).
+            name: "dynbvh bvh8 sah-collapse",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh_with(
+                        &MeshBvh::build(&m, &BuildParams::BINNED),
+                        dynbvh::bvh::CollapseMethod::SAH,
+                    ))
+                })
+            },
+        },
+        Variant {
             // The same tree as before huge pages and the multiply-add slab test: copied by
             // `Clone` (4 KiB pages) and set to the plain slab test (a refit restores it, so
             // only its rays are "before"; the copy is inside its build time).

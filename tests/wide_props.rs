@@ -6,7 +6,8 @@ mod common;
 
 use common::strategies::{mesh, rays, vec3};
 use dynbvh::bvh::{
-    BuildParams, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any, brute_force_closest,
+    BuildParams, CollapseMethod, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any,
+    brute_force_closest,
 };
 use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
@@ -78,14 +79,19 @@ fn check_ray<const K: usize>(
     Ok(())
 }
 
+/// Both collapses.
+const METHODS: [CollapseMethod; 2] = [CollapseMethod::Greedy, CollapseMethod::SAH];
+
 fn check_both(mesh: &TriMesh, bin: &MeshBvh, rays: &[Ray]) -> Result<(), String> {
-    let w4 = WideBvh::<4>::from_mesh_bvh(bin);
-    let w8 = WideBvh::<8>::from_mesh_bvh(bin);
-    w4.validate(mesh)?;
-    w8.validate(mesh)?;
-    for ray in rays {
-        check_ray(mesh, bin, &w4, ray)?;
-        check_ray(mesh, bin, &w8, ray)?;
+    for method in METHODS {
+        let w4 = WideBvh::<4>::from_mesh_bvh_with(bin, method);
+        let w8 = WideBvh::<8>::from_mesh_bvh_with(bin, method);
+        w4.validate(mesh)?;
+        w8.validate(mesh)?;
+        for ray in rays {
+            check_ray(mesh, bin, &w4, ray).map_err(|e| format!("{method:?}: {e}"))?;
+            check_ray(mesh, bin, &w8, ray).map_err(|e| format!("{method:?}: {e}"))?;
+        }
     }
     Ok(())
 }
@@ -123,11 +129,11 @@ proptest! {
         moves in prop::collection::vec((prop::collection::vec(vec3(), 1..8), 0.0f32..3.0), 3),
         rays in rays(1..40),
     ) {
-        for params in builders() {
+        for (params, method) in builders().into_iter().flat_map(|p| METHODS.map(|m| (p, m))) {
             let mut m = mesh.clone();
             let mut bin = MeshBvh::build(&m, &params);
-            let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
-            let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
+            let mut w4 = WideBvh::<4>::from_mesh_bvh_with(&bin, method);
+            let mut w8 = WideBvh::<8>::from_mesh_bvh_with(&bin, method);
             // Several deformations in a row, each refitted from the previous trees.
             for (offsets, scale) in &moves {
                 for (i, p) in m.positions.iter_mut().enumerate() {
@@ -152,15 +158,19 @@ fn check_everything(mesh: &TriMesh, rays: &[Ray]) {
     for params in builders() {
         let bin = MeshBvh::build(mesh, &params);
         check_both(mesh, &bin, rays).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
-        let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
-        let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
-        w8.refit(mesh);
-        w4.refit(mesh);
-        w8.validate(mesh).unwrap();
-        w4.validate(mesh).unwrap();
-        for ray in rays {
-            check_ray(mesh, &bin, &w4, ray).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
-            check_ray(mesh, &bin, &w8, ray).unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+        for method in METHODS {
+            let mut w8 = WideBvh::<8>::from_mesh_bvh_with(&bin, method);
+            let mut w4 = WideBvh::<4>::from_mesh_bvh_with(&bin, method);
+            w8.refit(mesh);
+            w4.refit(mesh);
+            w8.validate(mesh).unwrap();
+            w4.validate(mesh).unwrap();
+            for ray in rays {
+                check_ray(mesh, &bin, &w4, ray)
+                    .unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+                check_ray(mesh, &bin, &w8, ray)
+                    .unwrap_or_else(|e| panic!("{}: {e}", params.name()));
+            }
         }
     }
 }
@@ -210,10 +220,10 @@ fn identical_triangles() {
 fn nan_and_infinite_vertices() {
     let mesh = common::soup_with_nan_and_inf();
     let rays = common::rays_around(Vec3::ZERO, 1.0, 300, 5);
-    for params in builders() {
+    for (params, method) in builders().into_iter().flat_map(|p| METHODS.map(|m| (p, m))) {
         let bin = MeshBvh::build(&mesh, &params);
-        let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
-        let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
+        let mut w8 = WideBvh::<8>::from_mesh_bvh_with(&bin, method);
+        let mut w4 = WideBvh::<4>::from_mesh_bvh_with(&bin, method);
         for _round in 0..2 {
             for ray in &rays {
                 check_ray(&mesh, &bin, &w4, ray).unwrap_or_else(|e| panic!("{e}"));
@@ -269,17 +279,19 @@ fn large_trees_refit_in_parallel_and_on_one_thread() {
             .build()
             .unwrap();
         pool.install(|| {
-            let mut w4 = WideBvh::<4>::from_mesh_bvh(&bin);
-            let mut w8 = WideBvh::<8>::from_mesh_bvh(&bin);
-            assert!(w8.nodes().len() > 2048, "{} nodes", w8.nodes().len());
-            for (m, b) in [(&deformed, &bin_def), (&rest, &bin), (&deformed, &bin_def)] {
-                w4.refit(m);
-                w8.refit(m);
-                w4.validate(m).unwrap();
-                w8.validate(m).unwrap();
-                for ray in &rays {
-                    check_ray(m, b, &w4, ray).unwrap();
-                    check_ray(m, b, &w8, ray).unwrap();
+            for method in METHODS {
+                let mut w4 = WideBvh::<4>::from_mesh_bvh_with(&bin, method);
+                let mut w8 = WideBvh::<8>::from_mesh_bvh_with(&bin, method);
+                assert!(w8.nodes().len() > 2048, "{} nodes", w8.nodes().len());
+                for (m, b) in [(&deformed, &bin_def), (&rest, &bin), (&deformed, &bin_def)] {
+                    w4.refit(m);
+                    w8.refit(m);
+                    w4.validate(m).unwrap();
+                    w8.validate(m).unwrap();
+                    for ray in &rays {
+                        check_ray(m, b, &w4, ray).unwrap();
+                        check_ray(m, b, &w8, ray).unwrap();
+                    }
                 }
             }
         });
@@ -294,16 +306,18 @@ fn collapse_into_used_storage_gives_the_fresh_collapse() {
     let bin_big = MeshBvh::build(&big, &BuildParams::BINNED);
     let bin_small = MeshBvh::build(&small, &BuildParams::BINNED);
     for (from, to, mesh) in [(&bin_big, &bin_small, &small), (&bin_small, &bin_big, &big)] {
-        let mut w = WideBvh::<8>::from_mesh_bvh(from);
-        w.collapse_from(to);
-        let fresh = WideBvh::<8>::from_mesh_bvh(to);
-        assert_eq!(w.nodes(), fresh.nodes());
-        assert_eq!(w.blocks().len(), fresh.blocks().len());
-        assert_eq!(w.prim_count(), fresh.prim_count());
-        w.validate(mesh).unwrap();
-        let rays = dynbvh::report::rays::random_rays(&mesh.bounds(), 100, 7);
-        for ray in &rays {
-            check_ray(mesh, to, &w, ray).unwrap();
+        for method in METHODS {
+            let mut w = WideBvh::<8>::from_mesh_bvh_with(from, method);
+            w.collapse_from(to);
+            let fresh = WideBvh::<8>::from_mesh_bvh_with(to, method);
+            assert_eq!(w.nodes(), fresh.nodes());
+            assert_eq!(w.blocks().len(), fresh.blocks().len());
+            assert_eq!(w.prim_count(), fresh.prim_count());
+            w.validate(mesh).unwrap();
+            let rays = dynbvh::report::rays::random_rays(&mesh.bounds(), 100, 7);
+            for ray in &rays {
+                check_ray(mesh, to, &w, ray).unwrap();
+            }
         }
     }
 }

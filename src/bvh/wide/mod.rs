@@ -1,10 +1,12 @@
 //! Wide BVHs (4 or 8 children per node) made from the binary BVH by collapsing, with the child
 //! boxes stored structure-of-arrays so that one SIMD operation tests a ray against all of them.
 //!
-//! Collapsing: a wide node starts from a binary node's two children and repeatedly replaces the
-//! child with the largest surface area by its own two children, until it has `K` children or
-//! only leaves are left. Binary leaves become wide leaves unchanged, so the triangles keep the
-//! binary tree's leaf order (and the [`MeshBvh`]'s leaf-ordered copy of them).
+//! Collapsing ([`CollapseMethod::Greedy`], the default): a wide node starts from a binary
+//! node's two children and repeatedly replaces the child with the largest surface area by its
+//! own two children, until it has `K` children or only leaves are left. Binary leaves become
+//! wide leaves unchanged, so the triangles keep the binary tree's leaf order (and the
+//! [`MeshBvh`]'s leaf-ordered copy of them). [`CollapseMethod::Sah`] instead chooses the cut of
+//! least SAH cost by dynamic programming (`sah.rs`); it writes the same layout.
 //!
 //! Invariants (checked by [`WideBvh::validate`]):
 //! - node 0 is the root; every interior child index is greater than its parent's (children after
@@ -20,9 +22,11 @@ pub(crate) use closest_point::Placed;
 mod lanes;
 mod packet;
 mod refit;
+mod sah;
 mod traverse;
 
 pub use lanes::TriBlock;
+pub use sah::WideCost;
 
 use super::{BuildParams, Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{Aabb, TriMesh};
@@ -156,6 +160,23 @@ fn encode_leaf(first: u32, count: u32) -> u32 {
     LEAF_BIT | ((count - 1) << FIRST_BITS) | first
 }
 
+/// How [`WideBvh::collapse_from`] turns the binary tree into the wide one.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum CollapseMethod {
+    /// Pull up the child with the largest area until a node is full; binary subtrees of at
+    /// most 8 triangles left over become one leaf lane.
+    #[default]
+    Greedy,
+    /// The collapse of least SAH cost with these costs, by dynamic programming (Ylitie, Karras
+    /// & Laine 2017): leaf sizes (up to [`MAX_WIDE_LEAF`]) are chosen by the cost.
+    Sah(WideCost),
+}
+
+impl CollapseMethod {
+    /// The SAH collapse with [`WideCost::DEFAULT`].
+    pub const SAH: Self = Self::Sah(WideCost::DEFAULT);
+}
+
 /// A wide BVH (`K` = 4 or 8 children per node) over a triangle mesh, with the triangles copied
 /// into blocks of four ([`TriBlock`]) in leaf order. Built by collapsing a binary [`MeshBvh`];
 /// refitted in place.
@@ -176,6 +197,10 @@ pub struct WideBvh<const K: usize> {
     ranges: Vec<(u32, u32)>,
     /// Scratch of the stack-need computation.
     need: Vec<usize>,
+    /// How [`WideBvh::collapse_from`] collapses.
+    method: CollapseMethod,
+    /// Scratch of the SAH collapse: its choices per binary node.
+    choice: Vec<u64>,
 }
 
 /// After a collapse into a vector that had `before` capacity: when it was empty storage or the
@@ -232,6 +257,32 @@ impl<const K: usize> WideBvh<K> {
         w
     }
 
+    /// [`WideBvh::from_mesh_bvh`] with the given collapse (kept for later
+    /// [`WideBvh::collapse_from`] calls).
+    ///
+    /// # Panics
+    /// As [`WideBvh::from_mesh_bvh`].
+    #[must_use]
+    pub fn from_mesh_bvh_with(m: &MeshBvh, method: CollapseMethod) -> Self {
+        let mut w = Self {
+            method,
+            ..Self::default()
+        };
+        w.collapse_from(m);
+        w
+    }
+
+    /// The collapse that [`WideBvh::collapse_from`] uses.
+    #[must_use]
+    pub fn collapse_method(&self) -> CollapseMethod {
+        self.method
+    }
+
+    /// Sets the collapse for the next [`WideBvh::collapse_from`] calls.
+    pub fn set_collapse_method(&mut self, method: CollapseMethod) {
+        self.method = method;
+    }
+
     /// [`WideBvh::from_mesh_bvh`] into this tree's storage: the collapse of a rebuilt binary
     /// tree, which allocates nothing once the storage has grown to the tree's size. The first
     /// collapse into empty storage (and any that outgrows it) leaves a quarter of headroom in
@@ -266,10 +317,32 @@ impl<const K: usize> WideBvh<K> {
         let mut ranges = std::mem::take(&mut self.ranges);
         let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
         let root = Item::Node(0);
-        if c.fits_leaf(root) {
-            c.node(&[root], &mut self.nodes);
-        } else {
-            c.node(&c.open(root), &mut self.nodes);
+        match self.method {
+            CollapseMethod::Sah(cost) if !c.binary(0).is_leaf() => {
+                let choice = &mut self.choice;
+                choice.clear();
+                choice.reserve((2 * bvh.prim_count()).saturating_sub(1));
+                choice.resize(bvh.nodes().len(), 0);
+                let a = c.binary(0).bounds().half_area_f64();
+                let mut dp = sah::Dp {
+                    c: &c,
+                    cost,
+                    choice,
+                    inv_root: if a > 0.0 && a.is_finite() {
+                        1.0 / a
+                    } else {
+                        1.0
+                    },
+                };
+                dp.solve::<K>(0);
+                dp.write(0, &mut self.nodes);
+            }
+            _ if c.fits_leaf(root) => {
+                c.node(&[root], &mut self.nodes);
+            }
+            _ => {
+                c.node(&c.open(root), &mut self.nodes);
+            }
         }
         self.ranges = ranges;
         // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
@@ -375,6 +448,40 @@ impl<const K: usize> WideBvh<K> {
             .map(|n| (0..K).filter(|&k| n.child(k) != Child::Empty).count())
             .sum();
         used as f64 / self.nodes.len().max(1) as f64
+    }
+
+    /// SAH cost of the tree with `cost`, relative to the root's area: the root node, each
+    /// interior lane's node and each leaf lane's triangles, weighted by the lane's area (0 for
+    /// the empty tree).
+    #[must_use]
+    pub fn sah_cost(&self, cost: WideCost) -> f64 {
+        let Some(root) = self.nodes.first() else {
+            return 0.0;
+        };
+        let mut sum = f64::from(cost.node) * root.bounds().half_area_f64();
+        for n in &self.nodes {
+            for k in 0..K {
+                let a = n.lane_bounds(k).half_area_f64();
+                sum += a * f64::from(match n.child(k) {
+                    Child::Empty => 0.0,
+                    Child::Node(_) => cost.node,
+                    Child::Leaf { first, count } => {
+                        let tris = self.blocks[first as usize..(first + count) as usize]
+                            .iter()
+                            .flat_map(|b| b.prims)
+                            .filter(|&p| p != NO_PRIM)
+                            .count();
+                        cost.leaf_cost(tris as u32)
+                    }
+                });
+            }
+        }
+        let a = root.bounds().half_area_f64();
+        if a > 0.0 && a.is_finite() {
+            sum / a
+        } else {
+            sum
+        }
     }
 
     fn compute_stack_need(&self) -> usize {
