@@ -99,6 +99,28 @@ impl RayLanes {
     }
 }
 
+/// The slab test over one vector of `$k` lanes (`$v`), the plane distance of bound row `plane`
+/// (a vector `row`) on axis `a` given by `$t`: [`slab`] and [`slab_fma`] differ only in it.
+macro_rules! slab_lanes {
+    ($v:ident, $k:literal, $bounds:ident, $r:ident, $tmax:ident, $dist:ident,
+     |$row:ident, $a:ident, $plane:ident| $t:expr) => {{
+        let t = |$a: usize, $plane: usize| {
+            let a: &[f32; $k] = $bounds[$plane].as_slice().try_into().expect("K lanes");
+            let $row = $v::from(*a);
+            $t
+        };
+        let tn = t(0, $r.near[0])
+            .fast_max(t(1, $r.near[1]))
+            .fast_max(t(2, $r.near[2]).fast_max($v::splat($r.tmin)));
+        let tf = t(0, $r.far[0])
+            .fast_min(t(1, $r.far[1]))
+            .fast_min(t(2, $r.far[2]).fast_min($v::splat($tmax)))
+            * $v::splat(FAR_SCALE);
+        $dist.as_mut_slice().copy_from_slice(&tn.to_array());
+        tn.simd_le(tf).to_bitmask()
+    }};
+}
+
 /// [`slab`] with each plane distance one fused multiply-add, `b * inv - c` (half the
 /// arithmetic of `(b - o) * inv`), for rays that pass [`RayLanes::fma_ok`]: conservative by the
 /// padded offsets (see [`RayLanes::new`]); the far distance gets the same `FAR_SCALE`. The
@@ -111,39 +133,11 @@ pub(super) fn slab_fma<const K: usize>(
     dist: &mut [f32; K],
 ) -> u32 {
     if K == 8 {
-        let row = |i: usize| -> f32x8 {
-            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
-            f32x8::from(*a)
-        };
-        let t = |a: usize, plane: usize| {
-            row(plane).mul_add(f32x8::splat(r.inv[a]), f32x8::splat(r.neg_c[plane]))
-        };
-        let tn = t(0, r.near[0])
-            .fast_max(t(1, r.near[1]))
-            .fast_max(t(2, r.near[2]).fast_max(f32x8::splat(r.tmin)));
-        let tf = t(0, r.far[0])
-            .fast_min(t(1, r.far[1]))
-            .fast_min(t(2, r.far[2]).fast_min(f32x8::splat(tmax)))
-            * f32x8::splat(FAR_SCALE);
-        dist.as_mut_slice().copy_from_slice(&tn.to_array());
-        tn.simd_le(tf).to_bitmask()
+        slab_lanes!(f32x8, 8, bounds, r, tmax, dist, |row, a, plane| row
+            .mul_add(f32x8::splat(r.inv[a]), f32x8::splat(r.neg_c[plane])))
     } else if K == 4 {
-        let row = |i: usize| -> f32x4 {
-            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
-            f32x4::from(*a)
-        };
-        let t = |a: usize, plane: usize| {
-            row(plane).mul_add(f32x4::splat(r.inv[a]), f32x4::splat(r.neg_c[plane]))
-        };
-        let tn = t(0, r.near[0])
-            .fast_max(t(1, r.near[1]))
-            .fast_max(t(2, r.near[2]).fast_max(f32x4::splat(r.tmin)));
-        let tf = t(0, r.far[0])
-            .fast_min(t(1, r.far[1]))
-            .fast_min(t(2, r.far[2]).fast_min(f32x4::splat(tmax)))
-            * f32x4::splat(FAR_SCALE);
-        dist.as_mut_slice().copy_from_slice(&tn.to_array());
-        tn.simd_le(tf).to_bitmask()
+        slab_lanes!(f32x4, 4, bounds, r, tmax, dist, |row, a, plane| row
+            .mul_add(f32x4::splat(r.inv[a]), f32x4::splat(r.neg_c[plane])))
     } else {
         slab(bounds, r, tmax, dist)
     }
@@ -161,39 +155,13 @@ pub(super) fn slab<const K: usize>(
     dist: &mut [f32; K],
 ) -> u32 {
     if K == 8 {
-        let row = |i: usize| -> f32x8 {
-            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
-            f32x8::from(*a)
-        };
-        let t = |a: usize, plane: usize| {
-            (row(plane) - f32x8::splat(r.origin[plane])) * f32x8::splat(r.inv[a])
-        };
-        let tn = t(0, r.near[0])
-            .fast_max(t(1, r.near[1]))
-            .fast_max(t(2, r.near[2]).fast_max(f32x8::splat(r.tmin)));
-        let tf = t(0, r.far[0])
-            .fast_min(t(1, r.far[1]))
-            .fast_min(t(2, r.far[2]).fast_min(f32x8::splat(tmax)))
-            * f32x8::splat(FAR_SCALE);
-        dist.as_mut_slice().copy_from_slice(&tn.to_array());
-        tn.simd_le(tf).to_bitmask()
+        slab_lanes!(f32x8, 8, bounds, r, tmax, dist, |row, a, plane| (row
+            - f32x8::splat(r.origin[plane]))
+            * f32x8::splat(r.inv[a]))
     } else if K == 4 {
-        let row = |i: usize| -> f32x4 {
-            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
-            f32x4::from(*a)
-        };
-        let t = |a: usize, plane: usize| {
-            (row(plane) - f32x4::splat(r.origin[plane])) * f32x4::splat(r.inv[a])
-        };
-        let tn = t(0, r.near[0])
-            .fast_max(t(1, r.near[1]))
-            .fast_max(t(2, r.near[2]).fast_max(f32x4::splat(r.tmin)));
-        let tf = t(0, r.far[0])
-            .fast_min(t(1, r.far[1]))
-            .fast_min(t(2, r.far[2]).fast_min(f32x4::splat(tmax)))
-            * f32x4::splat(FAR_SCALE);
-        dist.as_mut_slice().copy_from_slice(&tn.to_array());
-        tn.simd_le(tf).to_bitmask()
+        slab_lanes!(f32x4, 4, bounds, r, tmax, dist, |row, a, plane| (row
+            - f32x4::splat(r.origin[plane]))
+            * f32x4::splat(r.inv[a]))
     } else {
         let mut mask = 0;
         for i in 0..K {
