@@ -9,7 +9,7 @@
 use super::Accel;
 use super::interval::{beyond, box_interval, lower};
 use super::mailbox::Mailbox;
-use super::triangles::{AnyHit, Closest, Triangles, bounds_of};
+use super::triangles::{AnyHit, Closest, Triangles};
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
 use glam::Vec3;
@@ -45,6 +45,10 @@ impl Default for GridParams {
 /// in a fine grid would otherwise fill it).
 const MAX_REFS_PER_TRIANGLE: u64 = 64;
 
+/// A triangle entered into the grid: its index and its cells, `[x0, y0, z0, x1, y1, z1]`
+/// inclusive (16 bits suffice: [`resolution`] keeps at most 4096 cells a side).
+type Entry = (u32, [u16; 6]);
+
 /// A uniform grid over a mesh's triangles.
 #[derive(Clone, Debug, Default)]
 pub struct Grid {
@@ -69,9 +73,13 @@ impl Grid {
     #[must_use]
     pub fn build(mesh: &TriMesh, params: &GridParams) -> Self {
         let tris = Triangles::of_mesh(mesh);
-        let boxes = tris.boxes();
-        let bounds = bounds_of(&boxes);
-        let n = boxes.iter().filter(|b| !b.is_empty()).count();
+        let (mut bounds, mut n) = (Aabb::EMPTY, 0usize);
+        for b in tris.tris.iter().map(Aabb::of_triangle) {
+            if !b.is_empty() {
+                bounds = bounds.union(b);
+                n += 1;
+            }
+        }
         if n == 0 {
             return Self {
                 tris,
@@ -84,9 +92,9 @@ impl Grid {
             .max(1.0);
         loop {
             let mut g = Self::with_resolution(bounds, resolution(&bounds, target));
-            let (ranges, count, total) = g.count_refs(&boxes);
+            let (sorted, count, total) = g.count_refs(&tris.tris);
             if total <= MAX_REFS_PER_TRIANGLE * n as u64 + count.len() as u64 || target <= 1.0 {
-                g.fill(&ranges, count);
+                g.fill(&sorted, count);
                 g.tris = tris;
                 return g;
             }
@@ -123,11 +131,12 @@ impl Grid {
         }
     }
 
-    /// The cells a triangle's box (with the margin) overlaps, as index ranges per axis.
-    fn cell_range(&self, b: &Aabb) -> [std::ops::RangeInclusive<u32>; 3] {
-        std::array::from_fn(|a| {
-            self.cell_of(a, b.min[a] - self.margin[a])..=self.cell_of(a, b.max[a] + self.margin[a])
-        })
+    /// The cells a triangle's box (with the margin) overlaps: `[x0, y0, z0, x1, y1, z1]`,
+    /// inclusive.
+    fn cell_range(&self, b: &Aabb) -> [u32; 6] {
+        let lo: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.min[a] - self.margin[a]));
+        let hi: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.max[a] + self.margin[a]));
+        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
     }
 
     fn cell_index(&self, x: u32, y: u32, z: u32) -> usize {
@@ -138,38 +147,58 @@ impl Grid {
         self.res.iter().map(|&r| r as usize).product()
     }
 
-    /// Each triangle's cell range (`[x0, y0, z0, x1, y1, z1]`, inclusive; `None` without a
-    /// box), the references per cell, and their total; computed once, so the fill does not
-    /// locate the triangles in the grid again.
-    fn count_refs(&self, boxes: &[Aabb]) -> (Vec<Option<[u32; 6]>>, Vec<u32>, u64) {
-        let mut count = vec![0u32; self.cell_count()];
-        let mut total = 0u64;
+    /// Each triangle with a box and its cell range (`[x0, y0, z0, x1, y1, z1]`, inclusive),
+    /// the references per cell and their total (`u64::MAX` past `u32::MAX`); computed once, so
+    /// the fill does not locate the triangles in the grid again.
+    ///
+    /// The triangles come sorted by the row (`y`, `z`) of their first cell, by two counting
+    /// sorts (by `y`, then stably by `z`; one sort over all rows at once scatters its own
+    /// writes over too many places), so that the counts and lists written for consecutive
+    /// triangles lie in a few rows of the table, which stay in cache: in a mesh stored in no
+    /// spatial order (a soup) entering them by index scatters every write over the whole
+    /// table, a cache miss each.
+    fn count_refs(&self, tris: &[[Vec3; 3]]) -> (Vec<Entry>, Vec<u32>, u64) {
         let (nx, nxy) = (
             self.res[0] as usize,
             self.res[0] as usize * self.res[1] as usize,
         );
-        let mut ranges = Vec::with_capacity(boxes.len());
-        for b in boxes {
-            if b.is_empty() {
-                ranges.push(None);
-                continue;
-            }
-            let [rx, ry, rz] = self.cell_range(b);
-            let r = [
-                *rx.start(),
-                *ry.start(),
-                *rz.start(),
-                *rx.end(),
-                *ry.end(),
-                *rz.end(),
-            ];
-            ranges.push(Some(r));
+        let mut total = 0u64;
+        let mut ys = vec![0u32; self.res[1] as usize + 1];
+        let mut zs = vec![0u32; self.res[2] as usize + 1];
+        let boxes = || tris.iter().map(Aabb::of_triangle);
+        for b in boxes().filter(|b| !b.is_empty()) {
+            let r = self.cell_range(&b);
             total += u64::from(r[3] - r[0] + 1)
                 * u64::from(r[4] - r[1] + 1)
                 * u64::from(r[5] - r[2] + 1);
-            if total > u64::from(u32::MAX) {
-                return (ranges, count, u64::MAX);
-            }
+            ys[r[1] as usize + 1] += 1;
+            zs[r[2] as usize + 1] += 1;
+        }
+        if total > u64::from(u32::MAX) {
+            return (Vec::new(), Vec::new(), u64::MAX);
+        }
+        for k in 1..ys.len() {
+            ys[k] += ys[k - 1];
+        }
+        for k in 1..zs.len() {
+            zs[k] += zs[k - 1];
+        }
+        let m = zs[zs.len() - 1] as usize;
+        let mut by_row = huge_vec(m, (0, [0; 6]));
+        for (i, b) in boxes().enumerate().filter(|(_, b)| !b.is_empty()) {
+            let r = self.cell_range(&b);
+            let slot = &mut ys[r[1] as usize];
+            by_row[*slot as usize] = (i as u32, r.map(|x| x as u16));
+            *slot += 1;
+        }
+        let mut sorted = huge_vec(m, (0, [0; 6]));
+        for e in by_row {
+            let slot = &mut zs[e.1[2] as usize];
+            sorted[*slot as usize] = e;
+            *slot += 1;
+        }
+        let mut count = huge_vec(self.cell_count(), 0u32);
+        for (_, r) in &sorted {
             for z in r[2] as usize..=r[5] as usize {
                 for y in r[1] as usize..=r[4] as usize {
                     let row = z * nxy + y * nx;
@@ -179,11 +208,12 @@ impl Grid {
                 }
             }
         }
-        (ranges, count, total)
+        (sorted, count, total)
     }
 
-    fn fill(&mut self, ranges: &[Option<[u32; 6]>], count: Vec<u32>) {
-        let mut starts = Vec::with_capacity(count.len() + 1);
+    fn fill(&mut self, sorted: &[Entry], count: Vec<u32>) {
+        let mut starts = huge_vec(0, 0u32);
+        crate::simd::reserve_huge(&mut starts, count.len() + 1, 0);
         let mut sum = 0u32;
         starts.push(0);
         for c in &count {
@@ -194,18 +224,17 @@ impl Grid {
         let mut next = count;
         let cells = next.len();
         next.copy_from_slice(&starts[..cells]);
-        let mut refs = vec![0u32; sum as usize];
+        let mut refs = huge_vec(sum as usize, 0u32);
         let (nx, nxy) = (
             self.res[0] as usize,
             self.res[0] as usize * self.res[1] as usize,
         );
-        for (i, r) in ranges.iter().enumerate() {
-            let Some(r) = r else { continue };
+        for &(i, r) in sorted {
             for z in r[2] as usize..=r[5] as usize {
                 for y in r[1] as usize..=r[4] as usize {
                     let row = z * nxy + y * nx;
                     for c in &mut next[row + r[0] as usize..=row + r[3] as usize] {
-                        refs[*c as usize] = i as u32;
+                        refs[*c as usize] = i;
                         *c += 1;
                     }
                 }
@@ -359,10 +388,10 @@ impl Grid {
         }
         let mut want = vec![0u32; cells];
         for (i, b) in boxes.iter().enumerate().filter(|(_, b)| !b.is_empty()) {
-            let [rx, ry, rz] = self.cell_range(b);
-            for z in rz {
-                for y in ry.clone() {
-                    for x in rx.clone() {
+            let r = self.cell_range(b);
+            for z in r[2]..=r[5] {
+                for y in r[1]..=r[4] {
+                    for x in r[0]..=r[3] {
                         let c = self.cell_index(x, y, z);
                         let refs = &self.refs[self.starts[c] as usize..self.starts[c + 1] as usize];
                         if !refs.contains(&(i as u32)) {
@@ -378,6 +407,17 @@ impl Grid {
             None => Ok(()),
         }
     }
+}
+
+/// `n` copies of `x` in storage asked to be backed by huge pages
+/// ([`crate::simd::reserve_huge`]): the build's tables are large and written in scattered
+/// order, and rays read the cell lists in random order; with 4 KiB pages most of the build's
+/// time went to page faults and the walk's to TLB misses.
+fn huge_vec<T: Clone>(n: usize, x: T) -> Vec<T> {
+    let mut v = Vec::new();
+    crate::simd::reserve_huge(&mut v, n, 0);
+    v.resize(n, x);
+    v
 }
 
 /// Cells per axis for about `target` cells over `bounds`, proportional to its sides (flat or
