@@ -156,7 +156,7 @@ impl Grid {
     /// writes over too many places), so that the counts and lists written for consecutive
     /// triangles lie in a few rows of the table, which stay in cache: in a mesh stored in no
     /// spatial order (a soup) entering them by index scatters every write over the whole
-    /// table, a cache miss each.
+    /// table, a cache miss each. Triangles mostly in that order already are taken as they are.
     fn count_refs(&self, tris: &[[Vec3; 3]]) -> (Vec<Entry>, Vec<u32>, u64) {
         let (nx, nxy) = (
             self.res[0] as usize,
@@ -165,6 +165,8 @@ impl Grid {
         let mut total = 0u64;
         let mut ys = vec![0u32; self.res[1] as usize + 1];
         let mut zs = vec![0u32; self.res[2] as usize + 1];
+        // Consecutive triangles whose first cells lie in neighbouring rows.
+        let (mut near, mut last) = (0usize, [u32::MAX; 2]);
         let boxes = || tris.iter().map(Aabb::of_triangle);
         for b in boxes().filter(|b| !b.is_empty()) {
             let r = self.cell_range(&b);
@@ -173,29 +175,43 @@ impl Grid {
                 * u64::from(r[5] - r[2] + 1);
             ys[r[1] as usize + 1] += 1;
             zs[r[2] as usize + 1] += 1;
+            near += usize::from(r[1].abs_diff(last[0]) <= 1 && r[2].abs_diff(last[1]) <= 1);
+            last = [r[1], r[2]];
         }
         if total > u64::from(u32::MAX) {
             return (Vec::new(), Vec::new(), u64::MAX);
         }
-        for k in 1..ys.len() {
-            ys[k] += ys[k - 1];
-        }
-        for k in 1..zs.len() {
-            zs[k] += zs[k - 1];
-        }
-        let m = zs[zs.len() - 1] as usize;
-        let mut by_row = huge_vec(m, (0, [0; 6]));
-        for (i, b) in boxes().enumerate().filter(|(_, b)| !b.is_empty()) {
-            let r = self.cell_range(&b);
-            let slot = &mut ys[r[1] as usize];
-            by_row[*slot as usize] = (i as u32, r.map(|x| x as u16));
-            *slot += 1;
-        }
+        let m = zs[1..].iter().sum::<u32>() as usize;
+        let entries = || {
+            boxes()
+                .enumerate()
+                .filter(|(_, b)| !b.is_empty())
+                .map(|(i, b)| (i as u32, self.cell_range(&b).map(|x| x as u16)))
+        };
         let mut sorted = huge_vec(m, (0, [0; 6]));
-        for e in by_row {
-            let slot = &mut zs[e.1[2] as usize];
-            sorted[*slot as usize] = e;
-            *slot += 1;
+        if near >= m - m / 8 {
+            // Already in spatial order (a mesh's triangles mostly are): no sort.
+            for (slot, e) in sorted.iter_mut().zip(entries()) {
+                *slot = e;
+            }
+        } else {
+            for k in 1..ys.len() {
+                ys[k] += ys[k - 1];
+            }
+            for k in 1..zs.len() {
+                zs[k] += zs[k - 1];
+            }
+            let mut by_row = huge_vec(m, (0, [0; 6]));
+            for e in entries() {
+                let slot = &mut ys[e.1[1] as usize];
+                by_row[*slot as usize] = e;
+                *slot += 1;
+            }
+            for e in by_row {
+                let slot = &mut zs[e.1[2] as usize];
+                sorted[*slot as usize] = e;
+                *slot += 1;
+            }
         }
         let mut count = huge_vec(self.cell_count(), 0u32);
         for (_, r) in &sorted {

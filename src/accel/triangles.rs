@@ -12,11 +12,13 @@ pub(super) struct Triangles {
 }
 
 impl Triangles {
-    /// The mesh's triangles in its order.
+    /// The mesh's triangles in its order, on huge pages where the system gives them
+    /// ([`crate::simd::reserve_huge`]: rays read them in random order).
     pub(super) fn of_mesh(mesh: &TriMesh) -> Self {
-        Self {
-            tris: (0..mesh.len()).map(|i| mesh.triangle(i)).collect(),
-        }
+        let mut tris = Vec::new();
+        crate::simd::reserve_huge(&mut tris, mesh.len(), 0);
+        tris.extend((0..mesh.len()).map(|i| mesh.triangle(i)));
+        Self { tris }
     }
 
     /// Each triangle's box as trees store it ([`Aabb::of_triangle`]).
