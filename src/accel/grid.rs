@@ -188,13 +188,13 @@ impl Grid {
                 .filter(|(_, b)| !b.is_empty())
                 .map(|(i, b)| (i as u32, self.cell_range(&b).map(|x| x as u16)))
         };
-        let mut sorted = huge_vec(m, (0, [0; 6]));
+        let mut sorted = Vec::new();
         if near >= m - m / 8 {
             // Already in spatial order (a mesh's triangles mostly are): no sort.
-            for (slot, e) in sorted.iter_mut().zip(entries()) {
-                *slot = e;
-            }
+            crate::simd::reserve_huge(&mut sorted, m, 0);
+            sorted.extend(entries());
         } else {
+            sorted = huge_vec(m, (0, [0; 6]));
             for k in 1..ys.len() {
                 ys[k] += ys[k - 1];
             }

@@ -1,0 +1,51 @@
+//! Build time (CPU) of the other structures against the binned BVH's, builds alternating in one
+//! process, medians: `cargo run --release --example prof_accel_build MESH.tri [NAMES] [RUNS]`
+//! (MESH a `.tri` file or a glTF file, flattened at rest; NAMES comma-separated, default
+//! `grid`; RUNS default 5). Run with `RAYON_NUM_THREADS=1` to
+//! build the BVH on one thread. Prints each structure's builds, the BVH's, and the ratio of
+//! the medians.
+use dynbvh::accel::AccelKind;
+use dynbvh::bvh::{BuildParams, MeshBvh};
+
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::cpu_s;
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let path = std::path::PathBuf::from(args.next().expect("mesh"));
+    let mesh = if path.extension().is_some_and(|e| e == "tri") {
+        dynbvh::io::read_tri(&path).unwrap()
+    } else {
+        dynbvh::anim::Scene::load(&path).unwrap().0.flatten_rest()
+    };
+    let names = args.next().unwrap_or_else(|| "grid".into());
+    let runs: usize = args.next().map_or(5, |r| r.parse().unwrap());
+    let kinds: Vec<AccelKind> = names.split(',').map(|n| n.parse().unwrap()).collect();
+    let mut bvh_ms = Vec::new();
+    let mut ms = vec![Vec::new(); kinds.len()];
+    for _ in 0..runs {
+        let c = cpu_s();
+        drop(MeshBvh::build(&mesh, &BuildParams::BINNED));
+        bvh_ms.push((cpu_s() - c) * 1e3);
+        for (k, m) in kinds.iter().zip(&mut ms) {
+            let c = cpu_s();
+            drop(k.build(&mesh));
+            m.push((cpu_s() - c) * 1e3);
+        }
+    }
+    let b = median(&mut bvh_ms);
+    println!("binned16      median {b:8.1} ms cpu  {bvh_ms:.1?}");
+    for (name, m) in names.split(',').zip(&mut ms) {
+        let x = median(m);
+        println!(
+            "{name:<13} median {x:8.1} ms cpu  {m:.1?}  {:.3}x binned16",
+            x / b
+        );
+    }
+}
