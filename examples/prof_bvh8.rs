@@ -2,7 +2,9 @@
 //! `cargo run --release --example prof_bvh8 -- DIR INPUT...` with `DIR/INPUT.tri`,
 //! `DIR/INPUT_primary.rays`, `DIR/INPUT_random.rays`. Prints the leaf sizes, the work per ray,
 //! the agreement with the binary tree on a sample, and Mrays/s in CPU time (median of `PASSES`,
-//! default 5, over the first `RAYS` rays of each set, default 2^18).
+//! default 5, over the first `RAYS` rays of each set, default 2^18). `VARIANTS=a,b,..` times
+//! `MeshBvh8::bench_closest_hit` with those switches instead, interleaved pass by pass, and
+//! prints each one's median and its median ratio to the first.
 use dynbvh::bvh::{BuildParams, Child, MeshBvh, MeshBvh8, TraversalStats};
 use dynbvh::geom::Ray;
 
@@ -82,6 +84,52 @@ fn main() {
             let mut st = TraversalStats::default();
             for r in &sample {
                 let _ = w8.closest_hit_counted(r, &mut st);
+            }
+            if let Ok(list) = std::env::var("VARIANTS") {
+                let variants: Vec<u32> = list.split(',').map(|v| v.parse().unwrap()).collect();
+                for &x in &variants {
+                    let bad = sample
+                        .iter()
+                        .filter(|r| {
+                            w8.bench_closest_hit(r, x).map(|h| (h.t, h.u, h.v))
+                                != w8.closest_hit(r).map(|h| (h.t, h.u, h.v))
+                        })
+                        .count();
+                    assert_eq!(bad, 0, "variant {x} differs");
+                }
+                // speeds[variant][pass]
+                let mut speeds = vec![Vec::new(); variants.len()];
+                for _ in 0..passes {
+                    for (i, &x) in variants.iter().enumerate() {
+                        let c = cpu_s();
+                        let n = rays
+                            .iter()
+                            .filter(|r| w8.bench_closest_hit(r, x).is_some())
+                            .count();
+                        std::hint::black_box(n);
+                        speeds[i].push(rays.len() as f64 / (cpu_s() - c) / 1e6);
+                    }
+                }
+                let median = |mut v: Vec<f64>| {
+                    v.sort_by(f64::total_cmp);
+                    v[v.len() / 2]
+                };
+                let line: Vec<String> = variants
+                    .iter()
+                    .enumerate()
+                    .map(|(i, x)| {
+                        let ratio = median(
+                            speeds[i]
+                                .iter()
+                                .zip(&speeds[0])
+                                .map(|(a, b)| a / b)
+                                .collect(),
+                        );
+                        format!("v{x} {:.2} ({ratio:.3})", median(speeds[i].clone()))
+                    })
+                    .collect();
+                println!("  {set}: {}", line.join(", "));
+                continue;
             }
             let mut v: Vec<f64> = (0..passes)
                 .map(|_| {
