@@ -63,7 +63,7 @@ fn main() {
             if set == "primary" && side * side == rays.len() {
                 // As the peers bench: every 2nd row and column, in the order of packet tiles.
                 let half: Vec<Ray> = (0..side * side)
-                    .filter(|i| (i / side) % 2 == 0 && (i % side) % 2 == 0)
+                    .filter(|i| (i / side).is_multiple_of(2) && (i % side).is_multiple_of(2))
                     .map(|i| rays[i])
                     .collect();
                 rays.clear();
