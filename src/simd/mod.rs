@@ -2,7 +2,7 @@
 //! plain-array fallbacks chosen at compile time; the wide tree's are in
 //! `src/bvh/wide/lanes.rs`), and the crate's few `unsafe` operations, each behind a safe
 //! function: cache prefetch hints and the huge-page hint of [`reserve_huge`], which have no
-//! safe equivalent.
+//! safe equivalent, and the reads of the uninitialised traversal [`Stack`].
 
 pub mod packet;
 
