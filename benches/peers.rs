@@ -204,6 +204,31 @@ impl Accel for DynWide {
     }
 }
 
+/// The 8-wide tree traced as before issue 17's fourth session: a zeroed stack for every ray
+/// and two hit children ordered by the insertion loop (`MeshBvh8::bench_closest_hit` variant 1).
+struct DynWideBefore(DynWide);
+
+impl Accel for DynWideBefore {
+    type Input = TriMesh;
+    type R = Ray;
+    fn prepare(mesh: &TriMesh) -> TriMesh {
+        mesh.clone()
+    }
+    fn ray(r: &Ray) -> Ray {
+        *r
+    }
+    #[inline]
+    fn closest(&self, ray: &Ray) -> Option<(f32, u32)> {
+        self.0.0.bench_closest_hit(ray, 1).map(|h| (h.t, h.prim))
+    }
+    fn sah(&self) -> f64 {
+        f64::NAN
+    }
+    fn refit(&mut self, input: &TriMesh) -> bool {
+        self.0.refit(input)
+    }
+}
+
 /// dynbvh's 8-wide tree traced as packets of up to 128 consecutive rays (16x8 camera tiles;
 /// incoherent packets fall back to single rays by themselves).
 struct DynWidePackets(DynWide);
@@ -1113,6 +1138,18 @@ fn variants() -> Vec<Variant> {
                     drop(w);
                     c.bench_plain_slab();
                     DynWide(c)
+                })
+            },
+        },
+        Variant {
+            // The same tree and traversal with the stack zeroed for every ray and two hit
+            // children sorted by the insertion loop (`docs/wide.md`, fourth session).
+            name: "dynbvh bvh8 before (zeroed stack)",
+            make: |i| {
+                measured(i, |m: TriMesh| {
+                    DynWideBefore(DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(
+                        &MeshBvh::build(&m, &BuildParams::BINNED),
+                    )))
                 })
             },
         },

@@ -41,7 +41,7 @@ pub use packet::{
     TILE_W, image_tiles, is_coherent,
 };
 pub use traverse::{Counters, TraversalStats};
-pub use wide::{CollapseMethod, MeshBvh4, MeshBvh8, WideBvh, WideCost, WideNode};
+pub use wide::{Child, CollapseMethod, MeshBvh4, MeshBvh8, WideBvh, WideCost, WideNode};
 
 /// The deepest a tree may be (root at depth 0); traversal stacks have this many entries.
 pub const MAX_DEPTH: usize = 128;

@@ -245,7 +245,9 @@ impl<const K: usize> WideBvh<K> {
         c: u32,
     ) -> bool {
         let ray = *p.ray(i);
-        let Some((slot, t, u, v)) = self.traverse::<ANY, N>(c, &ray, p.tmax(i), &mut ()) else {
+        let Some((slot, t, u, v)) =
+            self.traverse::<ANY, N, { super::traverse::X_DEFAULT }>(c, &ray, p.tmax(i), &mut ())
+        else {
             return false;
         };
         if ANY {

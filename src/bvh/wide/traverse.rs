@@ -19,6 +19,18 @@ pub(super) const BIG_STACK: usize = (crate::bvh::MAX_DEPTH + 32) * 8;
 /// Whether the children pushed on the stack are prefetched.
 const PREFETCH: bool = true;
 
+/// Switches of the closest-hit and any-hit walk (bits of its `X` parameter), so that variants
+/// can be timed against each other pass by pass in one process
+/// ([`WideBvh::bench_closest_hit`]).
+pub(super) mod x {
+    /// Zero the stack's storage for every ray (as a `[T; N]` array would be).
+    pub const ZERO_STACK: u32 = 1;
+    /// Two hit children: compare and push the farther one, no insertion loop.
+    pub const SORT2: u32 = 2;
+}
+/// The switches of the queries.
+pub(super) const X_DEFAULT: u32 = x::SORT2;
+
 /// The closest hit so far: block lane (`4 * block + lane`), distance, barycentrics.
 pub(super) type Best = Option<(usize, f32, f32, f32)>;
 
@@ -35,9 +47,32 @@ impl<const K: usize> WideBvh<K> {
     #[inline]
     pub fn closest_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> Option<Hit> {
         let best = if self.stack_need < SMALL_STACK {
-            self.traverse::<false, SMALL_STACK>(0, ray, ray.tmax, counters)
+            self.traverse::<false, SMALL_STACK, X_DEFAULT>(0, ray, ray.tmax, counters)
         } else {
-            self.traverse::<false, BIG_STACK>(0, ray, ray.tmax, counters)
+            self.traverse::<false, BIG_STACK, X_DEFAULT>(0, ray, ray.tmax, counters)
+        };
+        best.map(|(slot, t, u, v)| Hit {
+            t,
+            u,
+            v,
+            prim: self.blocks[slot / 4].prims[slot % 4],
+        })
+    }
+
+    /// For benchmarks: [`WideBvh::closest_hit`] with the walk's switches `variant` (bits of
+    /// `traverse::x`; only the combinations listed here are compiled).
+    #[doc(hidden)]
+    #[must_use]
+    pub fn bench_closest_hit(&self, ray: &Ray, variant: u32) -> Option<Hit> {
+        use x::{SORT2, ZERO_STACK};
+        assert!(self.stack_need < SMALL_STACK, "a deep tree");
+        let best = match variant {
+            0 => self.traverse::<false, SMALL_STACK, 0>(0, ray, ray.tmax, &mut ()),
+            ZERO_STACK => {
+                self.traverse::<false, SMALL_STACK, ZERO_STACK>(0, ray, ray.tmax, &mut ())
+            }
+            SORT2 => self.traverse::<false, SMALL_STACK, SORT2>(0, ray, ray.tmax, &mut ()),
+            _ => panic!("variant {variant} not compiled"),
         };
         best.map(|(slot, t, u, v)| Hit {
             t,
@@ -59,9 +94,9 @@ impl<const K: usize> WideBvh<K> {
     #[inline]
     pub fn any_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> bool {
         if self.stack_need < SMALL_STACK {
-            self.traverse::<true, SMALL_STACK>(0, ray, ray.tmax, counters)
+            self.traverse::<true, SMALL_STACK, X_DEFAULT>(0, ray, ray.tmax, counters)
         } else {
-            self.traverse::<true, BIG_STACK>(0, ray, ray.tmax, counters)
+            self.traverse::<true, BIG_STACK, X_DEFAULT>(0, ray, ray.tmax, counters)
         }
         .is_some()
     }
@@ -85,7 +120,7 @@ impl<const K: usize> WideBvh<K> {
     /// `ANY` returns at the first hit and visits children in lane order; otherwise hit children
     /// are visited nearest first.
     #[inline(always)]
-    pub(super) fn traverse<const ANY: bool, const N: usize>(
+    pub(super) fn traverse<const ANY: bool, const N: usize, const X: u32>(
         &self,
         start: u32,
         ray: &Ray,
@@ -96,15 +131,15 @@ impl<const K: usize> WideBvh<K> {
         // One fused multiply-add a plane for the rays it is safe for (nearly all), else the
         // exact test.
         if lanes.fma_ok(self.coord_max) {
-            self.walk::<ANY, N, true>(start, ray, &lanes, tmax, counters)
+            self.walk::<ANY, N, true, X>(start, ray, &lanes, tmax, counters)
         } else {
-            self.walk::<ANY, N, false>(start, ray, &lanes, tmax, counters)
+            self.walk::<ANY, N, false, X>(start, ray, &lanes, tmax, counters)
         }
     }
 
     /// [`WideBvh::traverse`] with the node test [`slab_fma`] (`FMA`) or [`slab`].
     #[inline(always)]
-    fn walk<const ANY: bool, const N: usize, const FMA: bool>(
+    fn walk<const ANY: bool, const N: usize, const FMA: bool, const X: u32>(
         &self,
         start: u32,
         ray: &Ray,
@@ -121,8 +156,10 @@ impl<const K: usize> WideBvh<K> {
         let tri_lanes = TriLanes::new(ray);
         let pre = RayTriPrecomp::new(ray.dir);
         let mut best: Best = None;
-        let mut stack = [(0u32, 0f32); N];
-        let mut sp = 0usize;
+        let mut stack = crate::simd::Stack::<(u32, f32), N>::default();
+        if X & x::ZERO_STACK != 0 {
+            stack.zero();
+        }
         let mut dist = [0f32; K];
         let mut cur = start;
         loop {
@@ -189,17 +226,31 @@ impl<const K: usize> WideBvh<K> {
                         while mask != 0 {
                             let k = mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            stack[sp] = (node.child[k], dist[k]);
                             if PREFETCH {
-                                self.prefetch(stack[sp].0);
+                                self.prefetch(node.child[k]);
                             }
-                            sp += 1;
+                            stack.push((node.child[k], dist[k]));
                         }
                         cur = node.child[first];
                         continue;
                     }
+                    if X & x::SORT2 != 0 && hits == 2 {
+                        // Two hits, the commonest case after one: the farther one onto the
+                        // stack without the insertion loop, ties ordered as it orders them.
+                        let k0 = mask.trailing_zeros() as usize;
+                        let k1 = (mask & (mask - 1)).trailing_zeros() as usize;
+                        let a = (node.child[k0], dist[k0]);
+                        let b = (node.child[k1], dist[k1]);
+                        let (near, far) = if a.1 < b.1 { (a, b) } else { (b, a) };
+                        if PREFETCH {
+                            self.prefetch(far.0);
+                        }
+                        stack.push(far);
+                        cur = near.0;
+                        continue;
+                    }
                     // Sort the hit lanes by entry distance, farthest first, onto the stack.
-                    let base = sp;
+                    let base = stack.len();
                     while mask != 0 {
                         let k = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
@@ -207,27 +258,18 @@ impl<const K: usize> WideBvh<K> {
                         if PREFETCH {
                             self.prefetch(e.0);
                         }
-                        let mut j = sp;
-                        while j > base && stack[j - 1].1 < e.1 {
-                            stack[j] = stack[j - 1];
-                            j -= 1;
-                        }
-                        stack[j] = e;
-                        sp += 1;
+                        stack.insert_by(base, e, |e, s| s.1 < e.1);
                     }
                     // The nearest is on top: visit it now.
-                    sp -= 1;
-                    cur = stack[sp].0;
+                    cur = stack.pop().expect("pushed").0;
                     continue;
                 }
             }
             // Pop the next subtree that may still hold a closer hit.
             loop {
-                if sp == 0 {
+                let Some((c, tnear)) = stack.pop() else {
                     return best;
-                }
-                sp -= 1;
-                let (c, tnear) = stack[sp];
+                };
                 if tnear <= tmax * FAR_SCALE {
                     cur = c;
                     break;
