@@ -133,6 +133,7 @@ impl Grid {
 
     /// The cells a triangle's box (with the margin) overlaps: `[x0, y0, z0, x1, y1, z1]`,
     /// inclusive.
+    #[inline(always)]
     fn cell_range(&self, b: &Aabb) -> [u32; 6] {
         let lo: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.min[a] - self.margin[a]));
         let hi: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.max[a] + self.margin[a]));
