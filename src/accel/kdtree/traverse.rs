@@ -218,11 +218,11 @@ fn boxes_met(ray: &KdRay, tris: &[[Vec3; 3]], tn: f32, tf: f32) -> u32 {
 /// Whether the ray over `[tn, tf]` may meet the box of `tri`'s corners: the slab test of
 /// `interval::box_interval`, widened the same way, on SIMD lanes with plain `min`/`max` (one
 /// instruction each, like `Ray::hit_box`). A NaN can only make the answer "may meet": it drops
-/// out of a `min` or `max` (a looser bound) or fails the last compare. The one exception, a
-/// lane with one NaN distance and one finite, comes from a ray that does not move on that axis
-/// and a box face one ulp off its origin (see `Ray::slab_lo`): the ray misses that box, and a
-/// triangle with a NaN coordinate, whose box may come out wrong, is never hit by the
-/// watertight test either.
+/// out of a `min` or `max`, or of the choice against `tn` and `tf` (a looser bound). The one
+/// exception, a lane with one NaN distance and one finite, comes from a ray that does not move
+/// on that axis and a box face one ulp off its origin (see `Ray::slab_lo`): the ray misses that
+/// box, and a triangle with a NaN coordinate, whose box may come out wrong, is never hit by
+/// the watertight test either.
 #[inline(always)]
 fn meets_box(ray: &KdRay, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
     let (a, b, c) = (
@@ -236,7 +236,7 @@ fn meets_box(ray: &KdRay, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
     let far = upper(t0.max(t1).min_element() * FAR_SCALE);
     let near = if near > tn { near } else { tn };
     let far = if far < tf { far } else { tf };
-    !(near > far)
+    near <= far
 }
 
 /// Stack entries for trees no deeper than this (the default depth limit at 4M triangles is 37):
