@@ -7,7 +7,9 @@
 //! In a leaf, a triangle is tested only when the ray's interval in the leaf's cell meets the
 //! box of its corners: a hit outside the cell lies in another cell the ray crosses, which holds
 //! the triangle too and is visited unless a closer hit ends the walk first. Most of a leaf's
-//! triangles are rejected so by a slab test, cheaper than the watertight test.
+//! triangles are rejected so by a slab test, cheaper than the watertight test. The slab tests
+//! of a leaf run first, without branches, into a bit mask (whose outcome a branch per triangle
+//! would often mispredict); the triangles it keeps are then tested in order.
 
 use super::{KdTree, MAX_KD_DEPTH};
 use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
@@ -15,7 +17,7 @@ use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
 use crate::geom::{FAR_SCALE, Hit, Ray};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// A node still to visit and the ray's interval in it, already widened (`tn` lowered and `tf`
 /// raised by [`PLANE_SLACK`](crate::accel::interval) once more), so that the descent compares a
@@ -40,11 +42,15 @@ impl Pending {
 }
 
 /// What the descent reads of a ray at every node, gathered once: origin, reciprocal direction,
-/// and which child of a pair is the near one on each axis.
+/// and which child of a pair is the near one on each axis; and the slab test's origins and
+/// reciprocal direction in SIMD lanes.
 struct KdRay {
     origin: [f32; 3],
     inv_dir: [f32; 3],
     near: [usize; 3],
+    slab_lo: Vec3A,
+    slab_hi: Vec3A,
+    inv: Vec3A,
 }
 
 impl KdRay {
@@ -54,6 +60,9 @@ impl KdRay {
             origin: ray.origin.to_array(),
             inv_dir: ray.inv_dir.to_array(),
             near: std::array::from_fn(|a| usize::from(!lower_is_near(ray, a))),
+            slab_lo: ray.slab_lo.into(),
+            slab_hi: ray.slab_hi.into(),
+            inv: ray.inv_dir.into(),
         }
     }
 }
@@ -125,9 +134,15 @@ impl KdTree {
             let at = self.descend(&kray, next, &mut stack, &mut sp, c);
             let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
-            for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) {
-                    q.test(tri, prim, c);
+            let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
+            for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
+                let mut keep = boxes_met(&kray, tris, at.tn, at.tf);
+                while keep != 0 {
+                    let i = keep.trailing_zeros() as usize;
+                    keep &= keep - 1;
+                    if !mailbox.seen(refs[i]) {
+                        q.test(&tris[i], refs[i], c);
+                    }
                 }
             }
             loop {
@@ -169,9 +184,15 @@ impl KdTree {
             let at = self.descend(&kray, next, &mut stack, &mut sp, c);
             let leaf = self.nodes[at.node as usize];
             let range = leaf.index()..leaf.index() + leaf.count();
-            for (&prim, tri) in self.refs[range.clone()].iter().zip(&self.leaf_tris[range]) {
-                if meets_box(ray, tri, at.tn, at.tf) && !mailbox.seen(prim) && q.test(tri, c) {
-                    return true;
+            let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
+            for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
+                let mut keep = boxes_met(&kray, tris, at.tn, at.tf);
+                while keep != 0 {
+                    let i = keep.trailing_zeros() as usize;
+                    keep &= keep - 1;
+                    if !mailbox.seen(refs[i]) && q.test(&tris[i], c) {
+                        return true;
+                    }
                 }
             }
             if sp == 0 {
@@ -183,18 +204,38 @@ impl KdTree {
     }
 }
 
-/// Whether the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of `tri`'s
-/// corners: the slab test of `interval::box_interval`, widened the same way. A triangle with a
-/// NaN coordinate, whose box the vector `min`/`max` may get wrong, can never be hit by the
-/// watertight test, so skipping it changes nothing; a NaN distance drops out of `max`/`min`.
+/// Bit `i` set when the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of
+/// `tris[i]`'s corners (at most 32 triangles), computed for every triangle without a branch.
 #[inline(always)]
-fn meets_box(ray: &Ray, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
-    let lo = tri[0].min(tri[1]).min(tri[2]);
-    let hi = tri[0].max(tri[1]).max(tri[2]);
-    let t0 = (lo - ray.slab_lo) * ray.inv_dir;
-    let t1 = (hi - ray.slab_hi) * ray.inv_dir;
-    let near = lower(t0.min(t1).max_element()).max(tn);
-    let far = upper(t0.max(t1).min_element() * FAR_SCALE).min(tf);
+fn boxes_met(ray: &KdRay, tris: &[[Vec3; 3]], tn: f32, tf: f32) -> u32 {
+    let mut keep = 0;
+    for (i, tri) in tris.iter().enumerate() {
+        keep |= u32::from(meets_box(ray, tri, tn, tf)) << i;
+    }
+    keep
+}
+
+/// Whether the ray over `[tn, tf]` may meet the box of `tri`'s corners: the slab test of
+/// `interval::box_interval`, widened the same way, on SIMD lanes with plain `min`/`max` (one
+/// instruction each, like `Ray::hit_box`). A NaN can only make the answer "may meet": it drops
+/// out of a `min` or `max`, or of the choice against `tn` and `tf` (a looser bound). The one
+/// exception, a lane with one NaN distance and one finite, comes from a ray that does not move
+/// on that axis and a box face one ulp off its origin (see `Ray::slab_lo`): the ray misses that
+/// box, and a triangle with a NaN coordinate, whose box may come out wrong, is never hit by
+/// the watertight test either.
+#[inline(always)]
+fn meets_box(ray: &KdRay, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
+    let (a, b, c) = (
+        Vec3A::from(tri[0]),
+        Vec3A::from(tri[1]),
+        Vec3A::from(tri[2]),
+    );
+    let t0 = (a.min(b).min(c) - ray.slab_lo) * ray.inv;
+    let t1 = (a.max(b).max(c) - ray.slab_hi) * ray.inv;
+    let near = lower(t0.min(t1).max_element());
+    let far = upper(t0.max(t1).min_element() * FAR_SCALE);
+    let near = if near > tn { near } else { tn };
+    let far = if far < tf { far } else { tf };
     near <= far
 }
 
@@ -229,6 +270,7 @@ mod tests {
                 dir[a] = if next() > 0.0 { 1.0 } else { -1.0 };
             }
             let ray = Ray::new(origin, dir);
+            let kray = KdRay::new(&ray);
             let pre = RayTriPrecomp::new(ray.dir);
             let Some((t, _, _)) =
                 intersect_triangle(&ray, &pre, tri[0], tri[1], tri[2], f32::INFINITY)
@@ -243,7 +285,10 @@ mod tests {
                 (0.0, above),
                 (below, 2.0 * t),
             ] {
-                assert!(meets_box(&ray, &tri, tn, tf), "ray {i}: hit at {t} dropped");
+                assert!(
+                    meets_box(&kray, &tri, tn, tf),
+                    "ray {i}: hit at {t} dropped"
+                );
             }
         }
         assert!(hits > 1000, "{hits} hits");
