@@ -110,6 +110,31 @@ impl KdTree {
         }
     }
 
+    /// Calls `visit(triangle, prim)` for each triangle of the leaf `at` whose box the ray may
+    /// meet in the leaf's interval, in leaf order, until it returns true (then returns true).
+    #[inline(always)]
+    fn leaf_candidates(
+        &self,
+        ray: &KdRay,
+        at: Pending,
+        mut visit: impl FnMut(&[Vec3; 3], u32) -> bool,
+    ) -> bool {
+        let leaf = self.nodes[at.node as usize];
+        let range = leaf.index()..leaf.index() + leaf.count();
+        let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
+        for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
+            let mut keep = boxes_met(ray, tris, at.tn, at.tf);
+            while keep != 0 {
+                let i = keep.trailing_zeros() as usize;
+                keep &= keep - 1;
+                if visit(&tris[i], refs[i]) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
     /// The closest hit, counting the work, on a stack of `N` entries (`N` at least the depth).
     pub(super) fn closest(&self, ray: &Ray, c: &mut impl Counters) -> Option<Hit> {
         if self.depth <= SHORT_STACK {
@@ -132,19 +157,12 @@ impl KdTree {
         let mut next = Pending::root(tn, tf);
         loop {
             let at = self.descend(&kray, next, &mut stack, &mut sp, c);
-            let leaf = self.nodes[at.node as usize];
-            let range = leaf.index()..leaf.index() + leaf.count();
-            let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
-            for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
-                let mut keep = boxes_met(&kray, tris, at.tn, at.tf);
-                while keep != 0 {
-                    let i = keep.trailing_zeros() as usize;
-                    keep &= keep - 1;
-                    if !mailbox.seen(refs[i]) {
-                        q.test(&tris[i], refs[i], c);
-                    }
+            self.leaf_candidates(&kray, at, |tri, prim| {
+                if !mailbox.seen(prim) {
+                    q.test(tri, prim, c);
                 }
-            }
+                false
+            });
             loop {
                 if sp == 0 {
                     return q.hit;
@@ -182,18 +200,8 @@ impl KdTree {
         let mut next = Pending::root(tn, tf);
         loop {
             let at = self.descend(&kray, next, &mut stack, &mut sp, c);
-            let leaf = self.nodes[at.node as usize];
-            let range = leaf.index()..leaf.index() + leaf.count();
-            let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
-            for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
-                let mut keep = boxes_met(&kray, tris, at.tn, at.tf);
-                while keep != 0 {
-                    let i = keep.trailing_zeros() as usize;
-                    keep &= keep - 1;
-                    if !mailbox.seen(refs[i]) && q.test(&tris[i], c) {
-                        return true;
-                    }
-                }
+            if self.leaf_candidates(&kray, at, |tri, prim| !mailbox.seen(prim) && q.test(tri, c)) {
+                return true;
             }
             if sp == 0 {
                 return false;
