@@ -9,12 +9,7 @@ use dynbvh::bvh::{BuildParams, MeshBvh};
 
 #[path = "common/cpu.rs"]
 mod cpu;
-use cpu::cpu_s;
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use cpu::{cpu_s, median};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -39,10 +34,10 @@ fn main() {
             m.push((cpu_s() - c) * 1e3);
         }
     }
-    let b = median(&mut bvh_ms);
+    let b = median(bvh_ms.clone());
     println!("binned16      median {b:8.1} ms cpu  {bvh_ms:.1?}");
-    for (name, m) in names.split(',').zip(&mut ms) {
-        let x = median(m);
+    for (name, m) in names.split(',').zip(&ms) {
+        let x = median(m.clone());
         println!(
             "{name:<13} median {x:8.1} ms cpu  {m:.1?}  {:.3}x binned16",
             x / b

@@ -10,7 +10,7 @@ use dynbvh::geom::Ray;
 
 #[path = "common/cpu.rs"]
 mod cpu;
-use cpu::cpu_s;
+use cpu::{cpu_s, median, one_thread};
 
 fn env(name: &str, default: usize) -> usize {
     std::env::var(name)
@@ -19,10 +19,7 @@ fn env(name: &str, default: usize) -> usize {
 }
 
 fn main() {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build_global()
-        .unwrap();
+    one_thread();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let dir = &args[0];
     let passes = env("PASSES", 5);
@@ -110,10 +107,6 @@ fn main() {
                         speeds[i].push(rays.len() as f64 / (cpu_s() - c) / 1e6);
                     }
                 }
-                let median = |mut v: Vec<f64>| {
-                    v.sort_by(f64::total_cmp);
-                    v[v.len() / 2]
-                };
                 let line: Vec<String> = variants
                     .iter()
                     .enumerate()

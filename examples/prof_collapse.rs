@@ -11,18 +11,10 @@ use dynbvh::geom::Hit;
 
 #[path = "common/cpu.rs"]
 mod cpu;
-use cpu::cpu_s;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use cpu::{cpu_s, median, one_thread};
 
 fn main() {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build_global()
-        .unwrap();
+    one_thread();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mesh = dynbvh::io::read_tri(args[0].as_ref()).unwrap();
     let mut params = BuildParams::BINNED;

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 #[path = "common/cpu.rs"]
 mod cpu;
-use cpu::cpu_s;
+use cpu::{cpu_s, median, one_thread};
 
 /// Median Mrays/s (CPU time) of three passes.
 fn mrays(rays: &[Ray], f: impl Fn(&Ray) -> bool) -> f64 {
@@ -24,7 +24,7 @@ fn mrays(rays: &[Ray], f: impl Fn(&Ray) -> bool) -> f64 {
 }
 
 fn refit_ms(a: &TriMesh, b: &TriMesh, mut f: impl FnMut(&TriMesh)) -> f64 {
-    let mut v: Vec<f64> = (0..9)
+    let v: Vec<f64> = (0..9)
         .map(|i| {
             let m = if i % 2 == 0 { b } else { a };
             let c = cpu_s();
@@ -32,15 +32,11 @@ fn refit_ms(a: &TriMesh, b: &TriMesh, mut f: impl FnMut(&TriMesh)) -> f64 {
             (cpu_s() - c) * 1e3
         })
         .collect();
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    median(v)
 }
 
 fn main() {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build_global()
-        .unwrap();
+    one_thread();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mesh = dynbvh::io::read_tri(args[0].as_ref()).unwrap();
     let (def, ray_files) = if args.len() > 1 && args[1].ends_with(".tri") {

@@ -10,3 +10,19 @@ pub fn cpu_s() -> f64 {
         .sum::<u64>() as f64
         * 1e-9
 }
+
+/// The median of `v` (the upper one of an even count).
+#[allow(dead_code)]
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Makes rayon's global pool one thread, so that what a profile measures runs on one core.
+#[allow(dead_code)]
+pub fn one_thread() {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build_global()
+        .unwrap();
+}

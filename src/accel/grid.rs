@@ -229,7 +229,7 @@ impl Grid {
     }
 
     fn fill(&mut self, sorted: &[Entry], count: Vec<u32>) {
-        let mut starts = huge_vec(0, 0u32);
+        let mut starts = Vec::new();
         crate::simd::reserve_huge(&mut starts, count.len() + 1, 0);
         let mut sum = 0u32;
         starts.push(0);
