@@ -169,6 +169,16 @@ fn spheres_and_soups_match_brute_force() {
             ]
         })
         .collect();
+    // A mesh in spatial order and then a soup: the grid's first triangles show an order the
+    // rest does not keep (its counts are taken as they come, its lists filled after sorting).
+    let patch = shapes::bumpy_sphere(6000);
+    let mixed: Vec<[Vec3; 3]> = (0..patch.len())
+        .map(|i| patch.triangle(i))
+        .chain(soup.iter().map(|t| t.map(|p| p * 2.0 - Vec3::ONE)))
+        .chain(soup.iter().map(|t| t.map(|p| p * 2.0 - Vec3::splat(0.5))))
+        .collect();
+    let mixed = TriMesh::from_soup(&mixed);
+    check_all("sphere, then a soup", &mixed, &ray_sets(&mixed, 300, 4));
     let soup = TriMesh::from_soup(&soup);
     check_all("soup", &soup, &ray_sets(&soup, 600, 2));
     let hostile = common::soup_with_nan_and_inf();

@@ -72,14 +72,7 @@ impl Grid {
     /// When a vertex index is out of range.
     #[must_use]
     pub fn build(mesh: &TriMesh, params: &GridParams) -> Self {
-        let tris = Triangles::of_mesh(mesh);
-        let (mut bounds, mut n) = (Aabb::EMPTY, 0usize);
-        for b in tris.tris.iter().map(Aabb::of_triangle) {
-            if !b.is_empty() {
-                bounds = bounds.union(b);
-                n += 1;
-            }
-        }
+        let (tris, bounds, n) = Triangles::of_mesh_bounded(mesh);
         if n == 0 {
             return Self {
                 tris,
@@ -149,53 +142,66 @@ impl Grid {
     }
 
     /// Each triangle with a box and its cell range (`[x0, y0, z0, x1, y1, z1]`, inclusive),
-    /// the references per cell and their total (`u64::MAX` past `u32::MAX`); computed once, so
-    /// the fill does not locate the triangles in the grid again.
+    /// the references per cell and their total (`u64::MAX` past `u32::MAX`); each triangle is
+    /// located once, in one pass, so the fill does not locate it again.
     ///
-    /// The triangles come sorted by the row (`y`, `z`) of their first cell, by two counting
-    /// sorts (by `y`, then stably by `z`; one sort over all rows at once scatters its own
-    /// writes over too many places), so that the counts and lists written for consecutive
-    /// triangles lie in a few rows of the table, which stay in cache: in a mesh stored in no
-    /// spatial order (a soup) entering them by index scatters every write over the whole
-    /// table, a cache miss each. Triangles mostly in that order already are taken as they are.
+    /// The fill takes the triangles sorted by the row (`y`, `z`) of their first cell (two
+    /// counting sorts: by `y`, then stably by `z`; one sort over all rows at once scatters its
+    /// own writes over too many places), so that the lists written for consecutive triangles
+    /// lie in a few rows of the table, which stay in cache: in a mesh stored in no spatial
+    /// order (a soup) entering them by index scatters every write over the whole table, a
+    /// cache miss each. Triangles mostly in that order already (as a mesh's are) are taken as
+    /// they are, and counted in the same pass when the first of them show that order.
     fn count_refs(&self, tris: &[[Vec3; 3]]) -> (Vec<Entry>, Vec<u32>, u64) {
-        let (nx, nxy) = (
-            self.res[0] as usize,
-            self.res[0] as usize * self.res[1] as usize,
+        const PROBE: usize = 4096;
+        let boxes = || {
+            tris.iter()
+                .enumerate()
+                .map(|(i, t)| (i, Aabb::of_triangle(t)))
+                .filter(|(_, b)| !b.is_empty())
+        };
+        let near_rows =
+            |a: &[u32; 6], b: &[u32; 6]| a[1].abs_diff(b[1]) <= 1 && a[2].abs_diff(b[2]) <= 1;
+        let mostly = |near: usize, m: usize| near >= m - m / 8;
+        // Whether the first triangles are in spatial order: then counting as they come writes
+        // near the last count, and the count needs no pass of its own.
+        let probe: Vec<[u32; 6]> = boxes()
+            .take(PROBE)
+            .map(|(_, b)| self.cell_range(&b))
+            .collect();
+        let count_now = mostly(
+            probe.windows(2).filter(|w| near_rows(&w[0], &w[1])).count() + 1,
+            probe.len(),
         );
+        let mut count = huge_vec(self.cell_count(), 0u32);
+        let mut entries = Vec::new();
+        crate::simd::reserve_huge(&mut entries, tris.len(), 0);
         let mut total = 0u64;
         let mut ys = vec![0u32; self.res[1] as usize + 1];
         let mut zs = vec![0u32; self.res[2] as usize + 1];
         // Consecutive triangles whose first cells lie in neighbouring rows.
-        let (mut near, mut last) = (0usize, [u32::MAX; 2]);
-        let boxes = || tris.iter().map(Aabb::of_triangle);
-        for b in boxes().filter(|b| !b.is_empty()) {
+        let (mut near, mut last) = (0usize, [u32::MAX; 6]);
+        for (i, b) in boxes() {
             let r = self.cell_range(&b);
             total += u64::from(r[3] - r[0] + 1)
                 * u64::from(r[4] - r[1] + 1)
                 * u64::from(r[5] - r[2] + 1);
             ys[r[1] as usize + 1] += 1;
             zs[r[2] as usize + 1] += 1;
-            near += usize::from(r[1].abs_diff(last[0]) <= 1 && r[2].abs_diff(last[1]) <= 1);
-            last = [r[1], r[2]];
+            near += usize::from(near_rows(&r, &last));
+            last = r;
+            let e = (i as u32, r.map(|x| x as u16));
+            if count_now {
+                self.add_counts(&mut count, &e);
+            }
+            entries.push(e);
         }
         if total > u64::from(u32::MAX) {
             return (Vec::new(), Vec::new(), u64::MAX);
         }
-        let m = zs[1..].iter().sum::<u32>() as usize;
-        let entries = || {
-            boxes()
-                .enumerate()
-                .filter(|(_, b)| !b.is_empty())
-                .map(|(i, b)| (i as u32, self.cell_range(&b).map(|x| x as u16)))
-        };
-        let mut sorted = Vec::new();
-        if near >= m - m / 8 {
-            // Already in spatial order (a mesh's triangles mostly are): no sort.
-            crate::simd::reserve_huge(&mut sorted, m, 0);
-            sorted.extend(entries());
-        } else {
-            sorted = huge_vec(m, (0, [0; 6]));
+        let m = entries.len();
+        let in_order = mostly(near, m);
+        if !in_order {
             for k in 1..ys.len() {
                 ys[k] += ys[k - 1];
             }
@@ -203,29 +209,41 @@ impl Grid {
                 zs[k] += zs[k - 1];
             }
             let mut by_row = huge_vec(m, (0, [0; 6]));
-            for e in entries() {
+            for &e in &entries {
                 let slot = &mut ys[e.1[1] as usize];
                 by_row[*slot as usize] = e;
                 *slot += 1;
             }
-            for e in by_row {
+            for &e in &by_row {
                 let slot = &mut zs[e.1[2] as usize];
-                sorted[*slot as usize] = e;
+                entries[*slot as usize] = e;
                 *slot += 1;
             }
         }
-        let mut count = huge_vec(self.cell_count(), 0u32);
-        for (_, r) in &sorted {
-            for z in r[2] as usize..=r[5] as usize {
-                for y in r[1] as usize..=r[4] as usize {
-                    let row = z * nxy + y * nx;
-                    for c in &mut count[row + r[0] as usize..=row + r[3] as usize] {
-                        *c += 1;
-                    }
+        if !count_now {
+            for e in &entries {
+                self.add_counts(&mut count, e);
+            }
+        }
+        (entries, count, total)
+    }
+
+    /// Adds one to the count of each cell of entry `e`.
+    #[inline(always)]
+    fn add_counts(&self, count: &mut [u32], e: &Entry) {
+        let (nx, nxy) = (
+            self.res[0] as usize,
+            self.res[0] as usize * self.res[1] as usize,
+        );
+        let r = e.1;
+        for z in r[2] as usize..=r[5] as usize {
+            for y in r[1] as usize..=r[4] as usize {
+                let row = z * nxy + y * nx;
+                for c in &mut count[row + r[0] as usize..=row + r[3] as usize] {
+                    *c += 1;
                 }
             }
         }
-        (sorted, count, total)
     }
 
     fn fill(&mut self, sorted: &[Entry], count: Vec<u32>) {

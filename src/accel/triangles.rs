@@ -21,6 +21,24 @@ impl Triangles {
         Self { tris }
     }
 
+    /// [`Triangles::of_mesh`], with the union of the triangles' boxes and how many have one,
+    /// found in the same pass.
+    pub(super) fn of_mesh_bounded(mesh: &TriMesh) -> (Self, Aabb, usize) {
+        let mut tris = Vec::new();
+        crate::simd::reserve_huge(&mut tris, mesh.len(), 0);
+        let (mut bounds, mut n) = (Aabb::EMPTY, 0usize);
+        tris.extend((0..mesh.len()).map(|i| {
+            let t = mesh.triangle(i);
+            let b = Aabb::of_triangle(&t);
+            if !b.is_empty() {
+                bounds = bounds.union(b);
+                n += 1;
+            }
+            t
+        }));
+        (Self { tris }, bounds, n)
+    }
+
     /// Each triangle's box as trees store it ([`Aabb::of_triangle`]).
     pub(super) fn boxes(&self) -> Vec<Aabb> {
         self.tris.iter().map(Aabb::of_triangle).collect()
