@@ -169,18 +169,41 @@ fn spheres_and_soups_match_brute_force() {
             ]
         })
         .collect();
-    // A mesh in spatial order and then a soup: the grid's first triangles show an order the
-    // rest does not keep (its counts are taken as they come, its lists filled after sorting).
-    let patch = shapes::bumpy_sphere(6000);
-    let mixed: Vec<[Vec3; 3]> = (0..patch.len())
-        .map(|i| patch.triangle(i))
-        .chain(soup.iter().map(|t| t.map(|p| p * 2.0 - Vec3::ONE)))
-        .chain(soup.iter().map(|t| t.map(|p| p * 2.0 - Vec3::splat(0.5))))
-        .collect();
-    let mixed = TriMesh::from_soup(&mixed);
-    check_all("sphere, then a soup", &mixed, &ray_sets(&mixed, 300, 4));
     let soup = TriMesh::from_soup(&soup);
     check_all("soup", &soup, &ray_sets(&soup, 600, 2));
+    // Grids too large for the cache, where the build sorts the triangles it enters: a soup,
+    // and a row of small triangles followed by a soup (the first ones counted as they came).
+    let big_soup: Vec<[Vec3; 3]> = (0..12_000)
+        .map(|_| {
+            let p = Vec3::new(rng.f(), rng.f(), rng.f());
+            [
+                p,
+                p + rng.unit_vector() * 0.02,
+                p + rng.unit_vector() * 0.02,
+            ]
+        })
+        .collect();
+    let row: Vec<[Vec3; 3]> = (0..6000)
+        .map(|i| {
+            let p = Vec3::new(i as f32 / 6000.0, 0.5, 0.5);
+            [p, p + Vec3::X * 1e-4, p + Vec3::Z * 1e-4]
+        })
+        .collect();
+    let row_then_soup = TriMesh::from_soup(&[row, big_soup.clone()].concat());
+    let big_soup = TriMesh::from_soup(&big_soup);
+    let fine = GridParams {
+        density: GridParams::MAX_DENSITY,
+        ..GridParams::default()
+    };
+    for (what, mesh) in [("row, then a soup", &row_then_soup), ("soup", &big_soup)] {
+        let rays = ray_sets(mesh, 300, 6);
+        let g = Grid::build(mesh, &fine);
+        let cells: u32 = g.resolution().iter().product();
+        assert!(cells > 1 << 19, "{what}: {cells} cells fit in the cache");
+        g.validate(mesh).unwrap();
+        let bad = compare(what, mesh, &g, &rays, &brute_force(mesh, &rays));
+        assert!(bad.is_empty(), "{}", bad.join("\n"));
+    }
     let hostile = common::soup_with_nan_and_inf();
     check_all("NaN and inf soup", &hostile, &ray_sets(&hostile, 300, 3));
 }

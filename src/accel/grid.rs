@@ -45,6 +45,10 @@ impl Default for GridParams {
 /// in a fine grid would otherwise fill it).
 const MAX_REFS_PER_TRIANGLE: u64 = 64;
 
+/// Cells up to which the build enters triangles in the mesh's order whatever it is: the
+/// counts (4 bytes a cell) and lists of such a grid stay in the cache (see `count_refs`).
+const CACHED_CELLS: usize = 1 << 19;
+
 /// A triangle entered into the grid: its index and its cells, `[x0, y0, z0, x1, y1, z1]`
 /// inclusive (16 bits suffice: [`resolution`] keeps at most 4096 cells a side).
 type Entry = (u32, [u16; 6]);
@@ -150,8 +154,9 @@ impl Grid {
     /// own writes over too many places), so that the lists written for consecutive triangles
     /// lie in a few rows of the table, which stay in cache: in a mesh stored in no spatial
     /// order (a soup) entering them by index scatters every write over the whole table, a
-    /// cache miss each. Triangles mostly in that order already (as a mesh's are) are taken as
-    /// they are, and counted in the same pass when the first of them show that order.
+    /// cache miss each. Triangles mostly in that order already (as a mesh's are), and all of
+    /// them when the grid is small enough for its table to stay in the cache, are taken as they
+    /// are, and counted in the same pass when the first of them show that order.
     fn count_refs(&self, tris: &[[Vec3; 3]]) -> (Vec<Entry>, Vec<u32>, u64) {
         const PROBE: usize = 4096;
         let boxes = || {
@@ -169,10 +174,13 @@ impl Grid {
             .take(PROBE)
             .map(|(_, b)| self.cell_range(&b))
             .collect();
-        let count_now = mostly(
-            probe.windows(2).filter(|w| near_rows(&w[0], &w[1])).count() + 1,
-            probe.len(),
-        );
+        // A table that fits in the cache is written fast in any order.
+        let cached = self.cell_count() <= CACHED_CELLS;
+        let count_now = cached
+            || mostly(
+                probe.windows(2).filter(|w| near_rows(&w[0], &w[1])).count() + 1,
+                probe.len(),
+            );
         let mut count = huge_vec(self.cell_count(), 0u32);
         let mut entries = Vec::new();
         crate::simd::reserve_huge(&mut entries, tris.len(), 0);
@@ -200,7 +208,7 @@ impl Grid {
             return (Vec::new(), Vec::new(), u64::MAX);
         }
         let m = entries.len();
-        let in_order = mostly(near, m);
+        let in_order = cached || mostly(near, m);
         if !in_order {
             for k in 1..ys.len() {
                 ys[k] += ys[k - 1];
