@@ -79,6 +79,15 @@ pub fn reserve_huge<T>(v: &mut Vec<T>, additional: usize, headroom: usize) {
     *v = fresh;
 }
 
+/// Asks for huge pages over `v`'s whole buffer (a hint, as for [`reserve_huge`]), for a buffer
+/// the allocator has just mapped and nothing has touched yet, such as a large `vec![0; n]`.
+pub fn advise_huge_vec<T>(v: &mut Vec<T>) {
+    advise_huge(
+        v.as_mut_ptr().cast::<u8>(),
+        v.capacity() * std::mem::size_of::<T>(),
+    );
+}
+
 /// Asks for huge pages over the whole pages inside `len` bytes from `p` (an allocation of
 /// ours, nothing of it written yet).
 fn advise_huge(p: *mut u8, len: usize) {

@@ -37,8 +37,11 @@ pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &
     }
     let mut arena: [Arena; 3] = std::array::from_fn(|axis| {
         // The root's events (at most two a triangle) and room for a few levels of children
-        // (straddlers add events), zeroed by the allocator (fresh pages) rather than written.
+        // (straddlers add events), zeroed by the allocator (fresh pages) rather than written,
+        // on huge pages where the system gives them: one page fault per 2 MiB touched, not
+        // per 4 KiB.
         let mut ev = vec![0; 8 * ids.len()];
+        crate::simd::advise_huge_vec(&mut ev);
         let mut top = 0;
         for &i in &ids {
             top += write_events(&mut ev[top..], &boxes[i as usize], axis, i);
@@ -48,8 +51,8 @@ pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &
     });
     let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
     let mut scratch = Scratch::default();
-    b.nodes.reserve(4 * ids.len());
-    b.refs.reserve(2 * ids.len());
+    crate::simd::reserve_huge(&mut b.nodes, 4 * ids.len(), 0);
+    crate::simd::reserve_huge(&mut b.refs, 2 * ids.len(), 0);
     b.nodes.push(KdNode::leaf(0, 0));
     b.node(&mut arena, &mut scratch, 0, *bounds, ranges, ids.len(), 0);
     b.finish()

@@ -194,7 +194,11 @@ impl KdTree {
             KdBuild::Sorted => build_fast::build(&tris.tris, &boxes, &bounds, params),
             KdBuild::Naive => build_naive::build(&tris.tris, &boxes, &bounds, params),
         };
-        let leaf_tris = built.refs.iter().map(|&r| tris.tris[r as usize]).collect();
+        // Rays read the leaves' triangles in scattered order: on huge pages where the system
+        // gives them, as the triangles in mesh order are.
+        let mut leaf_tris = Vec::new();
+        crate::simd::reserve_huge(&mut leaf_tris, built.refs.len(), 0);
+        leaf_tris.extend(built.refs.iter().map(|&r| tris.tris[r as usize]));
         Self {
             nodes: built.nodes,
             leaf_tris,

@@ -42,12 +42,14 @@ impl Pending {
 }
 
 /// What the descent reads of a ray at every node, gathered once: origin, reciprocal direction,
-/// and which child of a pair is the near one on each axis; and the slab test's origins and
-/// reciprocal direction in SIMD lanes.
+/// and which child of a pair is the near one on each axis (bit `a` of `near` set when it is
+/// the second: a shift of a register at each node where an array needs one more load on the
+/// path from one node to the next); and the slab test's origins and reciprocal direction in
+/// SIMD lanes.
 struct KdRay {
     origin: [f32; 3],
     inv_dir: [f32; 3],
-    near: [usize; 3],
+    near: u32,
     slab_lo: Vec3A,
     slab_hi: Vec3A,
     inv: Vec3A,
@@ -59,7 +61,7 @@ impl KdRay {
         Self {
             origin: ray.origin.to_array(),
             inv_dir: ray.inv_dir.to_array(),
-            near: std::array::from_fn(|a| usize::from(!lower_is_near(ray, a))),
+            near: (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum(),
             slab_lo: ray.slab_lo.into(),
             slab_hi: ray.slab_hi.into(),
             inv: ray.inv_dir.into(),
@@ -90,8 +92,9 @@ impl KdTree {
             }
             let axis = n.axis();
             let d = (n.split() - ray.origin[axis]) * ray.inv_dir[axis];
-            let near = n.index() + ray.near[axis];
-            let far = n.index() + (ray.near[axis] ^ 1);
+            let second = ((ray.near >> axis) & 1) as usize;
+            let near = n.index() + second;
+            let far = n.index() + (second ^ 1);
             let far_only = p.tn > d;
             let near_only = d > p.tf;
             if !(far_only || near_only) {
