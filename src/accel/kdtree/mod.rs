@@ -152,15 +152,21 @@ impl KdNode {
     }
 }
 
+/// A leaf's copy of one of its triangles: the corners and the triangle's id.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub(super) struct LeafTri {
+    pub(super) corners: [Vec3; 3],
+    pub(super) id: u32,
+}
+
 /// A kd-tree over a mesh's triangles.
 #[derive(Clone, Debug, Default)]
 pub struct KdTree {
     nodes: Vec<KdNode>,
-    /// Triangle ids of the leaves, leaf by leaf.
-    refs: Vec<u32>,
-    /// `leaf_tris[i]`: the corners of triangle `refs[i]`, so that a leaf's triangles are read
-    /// in order.
-    leaf_tris: Vec<[Vec3; 3]>,
+    /// The leaves' triangles, leaf by leaf, each with its id: a leaf reads its triangles and
+    /// their ids in order from one run of memory.
+    leaf_tris: Vec<LeafTri>,
     tris: Triangles,
     /// The root cell: the box of every triangle that has one.
     bounds: Aabb,
@@ -198,11 +204,13 @@ impl KdTree {
         // gives them, as the triangles in mesh order are.
         let mut leaf_tris = Vec::new();
         crate::simd::reserve_huge(&mut leaf_tris, built.refs.len(), 0);
-        leaf_tris.extend(built.refs.iter().map(|&r| tris.tris[r as usize]));
+        leaf_tris.extend(built.refs.iter().map(|&r| LeafTri {
+            corners: tris.tris[r as usize],
+            id: r,
+        }));
         Self {
             nodes: built.nodes,
             leaf_tris,
-            refs: built.refs,
             tris,
             bounds,
             params: *params,
@@ -220,7 +228,7 @@ impl KdTree {
     /// References held by the leaves (triangles in several leaves count once per leaf).
     #[must_use]
     pub fn reference_count(&self) -> usize {
-        self.refs.len()
+        self.leaf_tris.len()
     }
 }
 
@@ -254,7 +262,6 @@ impl Accel for KdTree {
 
     fn memory_bytes(&self) -> usize {
         std::mem::size_of_val(self.nodes.as_slice())
-            + std::mem::size_of_val(self.refs.as_slice())
             + std::mem::size_of_val(self.leaf_tris.as_slice())
             + self.tris.memory_bytes()
     }

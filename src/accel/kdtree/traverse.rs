@@ -11,7 +11,7 @@
 //! of a leaf run first, without branches, into a bit mask (whose outcome a branch per triangle
 //! would often mispredict); the triangles it keeps are then tested in order.
 
-use super::{KdTree, MAX_KD_DEPTH};
+use super::{KdTree, LeafTri, MAX_KD_DEPTH};
 use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
@@ -124,13 +124,12 @@ impl KdTree {
     ) -> bool {
         let leaf = self.nodes[at.node as usize];
         let range = leaf.index()..leaf.index() + leaf.count();
-        let (refs, tris) = (&self.refs[range.clone()], &self.leaf_tris[range]);
-        for (refs, tris) in refs.chunks(32).zip(tris.chunks(32)) {
+        for tris in self.leaf_tris[range].chunks(32) {
             let mut keep = boxes_met(ray, tris, at.tn, at.tf);
             while keep != 0 {
                 let i = keep.trailing_zeros() as usize;
                 keep &= keep - 1;
-                if visit(&tris[i], refs[i]) {
+                if visit(&tris[i].corners, tris[i].id) {
                     return true;
                 }
             }
@@ -218,10 +217,10 @@ impl KdTree {
 /// Bit `i` set when the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of
 /// `tris[i]`'s corners (at most 32 triangles), computed for every triangle without a branch.
 #[inline(always)]
-fn boxes_met(ray: &KdRay, tris: &[[Vec3; 3]], tn: f32, tf: f32) -> u32 {
+fn boxes_met(ray: &KdRay, tris: &[LeafTri], tn: f32, tf: f32) -> u32 {
     let mut keep = 0;
     for (i, tri) in tris.iter().enumerate() {
-        keep |= u32::from(meets_box(ray, tri, tn, tf)) << i;
+        keep |= u32::from(meets_box(ray, &tri.corners, tn, tf)) << i;
     }
     keep
 }

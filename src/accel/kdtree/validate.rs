@@ -12,15 +12,13 @@ use crate::geom::{Aabb, TriMesh};
 impl KdTree {
     pub(super) fn check(&self, mesh: &TriMesh) -> Result<(), String> {
         self.tris.check(mesh)?;
-        if self.leaf_tris.len() != self.refs.len()
-            || self.refs.iter().zip(&self.leaf_tris).any(|(&r, t)| {
-                !self
-                    .tris
-                    .tris
-                    .get(r as usize)
-                    .is_some_and(|u| same_triangle(u, t))
-            })
-        {
+        if self.leaf_tris.iter().any(|t| {
+            !self
+                .tris
+                .tris
+                .get(t.id as usize)
+                .is_some_and(|u| same_triangle(u, &t.corners))
+        }) {
             return Err("leaf-order triangle copies differ from the triangles".into());
         }
         let boxes = self.tris.boxes();
@@ -56,10 +54,10 @@ impl KdTree {
         if n.is_leaf() {
             let range = n.index()..n.index() + n.count();
             let refs = self
-                .refs
+                .leaf_tris
                 .get(range.clone())
                 .ok_or_else(|| format!("leaf {i}: references {range:?} out of range"))?;
-            for &t in refs {
+            for t in refs.iter().map(|t| t.id) {
                 let b = boxes
                     .get(t as usize)
                     .ok_or_else(|| format!("leaf {i}: triangle {t} out of range"))?;
@@ -92,7 +90,9 @@ impl KdTree {
     fn reaches(&self, i: usize, cell: Aabb, b: &Aabb, t: u32) -> bool {
         let n = self.nodes[i];
         if n.is_leaf() {
-            return self.refs[n.index()..n.index() + n.count()].contains(&t);
+            return self.leaf_tris[n.index()..n.index() + n.count()]
+                .iter()
+                .any(|l| l.id == t);
         }
         let (axis, pos, first) = (n.axis(), n.split(), n.index());
         let (mut left, mut right) = (cell, cell);
