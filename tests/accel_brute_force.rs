@@ -159,30 +159,11 @@ fn spheres_and_soups_match_brute_force() {
     let sphere = shapes::bumpy_sphere(20_000);
     check_all("bumpy sphere", &sphere, &ray_sets(&sphere, 600, 1));
     let mut rng = Rng(5);
-    let soup: Vec<[Vec3; 3]> = (0..3000)
-        .map(|_| {
-            let p = Vec3::new(rng.f(), rng.f(), rng.f());
-            [
-                p,
-                p + rng.unit_vector() * 0.03,
-                p + rng.unit_vector() * 0.03,
-            ]
-        })
-        .collect();
-    let soup = TriMesh::from_soup(&soup);
+    let soup = TriMesh::from_soup(&rng.soup(3000, 0.03));
     check_all("soup", &soup, &ray_sets(&soup, 600, 2));
     // Grids too large for the cache, where the build sorts the triangles it enters: a soup,
     // and a row of small triangles followed by a soup (the first ones counted as they came).
-    let big_soup: Vec<[Vec3; 3]> = (0..12_000)
-        .map(|_| {
-            let p = Vec3::new(rng.f(), rng.f(), rng.f());
-            [
-                p,
-                p + rng.unit_vector() * 0.02,
-                p + rng.unit_vector() * 0.02,
-            ]
-        })
-        .collect();
+    let big_soup = rng.soup(12_000, 0.02);
     let row: Vec<[Vec3; 3]> = (0..6000)
         .map(|i| {
             let p = Vec3::new(i as f32 / 6000.0, 0.5, 0.5);

@@ -236,16 +236,7 @@ fn exponentially_spaced_boxes_stay_within_the_depth_limit() {
 #[test]
 fn binned_sah_is_within_two_percent_of_full_sweep() {
     let mut rng = Rng(21);
-    let soup: Vec<[Vec3; 3]> = (0..20_000)
-        .map(|_| {
-            let c = Vec3::new(rng.f(), rng.f(), rng.f());
-            [
-                c,
-                c + rng.unit_vector() * 0.01,
-                c + rng.unit_vector() * 0.01,
-            ]
-        })
-        .collect();
+    let soup = rng.soup(20_000, 0.01);
     let meshes = [
         ("sphere", dynbvh::geom::shapes::bumpy_sphere(30_000)),
         ("soup", TriMesh::from_soup(&soup)),

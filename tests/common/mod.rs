@@ -68,6 +68,20 @@ impl Rng {
         let s = (1.0 - z * z).max(0.0).sqrt();
         Vec3::new(s * phi.cos(), s * phi.sin(), z)
     }
+    /// `n` triangles in no order: each with a corner uniform in the unit cube and the other two
+    /// at distance `size` from it in random directions.
+    pub fn soup(&mut self, n: usize, size: f32) -> Vec<[Vec3; 3]> {
+        (0..n)
+            .map(|_| {
+                let p = Vec3::new(self.f(), self.f(), self.f());
+                [
+                    p,
+                    p + self.unit_vector() * size,
+                    p + self.unit_vector() * size,
+                ]
+            })
+            .collect()
+    }
 }
 
 /// Every builder, with the settings that take their rarer paths: few bins, the widest axis
