@@ -168,19 +168,18 @@ impl Grid {
         let near_rows =
             |a: &[u32; 6], b: &[u32; 6]| a[1].abs_diff(b[1]) <= 1 && a[2].abs_diff(b[2]) <= 1;
         let mostly = |near: usize, m: usize| near >= m - m / 8;
-        // Whether the first triangles are in spatial order: then counting as they come writes
-        // near the last count, and the count needs no pass of its own.
-        let probe: Vec<[u32; 6]> = boxes()
-            .take(PROBE)
-            .map(|(_, b)| self.cell_range(&b))
-            .collect();
-        // A table that fits in the cache is written fast in any order.
+        // A table that fits in the cache is written fast in any order; a larger one when the
+        // first triangles are in spatial order: then counting as they come writes near the
+        // last count, and the count needs no pass of its own.
         let cached = self.cell_count() <= CACHED_CELLS;
-        let count_now = cached
-            || mostly(
-                probe.windows(2).filter(|w| near_rows(&w[0], &w[1])).count() + 1,
-                probe.len(),
-            );
+        let count_now = cached || {
+            let probe: Vec<[u32; 6]> = boxes()
+                .take(PROBE)
+                .map(|(_, b)| self.cell_range(&b))
+                .collect();
+            let near = probe.windows(2).filter(|w| near_rows(&w[0], &w[1])).count();
+            mostly(near + 1, probe.len())
+        };
         let mut count = huge_vec(self.cell_count(), 0u32);
         let mut entries = Vec::new();
         crate::simd::reserve_huge(&mut entries, tris.len(), 0);
