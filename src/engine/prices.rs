@@ -326,8 +326,9 @@ fn solve_trace_prices(w1: TraversalStats, t1: f64, w2: TraversalStats, t2: f64) 
 }
 
 /// Median CPU time (ms) of one run of `f` over `passes` passes, after one untimed run. Each
-/// pass repeats `f` for at least [`MIN_PASS_MS`] of wall clock and divides: the kernel's
-/// per-thread CPU time advances only at scheduler events, too coarsely for a single short run.
+/// pass repeats `f` for at least [`MIN_PASS_MS`] of wall clock and divides: a pool thread still
+/// running when the clock is read counts its time only up to its last scheduler event, and
+/// one interruption weighs less in a longer pass.
 fn median_cpu_ms(passes: usize, mut f: impl FnMut()) -> f64 {
     f();
     let mut v: Vec<f64> = (0..passes)
