@@ -9,9 +9,9 @@ use std::time::Instant;
 
 /// Sum over this process's live threads: `(ns on a core, ns runnable but waiting for one)`.
 ///
-/// The kernel brings a running thread's count up to date only at a clock tick (4 ms on the
-/// machines measured) or when the thread leaves its core, so the calling thread yields first:
-/// without that, a measurement of a few milliseconds on it reads whole ticks.
+/// The kernel brings a running thread's count up to date only at a scheduler tick or when the
+/// thread leaves its core, so the calling thread yields first: without that, a measurement
+/// shorter than a few ticks reads whole ticks (`docs/accel.md` has the figures).
 #[must_use]
 pub fn thread_times_ns() -> Option<(u64, u64)> {
     std::thread::yield_now();

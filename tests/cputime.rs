@@ -20,7 +20,7 @@ fn short_spans_read_no_more_cpu_than_wall_clock() {
             e = c.elapsed_ms();
         }
         // One thread cannot run longer than the wall clock; a count that was brought up to
-        // date only at a tick (4 ms) inside the span would read up to a tick more.
+        // date only at a scheduler tick inside the span would read up to a tick more.
         assert!(e.cpu_ms <= e.wall_ms + 0.25, "{e:?}");
     }
 }

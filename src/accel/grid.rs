@@ -238,17 +238,25 @@ impl Grid {
     /// Adds one to the count of each cell of entry `e`.
     #[inline(always)]
     fn add_counts(&self, count: &mut [u32], e: &Entry) {
+        self.for_each_row(&e.1, |row| {
+            for c in &mut count[row] {
+                *c += 1;
+            }
+        });
+    }
+
+    /// Calls `f` with the table indices of each row of cells in range `r` (`[x0, y0, z0, x1,
+    /// y1, z1]`, inclusive): consecutive cells along `x`.
+    #[inline(always)]
+    fn for_each_row(&self, r: &[u16; 6], mut f: impl FnMut(std::ops::Range<usize>)) {
         let (nx, nxy) = (
             self.res[0] as usize,
             self.res[0] as usize * self.res[1] as usize,
         );
-        let r = e.1;
         for z in r[2] as usize..=r[5] as usize {
             for y in r[1] as usize..=r[4] as usize {
                 let row = z * nxy + y * nx;
-                for c in &mut count[row + r[0] as usize..=row + r[3] as usize] {
-                    *c += 1;
-                }
+                f(row + r[0] as usize..row + r[3] as usize + 1);
             }
         }
     }
@@ -267,20 +275,13 @@ impl Grid {
         let cells = next.len();
         next.copy_from_slice(&starts[..cells]);
         let mut refs = huge_vec(sum as usize, 0u32);
-        let (nx, nxy) = (
-            self.res[0] as usize,
-            self.res[0] as usize * self.res[1] as usize,
-        );
-        for &(i, r) in sorted {
-            for z in r[2] as usize..=r[5] as usize {
-                for y in r[1] as usize..=r[4] as usize {
-                    let row = z * nxy + y * nx;
-                    for c in &mut next[row + r[0] as usize..=row + r[3] as usize] {
-                        refs[*c as usize] = i;
-                        *c += 1;
-                    }
+        for (i, r) in sorted {
+            self.for_each_row(r, |row| {
+                for c in &mut next[row] {
+                    refs[*c as usize] = *i;
+                    *c += 1;
                 }
-            }
+            });
         }
         self.starts = starts;
         self.refs = refs;
