@@ -1,9 +1,9 @@
 //! Build time (CPU), size and traversal work per ray of the other structures beside the binned
 //! BVH, single-threaded: `cargo run --release --example prof_accel MESH.tri RAYS.rays [NAMES]`
 //! (NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`, `KD_CT`, `KD_EB`,
-//! `KD_DEPTH`, `KD_PERFECT`, `KD_LONGEST` (0 or 1): the kd-tree's intersection cost,
-//! traversal cost, empty bonus, depth limit, perfect splits and longest-axis sweep in place of
-//! the defaults). Run with `RAYON_NUM_THREADS=1` to build the BVH on one thread.
+//! `KD_DEPTH`, `KD_PERFECT_ABOVE` (a triangle count, or `none`), `KD_LONGEST` (0 or 1): the
+//! kd-tree's intersection cost, traversal cost, empty bonus, depth limit, the nodes split
+//! perfectly and the longest-axis sweep in place of the defaults). Run with `RAYON_NUM_THREADS=1` to build the BVH on one thread.
 use dynbvh::accel::{Accel, AccelKind, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 
@@ -26,11 +26,11 @@ fn main() {
             "KD_CT",
             "KD_EB",
             "KD_DEPTH",
-            "KD_PERFECT",
+            "KD_PERFECT_ABOVE",
             "KD_LONGEST",
         ]
         .iter()
-        .any(|k| env(k).is_some())
+        .any(|k| std::env::var(k).is_ok())
         .then_some(());
         let s: Box<dyn Accel> = if name == "bvh" {
             Box::new(MeshBvh::build(&mesh, &BuildParams::BINNED))
@@ -41,7 +41,16 @@ fn main() {
                 traversal_cost: env("KD_CT").unwrap_or(d.traversal_cost),
                 empty_bonus: env("KD_EB").unwrap_or(d.empty_bonus),
                 max_depth: env("KD_DEPTH").map(|v| v as usize).or(d.max_depth),
-                perfect_splits: env("KD_PERFECT").map_or(d.perfect_splits, |v| v != 0.0),
+                perfect_splits_above: std::env::var("KD_PERFECT_ABOVE").ok().map_or(
+                    d.perfect_splits_above,
+                    |v| {
+                        if v == "none" {
+                            usize::MAX
+                        } else {
+                            v.parse().unwrap()
+                        }
+                    },
+                ),
                 longest_axis_only: env("KD_LONGEST").map_or(d.longest_axis_only, |v| v != 0.0),
                 ..d
             };

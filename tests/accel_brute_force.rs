@@ -37,18 +37,21 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             ..KdParams::NAIVE
         },
     )));
-    // The other settings of perfect splits and of the axes swept, in both builders.
+    // Perfect splits in every node, in none, and in the nodes of more than 8 triangles; the
+    // other setting of the axes swept; in both builders.
     let d = KdParams::default();
     for params in [KdParams::default(), KdParams::NAIVE] {
-        v.push(Box::new(KdTree::build(
-            mesh,
-            &KdParams {
-                perfect_splits: !d.perfect_splits,
-                longest_axis_only: !d.longest_axis_only,
-                intersection_cost: 1.0,
-                ..params
-            },
-        )));
+        for perfect_splits_above in [0, 8, usize::MAX] {
+            v.push(Box::new(KdTree::build(
+                mesh,
+                &KdParams {
+                    perfect_splits_above,
+                    longest_axis_only: !d.longest_axis_only,
+                    intersection_cost: 1.0,
+                    ..params
+                },
+            )));
+        }
     }
     v.push(Box::new(Bih::build(mesh, &BihParams { max_leaf_size: 1 })));
     for density in [0.05, 8.0] {
@@ -317,13 +320,17 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
         lattice_box(5),
         common::soup_with_nan_and_inf(),
     ] {
-        for (perfect_splits, longest_axis_only) in
-            [(false, false), (false, true), (true, false), (true, true)]
-        {
+        for (perfect_splits_above, longest_axis_only) in [
+            (usize::MAX, false),
+            (usize::MAX, true),
+            (0, false),
+            (0, true),
+            (8, true),
+        ] {
             let fast = KdTree::build(
                 &mesh,
                 &KdParams {
-                    perfect_splits,
+                    perfect_splits_above,
                     longest_axis_only,
                     ..KdParams::default()
                 },
@@ -331,7 +338,7 @@ fn sorted_and_naive_kd_builds_make_the_same_tree() {
             let naive = KdTree::build(
                 &mesh,
                 &KdParams {
-                    perfect_splits,
+                    perfect_splits_above,
                     longest_axis_only,
                     ..KdParams::NAIVE
                 },

@@ -19,7 +19,7 @@
 use super::clip::split_clipped_boxes;
 use super::events::{
     BOTH, Event, Kind, LEFT, RIGHT, Split, choose_split, classify, clip_box, event, kind_of,
-    push_events, sort_events, tri_of, write_events,
+    push_events, sort_events, sort_events_by_position, tri_of, write_events,
 };
 use super::{Built, KdNode, KdParams};
 use crate::geom::Aabb;
@@ -46,7 +46,8 @@ pub(super) fn build(tris: &[[Vec3; 3]], boxes: &[Aabb], bounds: &Aabb, params: &
         for &i in &ids {
             top += write_events(&mut ev[top..], &boxes[i as usize], axis, i);
         }
-        sort_events(&mut ev[..top]);
+        let (root, rest) = ev.split_at_mut(top);
+        sort_events_by_position(root, rest);
         Arena { ev, top }
     });
     let ranges = std::array::from_fn(|axis| 0..arena[axis].top);
@@ -84,6 +85,8 @@ struct Scratch {
     right: Vec<Event>,
     new_left: [Vec<Event>; 3],
     new_right: [Vec<Event>; 3],
+    /// The side of each event of the list being split, read once from the triangles' flags.
+    sides: Vec<u8>,
 }
 
 /// The state shared by the whole build.
@@ -223,7 +226,7 @@ impl<'a> Builder<'a> {
             (ranges.clone(), Default::default())
         } else if scratch.straddlers.is_empty() && n_left == 0 {
             (Default::default(), ranges.clone())
-        } else if self.params.perfect_splits {
+        } else if self.params.perfect_at(n) {
             // Every straddler is clipped to each child and gets new events on every axis there
             // (none where it misses the child); its old events are dropped.
             for a in 0..3 {
@@ -252,6 +255,7 @@ impl<'a> Builder<'a> {
                     &mut arena[a],
                     ranges[a].clone(),
                     &self.side,
+                    &mut scratch.sides,
                     [&scratch.new_left[a], &scratch.new_right[a]],
                 );
                 left_ranges[a] = l;
@@ -288,7 +292,12 @@ impl<'a> Builder<'a> {
                         [&scratch.left, &scratch.right],
                     )
                 } else {
-                    split_by_side(&mut arena[a], ranges[a].clone(), &self.side)
+                    split_by_side(
+                        &mut arena[a],
+                        ranges[a].clone(),
+                        &self.side,
+                        &mut scratch.sides,
+                    )
                 };
                 left_ranges[a] = l;
                 right_ranges[a] = r;
@@ -323,41 +332,52 @@ impl<'a> Builder<'a> {
 
 /// Writes past `arena.top` the events of `arena.ev[src]` (an axis the plane does not cut) of
 /// the left child, then those of the right child, and returns their ranges (`top` moved past
-/// them). A straddler's events go to both. One branch-free pass writes every event to both
-/// halves of the room and advances the side it belongs to; the right half is then moved down.
+/// them). A straddler's events go to both. Each event's side is read from the triangles'
+/// flags once (scattered reads) into `sides`; then one pass per child writes every event and
+/// advances past those it keeps, without a branch, so that no more memory is written than
+/// the lists take.
 fn split_by_side(
     arena: &mut Arena,
     src: Range<usize>,
     side: &[u8],
+    sides: &mut Vec<u8>,
 ) -> (Range<usize>, Range<usize>) {
     let len = src.len();
     arena.reserve(2 * len);
     let top = arena.top;
     let (used, room) = arena.ev.split_at_mut(top);
-    let (tl, tr) = room[..2 * len].split_at_mut(len);
-    let (mut nl, mut nr) = (0, 0);
-    for &e in &used[src] {
-        let s = side[tri_of(e) as usize];
-        tl[nl] = e;
-        tr[nr] = e;
-        nl += usize::from(s != RIGHT);
-        nr += usize::from(s != LEFT);
-    }
-    room.copy_within(len..len + nr, nl);
+    let used = &used[src];
+    sides.clear();
+    sides.extend(used.iter().map(|&e| side[tri_of(e) as usize]));
+    let nl = keep_events(used, room, sides, RIGHT);
+    let nr = keep_events(used, &mut room[nl..], sides, LEFT);
     arena.top = top + nl + nr;
     (top..top + nl, top + nl..arena.top)
+}
+
+/// Writes to the start of `out` the events of `src` whose side (`sides`, one per event) is
+/// not `drop`, in order, and returns how many. Every event is written and only the kept ones
+/// advance, so `out` needs room for one more than are kept (or for all of `src`).
+#[inline(always)]
+fn keep_events(src: &[Event], out: &mut [Event], sides: &[u8], drop: u8) -> usize {
+    let mut n = 0;
+    for (&e, &s) in src.iter().zip(sides) {
+        out[n] = e;
+        n += usize::from(s != drop);
+    }
+    n
 }
 
 /// With perfect splits: writes past `arena.top` the events of `arena.ev[src]` of the
 /// triangles on one side only (left, then right), each side merged with the straddlers' new
 /// events `extra` for it (sorted), and returns their ranges (`top` moved past them). The
-/// straddlers' old events are dropped. One branch-free pass writes each event to both sides'
-/// room and advances the side it belongs to; each side is then merged in place from its end,
-/// and the right one moved down.
+/// straddlers' old events are dropped. One pass per side, as in [`split_by_side`], with the
+/// few new events slipped in as it goes, so that nothing is moved afterwards.
 fn split_perfect(
     arena: &mut Arena,
     src: Range<usize>,
     side: &[u8],
+    sides: &mut Vec<u8>,
     extra: [&[Event]; 2],
 ) -> (Range<usize>, Range<usize>) {
     let len = src.len();
@@ -365,58 +385,38 @@ fn split_perfect(
     arena.reserve(2 * len + kl + kr);
     let top = arena.top;
     let (used, room) = arena.ev.split_at_mut(top);
-    let (tl, tr) = room[..2 * len + kl + kr].split_at_mut(len + kl);
-    let (mut nl, mut nr) = (0, 0);
-    for &e in &used[src] {
-        let s = side[tri_of(e) as usize];
-        tl[nl] = e;
-        tr[nr] = e;
-        nl += usize::from(s == LEFT);
-        nr += usize::from(s == RIGHT);
-    }
-    let left = merge_back(tl, nl, extra[0]);
-    let right = merge_back(tr, nr, extra[1]);
-    room.copy_within(len + kl..len + kl + right, left);
+    let used = &used[src];
+    sides.clear();
+    sides.extend(used.iter().map(|&e| side[tri_of(e) as usize]));
+    let left = keep_merged(used, room, sides, LEFT, extra[0]);
+    let right = keep_merged(used, &mut room[left..], sides, RIGHT, extra[1]);
     arena.top = top + left + right;
     (top..top + left, top + left..arena.top)
 }
 
-/// Merges in place the sorted `buf[..na]` and the sorted `b` (no key in both) into
-/// `buf[..na + b.len()]`, from the end. Few new events: for each of `b`'s events, largest
-/// first, the run of `buf` above it is found by galloping search and moved up whole
-/// (`O(k log(n / k))` for `k` new events among `n`); many: element by element. Returns the
-/// length.
-fn merge_back(buf: &mut [Event], na: usize, b: &[Event]) -> usize {
-    if 4 * b.len() >= na {
-        // Many new events: an element-wise merge, without branches on the keys.
-        let (mut i, mut j) = (na, b.len());
-        while j > 0 {
-            let y = b[j - 1];
-            let take_a = i > 0 && buf[i - 1] > y;
-            let x = if take_a { buf[i - 1] } else { y };
-            buf[i + j - 1] = x;
-            i -= usize::from(take_a);
-            j -= usize::from(!take_a);
+/// Writes to the start of `out` the events of `src` whose side (`sides`, one per event) is
+/// `only`, merged with the sorted `extra` (no key in both), and returns how many. Every event
+/// of `src` is written and only the kept ones advance, so `out` needs room for all of `src`
+/// and `extra`; the new events, fewer, are slipped in where they belong.
+#[inline(always)]
+fn keep_merged(src: &[Event], out: &mut [Event], sides: &[u8], only: u8, extra: &[Event]) -> usize {
+    // Past the end of `extra`, `u64::MAX`, which no key is (its kind bits would be 3).
+    let next_of = |j: usize| extra.get(j).copied().unwrap_or(u64::MAX);
+    let (mut n, mut j) = (0, 0);
+    let mut next = next_of(0);
+    for (&e, &s) in src.iter().zip(sides) {
+        while next < e {
+            out[n] = next;
+            n += 1;
+            j += 1;
+            next = next_of(j);
         }
-        return na + b.len();
+        out[n] = e;
+        n += usize::from(s == only);
     }
-    let mut end = na;
-    let mut out = na + b.len();
-    for &y in b.iter().rev() {
-        // Galloping back from `end`, then a binary search in the last step: O(log run).
-        let mut step = 1;
-        while step <= end && buf[end - step] > y {
-            step *= 2;
-        }
-        let low = end.saturating_sub(step);
-        let start = low + buf[low..end].partition_point(|&x| x < y);
-        let run = end - start;
-        buf.copy_within(start..end, out - run);
-        out -= run + 1;
-        buf[out] = y;
-        end = start;
-    }
-    na + b.len()
+    let rest = &extra[j..];
+    out[n..n + rest.len()].copy_from_slice(rest);
+    n + rest.len()
 }
 
 /// Writes past `arena.top` the left child's events on the split axis, `arena.ev[src]`'s first

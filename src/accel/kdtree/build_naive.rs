@@ -56,7 +56,7 @@ fn node(b: &mut Builder, index: usize, cell: Aabb, items: Vec<(u32, Aabb)>, dept
             LEFT => left.push((t, bx)),
             RIGHT => right.push((t, bx)),
             _ => {
-                let (l, r) = if b.params.perfect_splits {
+                let (l, r) = if b.params.perfect_at(items.len()) {
                     b.straddler_boxes(t, &cell, &s)
                 } else {
                     (clip_box(&bx, &left_cell), clip_box(&bx, &right_cell))

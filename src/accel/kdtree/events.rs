@@ -79,6 +79,36 @@ pub(super) fn sort_events(events: &mut [Event]) {
     events.sort_unstable();
 }
 
+/// Sorts `events` in place as [`sort_events`] does, by a least-significant-digit radix sort of
+/// the position and kind bits, with `tmp` (at least as long) as the other buffer: for events
+/// written in the order of their triangles (as the root's are), which a stable sort keeps
+/// among equal positions and kinds, so the order is that of the whole keys.
+pub(super) fn sort_events_by_position(events: &mut [Event], tmp: &mut [Event]) {
+    /// The digits' bit ranges, from the kind's lowest bit to the top; an even count, so the
+    /// result ends where it began.
+    const DIGITS: [(u32, u32); 4] = [(KIND_SHIFT, 9), (KIND_SHIFT + 9, 9), (48, 8), (56, 8)];
+    let tmp = &mut tmp[..events.len()];
+    let (mut src, mut dst) = (events, tmp);
+    for (shift, bits) in DIGITS {
+        let mask = (1u64 << bits) - 1;
+        let digit = |e: Event| ((e >> shift) & mask) as usize;
+        let mut start = [0usize; 512];
+        for &e in src.iter() {
+            start[digit(e)] += 1;
+        }
+        let mut sum = 0;
+        for s in &mut start {
+            (*s, sum) = (sum, sum + *s);
+        }
+        for &e in src.iter() {
+            let d = digit(e);
+            dst[start[d]] = e;
+            start[d] += 1;
+        }
+        std::mem::swap(&mut src, &mut dst);
+    }
+}
+
 /// Appends the events of triangle `tri`'s (clipped) box on `axis`.
 #[inline(always)]
 pub(super) fn push_events(out: &mut Vec<Event>, b: &Aabb, axis: usize, tri: u32) {
@@ -259,12 +289,18 @@ impl PlaneCost {
     }
 }
 
+/// With [`KdParams::longest_axis_only`], the smallest node whose other axes are swept when its
+/// longest offers no split: in smaller nodes the retries cost many sweeps for splits that
+/// barely lower the tree's cost (figures in `docs/accel.md`).
+pub(super) const RETRY_ABOVE: usize = 16;
+
 /// The cheapest split over the three axes' sorted events (the lowest axis on ties, then the
 /// lowest position), if it beats making a leaf of the `n` triangles.
 ///
 /// The planes that leave a child empty (at each axis's first and last event) are costed
 /// first; then the axes are swept (with [`KdParams::longest_axis_only`], the cell's longest
-/// axis alone unless no split so far beats the leaf) in the order of a lower bound on their other splits' cost
+/// axis alone unless no split so far beats the leaf and the node holds more than
+/// [`RETRY_ABOVE`] triangles) in the order of a lower bound on their other splits' cost
 /// ([`PlaneCost::both_sides_bound`]), and an axis whose bound is not below the best split so
 /// far (or the leaf) is not swept, since none of its other planes can win or tie.
 pub(super) fn choose_split(
@@ -295,13 +331,13 @@ pub(super) fn choose_split(
     order.sort_by(|&a, &b| bounds[a].total_cmp(&bounds[b]));
     if params.longest_axis_only {
         // As in pbrt: the cell's longest axis first (the lowest on ties); the others only
-        // when it offers no split that beats the leaf.
+        // when it offers no split that beats the leaf, and not in small nodes.
         let longest = cell.largest_axis();
         order.sort_by_key(|&a| a != longest);
     }
     for (k, axis) in order.into_iter().enumerate() {
         let limit = best(&per_axis).map_or(leaf_cost, |b| b.cost.min(leaf_cost));
-        if params.longest_axis_only && k > 0 && limit < leaf_cost {
+        if params.longest_axis_only && k > 0 && (limit < leaf_cost || n <= RETRY_ABOVE) {
             break;
         }
         if bounds[axis] < limit {
@@ -410,6 +446,33 @@ mod tests {
             (kind_of(e), tri_of(e)),
             (Kind::Planar as usize, (1 << 30) - 1)
         );
+    }
+
+    #[test]
+    fn radix_sort_of_events_in_triangle_order_sorts_whole_keys() {
+        let mut seed = 0x9e37_79b9_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 33) as u32
+        };
+        // Few distinct positions (many ties), negative and positive, flat boxes among them.
+        let mut ev = Vec::new();
+        for t in 0..5000u32 {
+            let lo = (next() % 64) as f32 - 32.0;
+            let hi = if next() % 4 == 0 {
+                lo
+            } else {
+                lo + (next() % 8) as f32
+            };
+            push_events(&mut ev, &Aabb::new(Vec3::splat(lo), Vec3::splat(hi)), 0, t);
+        }
+        ev.push(event(-0.0, Kind::Start, 5000));
+        ev.push(event(f32::INFINITY, Kind::End, 5000));
+        let mut expected = ev.clone();
+        sort_events(&mut expected);
+        let mut tmp = vec![0; ev.len()];
+        sort_events_by_position(&mut ev, &mut tmp);
+        assert_eq!(ev, expected);
     }
 
     #[test]

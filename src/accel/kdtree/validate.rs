@@ -98,7 +98,7 @@ impl KdTree {
         let (mut left, mut right) = (cell, cell);
         left.max[axis] = pos;
         right.min[axis] = pos;
-        let c = if self.params.perfect_splits {
+        let c = if self.params.perfect_splits_above < usize::MAX {
             clipped_box_exact(&self.tris.tris[t as usize], b, &cell)
         } else {
             clip_box(b, &cell)
