@@ -349,21 +349,21 @@ fn split_by_side(
     let used = &used[src];
     sides.clear();
     sides.extend(used.iter().map(|&e| side[tri_of(e) as usize]));
-    let nl = keep_events(used, room, sides, RIGHT);
-    let nr = keep_events(used, &mut room[nl..], sides, LEFT);
+    let nl = keep_events(used, room, sides, |s| s != RIGHT);
+    let nr = keep_events(used, &mut room[nl..], sides, |s| s != LEFT);
     arena.top = top + nl + nr;
     (top..top + nl, top + nl..arena.top)
 }
 
-/// Writes to the start of `out` the events of `src` whose side (`sides`, one per event) is
-/// not `drop`, in order, and returns how many. Every event is written and only the kept ones
-/// advance, so `out` needs room for one more than are kept (or for all of `src`).
+/// Writes to the start of `out` the events of `src` whose side (`sides`, one per event)
+/// `keep` keeps, in order, and returns how many. Every event is written and only the kept
+/// ones advance, so `out` needs room for one more than are kept (or for all of `src`).
 #[inline(always)]
-fn keep_events(src: &[Event], out: &mut [Event], sides: &[u8], drop: u8) -> usize {
+fn keep_events(src: &[Event], out: &mut [Event], sides: &[u8], keep: impl Fn(u8) -> bool) -> usize {
     let mut n = 0;
     for (&e, &s) in src.iter().zip(sides) {
         out[n] = e;
-        n += usize::from(s != drop);
+        n += usize::from(keep(s));
     }
     n
 }
@@ -395,28 +395,22 @@ fn split_perfect(
 }
 
 /// Writes to the start of `out` the events of `src` whose side (`sides`, one per event) is
-/// `only`, merged with the sorted `extra` (no key in both), and returns how many. Every event
-/// of `src` is written and only the kept ones advance, so `out` needs room for all of `src`
-/// and `extra`; the new events, fewer, are slipped in where they belong.
+/// `only`, merged with the sorted `extra` (no key in both), and returns how many. Before each
+/// of the new events, the run of `src` below it is found by galloping search and its kept
+/// events written as [`keep_events`] does, so no step branches on the keys or the sides.
+/// `out` needs room for all of `src` and `extra`.
 #[inline(always)]
 fn keep_merged(src: &[Event], out: &mut [Event], sides: &[u8], only: u8, extra: &[Event]) -> usize {
-    // Past the end of `extra`, `u64::MAX`, which no key is (its kind bits would be 3).
-    let next_of = |j: usize| extra.get(j).copied().unwrap_or(u64::MAX);
-    let (mut n, mut j) = (0, 0);
-    let mut next = next_of(0);
-    for (&e, &s) in src.iter().zip(sides) {
-        while next < e {
-            out[n] = next;
-            n += 1;
-            j += 1;
-            next = next_of(j);
-        }
-        out[n] = e;
-        n += usize::from(s == only);
+    let keep = |s: u8| s == only;
+    let (mut n, mut start) = (0, 0);
+    for &y in extra {
+        let end = start + leading_below(&src[start..], y);
+        n += keep_events(&src[start..end], &mut out[n..], &sides[start..end], keep);
+        out[n] = y;
+        n += 1;
+        start = end;
     }
-    let rest = &extra[j..];
-    out[n..n + rest.len()].copy_from_slice(rest);
-    n + rest.len()
+    n + keep_events(&src[start..], &mut out[n..], &sides[start..], keep)
 }
 
 /// Writes past `arena.top` the left child's events on the split axis, `arena.ev[src]`'s first
