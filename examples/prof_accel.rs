@@ -3,7 +3,8 @@
 //! (NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`, `KD_CT`, `KD_EB`,
 //! `KD_DEPTH`, `KD_PERFECT_ABOVE` (a triangle count, or `none`), `KD_LONGEST` (0 or 1): the
 //! kd-tree's intersection cost, traversal cost, empty bonus, depth limit, the nodes split
-//! perfectly and the longest-axis sweep in place of the defaults). Run with `RAYON_NUM_THREADS=1` to build the BVH on one thread.
+//! perfectly and the longest-axis sweep in place of the defaults). Run with
+//! `RAYON_NUM_THREADS=1` to build the BVH on one thread.
 use dynbvh::accel::{Accel, AccelKind, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 
