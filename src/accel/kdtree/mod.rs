@@ -48,9 +48,10 @@ pub struct KdParams {
     /// and faster traces for a dearer build (figures in `docs/accel.md`).
     pub perfect_splits_above: usize,
     /// Sweep only the cell's longest axis (pbrt's rule; the other two only when it offers no
-    /// split that beats a leaf, in nodes of more than 16 triangles), instead of all three (Wald & Havran 2006): about a third of
-    /// the sweep's work. On by default: on the spheres the tree's SAH and work per ray are
-    /// those of the three-axis sweep (figures in `docs/accel.md`).
+    /// split that beats a leaf, in nodes of more than 16 triangles), instead of all three
+    /// (Wald & Havran 2006): about a third of the sweep's work. On by default: on the spheres
+    /// the tree's SAH and work per ray are those of the three-axis sweep (figures in
+    /// `docs/accel.md`).
     pub longest_axis_only: bool,
     /// The builder.
     pub build: KdBuild,
