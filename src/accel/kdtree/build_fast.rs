@@ -7,10 +7,9 @@
 //! axis its start stays left and its end right, and it gets an end at the plane on the left and
 //! a start there on the right (all at one position, so sorted by triangle alone).
 //!
-//! With perfect splits a straddler is clipped to each child instead (`clip.rs`): on the other
-//! two axes its old events are dropped and its new ones, sorted, are merged into each child's
-//! lists (section 4.3 and 5.2 of the paper); on the split axis it is handled as above, or
-//! leaves the child the clip keeps it out of.
+//! With perfect splits a straddler is clipped to each child instead (`clip.rs`): its old
+//! events are dropped on every axis, and its new ones, sorted, are merged into each child's
+//! lists (section 4.3 and 5.2 of the paper).
 //!
 //! The lists live in one arena per axis used as a stack: a node's children's lists are
 //! written after everything in use, the left subtree is built, then the right, and the arena
@@ -161,10 +160,6 @@ impl<'a> Builder<'a> {
 
     /// With perfect splits, the boxes of straddler `t` in the two children (empty where it
     /// misses the child); where rounding would drop it from both, its box clipped to each.
-    /// On the split axis the builders keep instead the halves of the box it had, cut at the
-    /// plane, so that the list on that axis is split there as without perfect splits (a
-    /// triangle that crosses the plane reaches it on both sides: only the bound away from the
-    /// plane can differ, and only by the clip's rounding).
     pub(super) fn straddler_boxes(&self, t: u32, cell: &Aabb, s: &Split) -> (Aabb, Aabb) {
         let (tri, bx) = (&self.tris[t as usize], &self.boxes[t as usize]);
         let (l, r) = split_clipped_boxes(tri, bx, cell, s.axis, s.pos);
@@ -231,52 +226,54 @@ impl<'a> Builder<'a> {
             (ranges.clone(), Default::default())
         } else if scratch.straddlers.is_empty() && n_left == 0 {
             (Default::default(), ranges.clone())
-        } else {
-            // Triangles in both children. On the split axis the lists are sorted by position,
-            // so the left child's events (before the plane, ends at it, flat ones at it when
-            // they go left) come first; a straddler keeps its start on the left and its end on
-            // the right, and gets an end at the plane on the left and a start there on the
-            // right (new events sorted by triangle).
-            let perfect = self.params.perfect_at(n);
-            scratch.straddlers.sort_unstable();
-            scratch.left.clear();
-            scratch.right.clear();
+        } else if self.params.perfect_at(n) {
+            // Every straddler is clipped to each child and gets new events on every axis there
+            // (none where it misses the child); its old events are dropped.
             for a in 0..3 {
                 scratch.new_left[a].clear();
                 scratch.new_right[a].clear();
             }
-            let mut clipped_away = false;
             for &t in &scratch.straddlers {
-                let (in_left, in_right) = if perfect {
-                    // Clipped to each child, with new events on the other axes there (none
-                    // where it misses the child); its old events there are dropped.
-                    let (l, r) = self.straddler_boxes(t, &cell, &s);
-                    for a in (0..3).filter(|&a| a != s.axis) {
-                        if !l.is_empty() {
-                            push_events(&mut scratch.new_left[a], &l, a, t);
-                        }
-                        if !r.is_empty() {
-                            push_events(&mut scratch.new_right[a], &r, a, t);
-                        }
+                let (l, r) = self.straddler_boxes(t, &cell, &s);
+                n_left -= usize::from(l.is_empty());
+                n_right -= usize::from(r.is_empty());
+                for a in 0..3 {
+                    if !l.is_empty() {
+                        push_events(&mut scratch.new_left[a], &l, a, t);
                     }
-                    (!l.is_empty(), !r.is_empty())
-                } else {
-                    (true, true)
-                };
-                if in_left {
-                    scratch.left.push(event(s.pos, Kind::End, t));
-                } else {
-                    self.side[t as usize] = CLIPPED_RIGHT;
+                    if !r.is_empty() {
+                        push_events(&mut scratch.new_right[a], &r, a, t);
+                    }
                 }
-                if in_right {
-                    scratch.right.push(event(s.pos, Kind::Start, t));
-                } else {
-                    self.side[t as usize] = CLIPPED_LEFT;
-                }
-                clipped_away |= !(in_left && in_right);
-                n_left -= usize::from(!in_left);
-                n_right -= usize::from(!in_right);
             }
+            let mut left_ranges: [Range<usize>; 3] = Default::default();
+            let mut right_ranges: [Range<usize>; 3] = Default::default();
+            for a in 0..3 {
+                sort_events(&mut scratch.new_left[a]);
+                sort_events(&mut scratch.new_right[a]);
+                let (l, r) = split_perfect(
+                    &mut arena[a],
+                    ranges[a].clone(),
+                    &self.side,
+                    &mut scratch.sides,
+                    [&scratch.new_left[a], &scratch.new_right[a]],
+                );
+                left_ranges[a] = l;
+                right_ranges[a] = r;
+            }
+            (left_ranges, right_ranges)
+        } else {
+            // Triangles in both children: the straddlers' new events on the split axis, at the
+            // plane, sorted by triangle.
+            scratch.straddlers.sort_unstable();
+            scratch.left.clear();
+            scratch.right.clear();
+            for &t in &scratch.straddlers {
+                scratch.left.push(event(s.pos, Kind::End, t));
+                scratch.right.push(event(s.pos, Kind::Start, t));
+            }
+            // On the split axis the lists are sorted by position, so the left child's events
+            // (before the plane, ends at it, flat ones at it when they go left) come first.
             let at_plane = if s.planar_left {
                 Kind::Start
             } else {
@@ -287,22 +284,12 @@ impl<'a> Builder<'a> {
             let mut left_ranges: [Range<usize>; 3] = Default::default();
             let mut right_ranges: [Range<usize>; 3] = Default::default();
             for a in 0..3 {
-                let (mut l, mut r) = if a == s.axis {
+                let (l, r) = if a == s.axis {
                     split_at_plane(
                         &mut arena[a],
                         ranges[a].clone(),
                         cut,
                         [&scratch.left, &scratch.right],
-                    )
-                } else if perfect {
-                    sort_events(&mut scratch.new_left[a]);
-                    sort_events(&mut scratch.new_right[a]);
-                    split_perfect(
-                        &mut arena[a],
-                        ranges[a].clone(),
-                        &self.side,
-                        &mut scratch.sides,
-                        [&scratch.new_left[a], &scratch.new_right[a]],
                     )
                 } else {
                     split_by_side(
@@ -312,11 +299,6 @@ impl<'a> Builder<'a> {
                         &mut scratch.sides,
                     )
                 };
-                if a == s.axis && clipped_away {
-                    // A straddler the clip keeps out of one child loses its old event there.
-                    l = drop_events(&mut arena[a].ev, l, &self.side, CLIPPED_RIGHT);
-                    r = drop_events(&mut arena[a].ev, r, &self.side, CLIPPED_LEFT);
-                }
                 left_ranges[a] = l;
                 right_ranges[a] = r;
             }
@@ -346,23 +328,6 @@ impl<'a> Builder<'a> {
             arena[a].top = mark[a];
         }
     }
-}
-
-/// Side flags beside [`BOTH`], [`LEFT`] and [`RIGHT`]: a straddler that perfect splitting
-/// keeps out of the right child (it is in the left one only), or out of the left one.
-const CLIPPED_LEFT: u8 = 3;
-const CLIPPED_RIGHT: u8 = 4;
-
-/// Removes from `ev[range]` the events of the triangles whose side is `flag`, keeping the
-/// order; returns the range left (its start is kept).
-fn drop_events(ev: &mut [Event], range: Range<usize>, side: &[u8], flag: u8) -> Range<usize> {
-    let (start, mut end) = (range.start, range.start);
-    for i in range {
-        let e = ev[i];
-        ev[end] = e;
-        end += usize::from(side[tri_of(e) as usize] != flag);
-    }
-    start..end
 }
 
 /// Writes past `arena.top` the events of `arena.ev[src]` (an axis the plane does not cut) of
@@ -494,23 +459,4 @@ fn merge_runs(out: &mut [Event], a: &[Event], b: &[Event]) -> usize {
     }
     out[len..len + rest.len()].copy_from_slice(rest);
     len + rest.len()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn drop_events_removes_the_flagged_triangles_in_order() {
-        let mut ev: Vec<Event> = (0..8u32).map(|t| event(t as f32, Kind::Start, t)).collect();
-        let mut side = vec![BOTH; 8];
-        side[2] = CLIPPED_RIGHT;
-        side[5] = CLIPPED_RIGHT;
-        side[6] = CLIPPED_LEFT;
-        let kept = drop_events(&mut ev, 1..7, &side, CLIPPED_RIGHT);
-        assert_eq!(kept, 1..5);
-        let tris: Vec<u32> = ev[kept].iter().map(|&e| tri_of(e)).collect();
-        assert_eq!(tris, [1, 3, 4, 6]);
-        assert_eq!(tri_of(ev[0]), 0, "events before the range untouched");
-    }
 }

@@ -57,16 +57,7 @@ fn node(b: &mut Builder, index: usize, cell: Aabb, items: Vec<(u32, Aabb)>, dept
             RIGHT => right.push((t, bx)),
             _ => {
                 let (l, r) = if b.params.perfect_at(items.len()) {
-                    let (mut l, mut r) = b.straddler_boxes(t, &cell, &s);
-                    // On the split axis the halves of the box it had (as `build_fast` keeps
-                    // the old events there).
-                    if !l.is_empty() {
-                        (l.min[s.axis], l.max[s.axis]) = (bx.min[s.axis], s.pos);
-                    }
-                    if !r.is_empty() {
-                        (r.min[s.axis], r.max[s.axis]) = (s.pos, bx.max[s.axis]);
-                    }
-                    (l, r)
+                    b.straddler_boxes(t, &cell, &s)
                 } else {
                     (clip_box(&bx, &left_cell), clip_box(&bx, &right_cell))
                 };
