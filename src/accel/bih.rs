@@ -2,12 +2,14 @@
 //! Interval Hierarchy", EGSR 2006): an object partition like the BVH, but each node stores only
 //! two planes on one axis, the left child's largest and the right child's smallest coordinate.
 //! The build splits the node's candidate box (not its triangles' bounds) in the middle of its
-//! longest side, sorting triangles by their box centre, and halves the candidate box again
-//! when one side would be empty (the global heuristic); where that empty side leaves a wide gap
-//! between the triangles and the box traversal knows, a node with an empty child cuts the gap
-//! off (without it, rays through the gap reach the subtree). Traversal clips the ray's interval by
-//! both planes; the children may overlap, so both are visited, nearer first. A refit keeps the
-//! tree and recomputes the planes from the moved triangles.
+//! longest side, sorting triangles by their box centre (for the first 16 halvings all at once:
+//! one radix sort by each centre's cell in the grid those halvings make, a Morton code), and
+//! halves the candidate box again when one side would be empty (the global heuristic); where
+//! that empty side leaves a wide gap between the triangles and the box traversal knows, a node
+//! with an empty child cuts the gap off (without it, rays through the gap reach the subtree).
+//! Traversal clips the ray's interval by both planes; the children may overlap, so both are
+//! visited, nearer first. A refit keeps the tree and recomputes the planes from the moved
+//! triangles.
 
 use super::Accel;
 use super::interval::{beyond, box_interval, lower, lower_is_near, plane_distance, upper};
@@ -111,19 +113,25 @@ struct Item {
 
 struct Builder {
     items: Vec<Item>,
+    /// Each item's first [`PRESORTED`] halvings (see [`halving_codes`]), in the items' order
+    /// while that order is the codes' (the node ranges above that level).
+    codes: Vec<u32>,
+    /// The axes of the halvings the codes record.
+    axes: [usize; PRESORTED],
     nodes: Vec<BihNode>,
     max_leaf: usize,
     depth: usize,
 }
 
 impl Builder {
-    /// Builds node `index` over `items[begin..end]` with candidate box `cand`; `seen` is the
-    /// box traversal knows the node by (its ancestors' planes).
+    /// Builds node `index` over `items[begin..end]` with candidate box `cand`, halved `level`
+    /// times from the root's; `seen` is the box traversal knows the node by (its ancestors'
+    /// planes).
     fn node(
         &mut self,
         index: usize,
         (begin, end): (usize, usize),
-        mut cand: Aabb,
+        (mut cand, mut level): (Aabb, usize),
         seen: Aabb,
         depth: usize,
     ) {
@@ -134,30 +142,40 @@ impl Builder {
             return;
         }
         for _ in 0..MAX_EMPTY_SPLITS {
-            let axis = cand.largest_axis();
+            let axis = if level < PRESORTED {
+                self.axes[level]
+            } else {
+                cand.largest_axis()
+            };
             let mid = cand.center()[axis];
             if !(cand.min[axis] < mid && mid < cand.max[axis]) {
                 break;
             }
-            let split = begin + partition(&mut self.items[begin..end], axis, mid);
+            let (below, planes) = if level < PRESORTED {
+                // The items are in the order of their codes: those in the lower half come
+                // first (the code's grid cell decides, which is `mid`'s side up to rounding).
+                let bit = 1 << (PRESORTED - 1 - level);
+                let below = self.codes[begin..end].partition_point(|&c| c & bit == 0);
+                (below, side_planes(&self.items[begin..end], below, axis))
+            } else {
+                partition(&mut self.items[begin..end], axis, mid)
+            };
+            level += 1;
+            let split = begin + below;
             let (mut left_cand, mut right_cand) = (cand, cand);
             left_cand.max[axis] = mid;
             right_cand.min[axis] = mid;
-            let items = &self.items[begin..end];
             if split == begin || split == end {
                 // One side empty: the candidate box is halved again (the global heuristic).
                 // Where the triangles leave a wide gap to the box traversal knows, a node with
                 // an empty child cuts it off, so rays through the gap skip the subtree.
                 let gap = seen.extent()[axis] * EMPTY_CUT;
+                // All the triangles on one side: that side's plane is their bound.
                 let cut = if split == begin {
-                    let lo = items
-                        .iter()
-                        .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis]));
+                    let lo = planes[1];
                     (lo - seen.min[axis] > gap).then_some((true, [f32::NEG_INFINITY, lo]))
                 } else {
-                    let hi = items
-                        .iter()
-                        .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis]));
+                    let hi = planes[0];
                     (seen.max[axis] - hi > gap).then_some((false, [hi, f32::INFINITY]))
                 };
                 cand = if split == begin {
@@ -175,23 +193,15 @@ impl Builder {
                     let mut tighter = seen;
                     if left_empty {
                         tighter.min[axis] = planes[1];
-                        self.node(first + 1, (begin, end), cand, tighter, depth + 1);
+                        self.node(first + 1, (begin, end), (cand, level), tighter, depth + 1);
                     } else {
                         tighter.max[axis] = planes[0];
-                        self.node(first, (begin, end), cand, tighter, depth + 1);
+                        self.node(first, (begin, end), (cand, level), tighter, depth + 1);
                     }
                     return;
                 }
                 continue;
             }
-            let planes = [
-                items[..split - begin]
-                    .iter()
-                    .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis])),
-                items[split - begin..]
-                    .iter()
-                    .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis])),
-            ];
             let (mut left_seen, mut right_seen) = (seen, seen);
             left_seen.max[axis] = left_seen.max[axis].min(planes[0]);
             right_seen.min[axis] = right_seen.min[axis].max(planes[1]);
@@ -199,27 +209,142 @@ impl Builder {
             self.nodes.push(BihNode::leaf(0, 0));
             self.nodes.push(BihNode::leaf(0, 0));
             self.nodes[index] = BihNode::interior(axis, planes, first);
-            self.node(first, (begin, split), left_cand, left_seen, depth + 1);
-            self.node(first + 1, (split, end), right_cand, right_seen, depth + 1);
+            self.node(
+                first,
+                (begin, split),
+                (left_cand, level),
+                left_seen,
+                depth + 1,
+            );
+            self.node(
+                first + 1,
+                (split, end),
+                (right_cand, level),
+                right_seen,
+                depth + 1,
+            );
             return;
         }
         self.nodes[index] = BihNode::leaf(begin, n);
     }
 }
 
-/// Moves the items whose box centre lies below `mid` on `axis` to the front; returns how many.
-fn partition(items: &mut [Item], axis: usize, mid: f32) -> usize {
-    let below = |it: &Item| (it.bounds.min[axis] + it.bounds.max[axis]) * 0.5 < mid;
+/// Moves the items whose box centre lies below `mid` on `axis` to the front; returns how many,
+/// and the planes of the two sides (the largest upper bound on `axis` of the items moved to
+/// the front, the smallest lower bound of the others), gathered in the same pass: each item is
+/// tested once, and goes to its side's plane then.
+fn partition(items: &mut [Item], axis: usize, mid: f32) -> (usize, [f32; 2]) {
     let (mut i, mut j) = (0, items.len());
+    let (mut left, mut right) = (f32::NEG_INFINITY, f32::INFINITY);
     while i < j {
-        if below(&items[i]) {
+        let (lo, hi) = (items[i].bounds.min[axis], items[i].bounds.max[axis]);
+        if (lo + hi) * 0.5 < mid {
+            left = left.max(hi);
             i += 1;
         } else {
+            right = right.min(lo);
             j -= 1;
             items.swap(i, j);
         }
     }
-    i
+    (i, [left, right])
+}
+
+/// The planes of `items` split after the first `below`: the largest upper bound on `axis` of
+/// those, the smallest lower bound of the rest.
+fn side_planes(items: &[Item], below: usize, axis: usize) -> [f32; 2] {
+    let (left, right) = items.split_at(below);
+    [
+        left.iter()
+            .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis])),
+        right
+            .iter()
+            .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis])),
+    ]
+}
+
+/// Halvings of the candidate box decided for every triangle before the build, as bits.
+const PRESORTED: usize = 16;
+
+/// The axes of the first [`PRESORTED`] halvings of the candidate box from `root`: each time
+/// its longest side (the lowest axis on ties), as [`Builder::node`] picks it. The sides'
+/// lengths halve whatever half is kept, so the sequence is the same on every path.
+fn halving_axes(root: &Aabb) -> [usize; PRESORTED] {
+    let mut extent = root.extent();
+    std::array::from_fn(|_| {
+        let axis = Aabb::new(Vec3::ZERO, extent).largest_axis();
+        extent[axis] *= 0.5;
+        axis
+    })
+}
+
+/// Each item's side at the first [`PRESORTED`] halvings of the candidate box from `root`
+/// along `axes`, the first in the highest bit (1: the upper half): its box centre's cell in
+/// the grid those halvings make of `root`, its coordinates' bits interleaved in the order of
+/// the halvings (a Morton code along `axes`). A node's items share the bits of the halvings
+/// above it, so sorting the items by code puts every node's items in one range, the lower
+/// half first: the top levels' partitions become searches (one sort instead of a pass over
+/// all the items at each level). Centres outside `root` (or not finite) count in its nearest
+/// cell.
+fn halving_codes(items: &[Item], root: &Aabb, axes: &[usize; PRESORTED]) -> Vec<u32> {
+    // Per axis: halvings on it, and each grid coordinate's bits placed in the code.
+    let halvings: [u32; 3] =
+        std::array::from_fn(|a| axes.iter().filter(|&&x| x == a).count() as u32);
+    let spread: [Vec<u32>; 3] = std::array::from_fn(|a| {
+        let positions: Vec<usize> = (0..PRESORTED).filter(|&k| axes[k] == a).collect();
+        (0..1u32 << halvings[a])
+            .map(|q| {
+                positions.iter().enumerate().fold(0, |code, (j, &k)| {
+                    let bit = (q >> (halvings[a] as usize - 1 - j)) & 1;
+                    code | bit << (PRESORTED - 1 - k)
+                })
+            })
+            .collect()
+    });
+    let extent = root.extent();
+    let scale: [f32; 3] = std::array::from_fn(|a| {
+        let cells = (1u32 << halvings[a]) as f32;
+        if extent[a] > 0.0 {
+            cells / extent[a]
+        } else {
+            0.0
+        }
+    });
+    items
+        .iter()
+        .map(|it| {
+            (0..3).fold(0, |code, a| {
+                let centre = (it.bounds.min[a] + it.bounds.max[a]) * 0.5;
+                let cell = ((centre - root.min[a]) * scale[a]) as u32; // NaN: 0; saturating
+                code | spread[a][cell.min((1 << halvings[a]) - 1) as usize]
+            })
+        })
+        .collect()
+}
+
+/// Sorts `items` and their `codes` (of [`PRESORTED`] bits) by code, keeping the order of equal
+/// codes: a least-significant-digit radix sort in two passes of 8 bits.
+fn sort_by_codes(items: &mut Vec<Item>, codes: &mut Vec<u32>) {
+    let mut items_tmp = items.clone();
+    let mut codes_tmp = codes.clone();
+    for shift in [0, 8] {
+        let mut start = [0usize; 256];
+        for &c in codes.iter() {
+            start[(c >> shift) as usize & 255] += 1;
+        }
+        let mut sum = 0;
+        for s in &mut start {
+            (*s, sum) = (sum, sum + *s);
+        }
+        for (&c, &it) in codes.iter().zip(items.iter()) {
+            let d = (c >> shift) as usize & 255;
+            items_tmp[start[d]] = it;
+            codes_tmp[start[d]] = c;
+            start[d] += 1;
+        }
+        std::mem::swap(items, &mut items_tmp);
+        std::mem::swap(codes, &mut codes_tmp);
+    }
 }
 
 impl Bih {
@@ -238,8 +363,16 @@ impl Bih {
             .collect();
         let bounds =
             super::triangles::bounds_of(&items.iter().map(|it| it.bounds).collect::<Vec<_>>());
+        let (mut items, mut codes) = (items, Vec::new());
+        let axes = halving_axes(&bounds);
+        if !items.is_empty() {
+            codes = halving_codes(&items, &bounds, &axes);
+            sort_by_codes(&mut items, &mut codes);
+        }
         let mut b = Builder {
             items,
+            codes,
+            axes,
             nodes: Vec::new(),
             max_leaf: params.max_leaf_size.max(1),
             depth: 0,
@@ -247,7 +380,7 @@ impl Bih {
         if !b.items.is_empty() {
             b.nodes.push(BihNode::leaf(0, 0));
             let n = b.items.len();
-            b.node(0, (0, n), bounds, bounds, 0);
+            b.node(0, (0, n), (bounds, 0), bounds, 0);
         }
         let prims: Vec<u32> = b.items.iter().map(|it| it.prim).collect();
         let tris = prims.iter().map(|&p| mesh.triangle(p as usize)).collect();
@@ -560,5 +693,85 @@ impl Accel for Bih {
     fn refit(&mut self, mesh: &TriMesh) -> bool {
         self.refit_to(mesh);
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn item(centre: Vec3, prim: u32) -> Item {
+        Item {
+            bounds: Aabb::new(centre - 0.25, centre + 0.25),
+            prim,
+        }
+    }
+
+    #[test]
+    fn halvings_follow_the_longest_side() {
+        // 8 x 2 x 4: x, x, z, x (now 1 x 2 x 2: y before z), y, z, x, y, z, ...
+        let root = Aabb::new(Vec3::ZERO, Vec3::new(8.0, 2.0, 4.0));
+        assert_eq!(halving_axes(&root)[..9], [0, 0, 2, 0, 1, 2, 0, 1, 2]);
+    }
+
+    #[test]
+    fn codes_are_the_cells_bits_in_halving_order() {
+        let root = Aabb::new(Vec3::ZERO, Vec3::splat(16.0));
+        let axes = halving_axes(&root);
+        assert_eq!(axes[..6], [0, 1, 2, 0, 1, 2]);
+        let items = [
+            item(Vec3::new(1.0, 1.0, 1.0), 0),
+            item(Vec3::new(9.0, 1.0, 1.0), 1),
+            item(Vec3::new(1.0, 9.0, 13.0), 2),
+            // Outside the root and not finite: the nearest cell, and cell 0.
+            item(Vec3::new(-5.0, 20.0, 8.5), 3),
+            item(Vec3::new(f32::NAN, 1.0, 1.0), 4),
+        ];
+        let codes = halving_codes(&items, &root, &axes);
+        let top = |c: u32| c >> (PRESORTED - 6);
+        // x y z x y z: the halves at 8, then the quarters at 4 and 12.
+        assert_eq!(top(codes[0]), 0b000_000);
+        assert_eq!(top(codes[1]), 0b100_000);
+        assert_eq!(top(codes[2]), 0b011_001);
+        assert_eq!(top(codes[3]), 0b011_010);
+        assert_eq!(top(codes[4]), 0b000_000);
+    }
+
+    #[test]
+    fn sorting_by_codes_is_stable() {
+        let mut items: Vec<Item> = (0..1000).map(|i| item(Vec3::ZERO, i)).collect();
+        let mut codes: Vec<u32> = (0..1000u32).map(|i| (i * 7919) % 300 * 211).collect();
+        let mut expected: Vec<(u32, u32)> = codes.iter().copied().zip(0..).collect();
+        expected.sort_by_key(|&(c, _)| c);
+        sort_by_codes(&mut items, &mut codes);
+        let got: Vec<(u32, u32)> = codes
+            .iter()
+            .copied()
+            .zip(items.iter().map(|it| it.prim))
+            .collect();
+        assert_eq!(got, expected);
+    }
+
+    #[test]
+    fn every_node_holds_its_triangles_within_its_planes() {
+        // Clustered centres (many equal codes) and a spread: `validate` checks every plane
+        // against the triangles below it.
+        let mut mesh = TriMesh::default();
+        for i in 0..3000u32 {
+            let c = if i % 3 == 0 {
+                Vec3::splat(0.5)
+            } else {
+                Vec3::new((i % 17) as f32, (i % 31) as f32 * 0.1, (i % 7) as f32 * 3.0)
+            };
+            let base = mesh.positions.len() as u32;
+            mesh.positions.extend([
+                c,
+                c + Vec3::new(0.3, 0.0, 0.1),
+                c + Vec3::new(0.0, 0.2, 0.3),
+            ]);
+            mesh.indices.push([base, base + 1, base + 2]);
+        }
+        let bih = Bih::build(&mesh, &BihParams::default());
+        assert_eq!(bih.validate(&mesh), Ok(()));
     }
 }
