@@ -2,7 +2,7 @@
 //! Interval Hierarchy", EGSR 2006): an object partition like the BVH, but each node stores only
 //! two planes on one axis, the left child's largest and the right child's smallest coordinate.
 //! The build splits the node's candidate box (not its triangles' bounds) in the middle of its
-//! longest side, sorting triangles by their box centre (for the first 16 halvings all at once:
+//! longest side, sorting triangles by their box centre (for the first 24 halvings all at once:
 //! one radix sort by each centre's cell in the grid those halvings make, a Morton code), and
 //! halves the candidate box again when one side would be empty (the global heuristic); where
 //! that empty side leaves a wide gap between the triangles and the box traversal knows, a node
@@ -264,7 +264,7 @@ fn side_planes(items: &[Item], below: usize, axis: usize) -> [f32; 2] {
 }
 
 /// Halvings of the candidate box decided for every triangle before the build, as bits.
-const PRESORTED: usize = 16;
+const PRESORTED: usize = 24;
 
 /// The axes of the first [`PRESORTED`] halvings of the candidate box from `root`: each time
 /// its longest side (the lowest axis on ties), as [`Builder::node`] picks it. The sides'
@@ -287,19 +287,28 @@ fn halving_axes(root: &Aabb) -> [usize; PRESORTED] {
 /// all the items at each level). Centres outside `root` (or not finite) count in its nearest
 /// cell.
 fn halving_codes(items: &[Item], root: &Aabb, axes: &[usize; PRESORTED]) -> Vec<u32> {
-    // Per axis: halvings on it, and each grid coordinate's bits placed in the code.
+    // Per axis: halvings on it, and where each bit of a grid coordinate goes in the code
+    // (`place[b]` for bit `b`, the lowest first: the axis's last halving), looked up 12 bits
+    // at a time so the tables stay small whatever the root's shape.
     let halvings: [u32; 3] =
         std::array::from_fn(|a| axes.iter().filter(|&&x| x == a).count() as u32);
-    let spread: [Vec<u32>; 3] = std::array::from_fn(|a| {
-        let positions: Vec<usize> = (0..PRESORTED).filter(|&k| axes[k] == a).collect();
-        (0..1u32 << halvings[a])
-            .map(|q| {
-                positions.iter().enumerate().fold(0, |code, (j, &k)| {
-                    let bit = (q >> (halvings[a] as usize - 1 - j)) & 1;
-                    code | bit << (PRESORTED - 1 - k)
+    let spread: [[Vec<u32>; 2]; 3] = std::array::from_fn(|a| {
+        let place: Vec<u32> = (0..PRESORTED)
+            .rev()
+            .filter(|&k| axes[k] == a)
+            .map(|k| 1 << (PRESORTED - 1 - k))
+            .collect();
+        std::array::from_fn(|half| {
+            let bits = &place[(12 * half).min(place.len())..(12 * half + 12).min(place.len())];
+            (0..1u32 << bits.len())
+                .map(|v| {
+                    bits.iter()
+                        .enumerate()
+                        .filter(|&(b, _)| v >> b & 1 == 1)
+                        .fold(0, |code, (_, &p)| code | p)
                 })
-            })
-            .collect()
+                .collect()
+        })
     });
     let extent = root.extent();
     let scale: [f32; 3] = std::array::from_fn(|a| {
@@ -316,18 +325,19 @@ fn halving_codes(items: &[Item], root: &Aabb, axes: &[usize; PRESORTED]) -> Vec<
             (0..3).fold(0, |code, a| {
                 let centre = (it.bounds.min[a] + it.bounds.max[a]) * 0.5;
                 let cell = ((centre - root.min[a]) * scale[a]) as u32; // NaN: 0; saturating
-                code | spread[a][cell.min((1 << halvings[a]) - 1) as usize]
+                let cell = cell.min((1 << halvings[a]) - 1) as usize;
+                code | spread[a][0][cell & 0xfff] | spread[a][1][cell >> 12]
             })
         })
         .collect()
 }
 
 /// Sorts `items` and their `codes` (of [`PRESORTED`] bits) by code, keeping the order of equal
-/// codes: a least-significant-digit radix sort in two passes of 8 bits.
+/// codes: a least-significant-digit radix sort in three passes of 8 bits.
 fn sort_by_codes(items: &mut Vec<Item>, codes: &mut Vec<u32>) {
     let mut items_tmp = items.clone();
     let mut codes_tmp = codes.clone();
-    for shift in [0, 8] {
+    for shift in [0, 8, 16] {
         let mut start = [0usize; 256];
         for &c in codes.iter() {
             start[(c >> shift) as usize & 255] += 1;
@@ -735,6 +745,43 @@ mod tests {
         assert_eq!(top(codes[2]), 0b011_001);
         assert_eq!(top(codes[3]), 0b011_010);
         assert_eq!(top(codes[4]), 0b000_000);
+    }
+
+    #[test]
+    fn codes_are_the_sides_of_the_halvings_on_a_long_root() {
+        // 4096 x 1 x 2: the first halvings all on x, so x takes more than 12 bits of the code.
+        let root = Aabb::new(Vec3::ZERO, Vec3::new(4096.0, 1.0, 2.0));
+        let axes = halving_axes(&root);
+        assert!(axes.iter().filter(|&&a| a == 0).count() > 12);
+        let mut seed = 0x2545_f491_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let items: Vec<Item> = (0..2000)
+            .map(|i| item(Vec3::new(next() * 4096.0, next(), next() * 2.0), i))
+            .collect();
+        let codes = halving_codes(&items, &root, &axes);
+        for (it, &code) in items.iter().zip(&codes) {
+            let c = it.bounds.center();
+            // The sides by halving the box itself; a centre within rounding of a middle is
+            // left out of the comparison.
+            let (mut cand, mut expected, mut near) = (root, 0u32, false);
+            for (k, &axis) in axes.iter().enumerate() {
+                let mid = cand.center()[axis];
+                near |= (c[axis] - mid).abs() < 1e-3 * cand.extent()[axis];
+                let right = c[axis] >= mid;
+                expected |= u32::from(right) << (PRESORTED - 1 - k);
+                if right {
+                    cand.min[axis] = mid;
+                } else {
+                    cand.max[axis] = mid;
+                }
+            }
+            if !near {
+                assert_eq!(code, expected, "{c:?}");
+            }
+        }
     }
 
     #[test]
