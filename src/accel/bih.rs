@@ -365,7 +365,7 @@ impl Bih {
     #[must_use]
     pub fn build(mesh: &TriMesh, params: &BihParams) -> Self {
         assert!(mesh.len() < 1 << 30, "too many triangles for a BIH");
-        let items: Vec<Item> = (0..mesh.len())
+        let mut items: Vec<Item> = (0..mesh.len())
             .map(|i| Item {
                 bounds: mesh.triangle_bounds(i),
                 prim: i as u32,
@@ -373,12 +373,9 @@ impl Bih {
             .collect();
         let bounds =
             super::triangles::bounds_of(&items.iter().map(|it| it.bounds).collect::<Vec<_>>());
-        let (mut items, mut codes) = (items, Vec::new());
         let axes = halving_axes(&bounds);
-        if !items.is_empty() {
-            codes = halving_codes(&items, &bounds, &axes);
-            sort_by_codes(&mut items, &mut codes);
-        }
+        let mut codes = halving_codes(&items, &bounds, &axes);
+        sort_by_codes(&mut items, &mut codes);
         let mut b = Builder {
             items,
             codes,
@@ -787,7 +784,8 @@ mod tests {
     #[test]
     fn sorting_by_codes_is_stable() {
         let mut items: Vec<Item> = (0..1000).map(|i| item(Vec3::ZERO, i)).collect();
-        let mut codes: Vec<u32> = (0..1000u32).map(|i| (i * 7919) % 300 * 211).collect();
+        // 300 distinct codes spread over all 24 bits (every pass of the sort moves items).
+        let mut codes: Vec<u32> = (0..1000u32).map(|i| (i * 7919) % 300 * 55_001).collect();
         let mut expected: Vec<(u32, u32)> = codes.iter().copied().zip(0..).collect();
         expected.sort_by_key(|&(c, _)| c);
         sort_by_codes(&mut items, &mut codes);
