@@ -12,7 +12,7 @@
 //! triangles.
 
 use super::Accel;
-use super::interval::{beyond, box_interval, lower, lower_is_near, plane_distance, upper};
+use super::interval::{SlabRay, beyond, box_interval, lower, lower_is_near, plane_distance, upper};
 use super::triangles::{AnyHit, Closest};
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
@@ -452,12 +452,14 @@ impl Bih {
         boxes
     }
 
+    /// Visits the leaves the ray may meet, near child first, calling `leaf(slots, interval)`
+    /// until it returns true; `best()` is the closest hit so far.
     #[inline(always)]
     fn walk<C: Counters>(
         &self,
         ray: &Ray,
         c: &mut C,
-        mut leaf: impl FnMut(std::ops::Range<usize>, &mut C) -> bool,
+        mut leaf: impl FnMut(std::ops::Range<usize>, (f32, f32), &mut C) -> bool,
         best: impl Fn() -> f32,
     ) {
         if self.nodes.is_empty() {
@@ -473,7 +475,7 @@ impl Bih {
             c.node();
             let n = self.nodes[node];
             if n.is_leaf() {
-                if leaf(n.slots(), c) {
+                if leaf(n.slots(), (tn, tf), c) {
                     return;
                 }
             } else {
@@ -521,17 +523,43 @@ impl Bih {
         }
     }
 
+    /// Calls `visit(slot)` for each triangle of the leaf's `slots` whose box the ray may meet
+    /// over the leaf's interval `[tn, tf]` (a hit on a triangle lies in its leaf's box, so
+    /// within that interval), in slot order, until it returns true (then returns true).
+    #[inline(always)]
+    fn leaf_candidates(
+        &self,
+        slab: &SlabRay,
+        slots: std::ops::Range<usize>,
+        (tn, tf): (f32, f32),
+        mut visit: impl FnMut(usize) -> bool,
+    ) -> bool {
+        let first = slots.start;
+        for (k, tris) in self.tris[slots].chunks(32).enumerate() {
+            let mut keep = slab.boxes_met(tris.iter(), tn, tf);
+            while keep != 0 {
+                let i = keep.trailing_zeros() as usize;
+                keep &= keep - 1;
+                if visit(first + 32 * k + i) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
         let q = std::cell::RefCell::new(Closest::new(ray));
+        let slab = SlabRay::new(ray);
         self.walk(
             ray,
             c,
-            |slots, c| {
+            |slots, interval, c| {
                 let mut q = q.borrow_mut();
-                for s in slots {
+                self.leaf_candidates(&slab, slots, interval, |s| {
                     q.test(&self.tris[s], s as u32, c);
-                }
-                false
+                    false
+                })
             },
             || q.borrow().tmax,
         );
@@ -544,12 +572,13 @@ impl Bih {
 
     fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
         let q = AnyHit::new(ray);
+        let slab = SlabRay::new(ray);
         let mut found = false;
         self.walk(
             ray,
             c,
-            |slots, c| {
-                found = slots.into_iter().any(|s| q.test(&self.tris[s], c));
+            |slots, interval, c| {
+                found = self.leaf_candidates(&slab, slots, interval, |s| q.test(&self.tris[s], c));
                 found
             },
             || ray.tmax,

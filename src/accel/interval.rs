@@ -8,7 +8,7 @@
 //! one point compute slightly different `t`, that test allows [`HIT_SLACK`] more.
 
 use crate::geom::{FAR_SCALE, Ray};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// Relative widening of a plane distance: `2^-20`, about five times the rounding of
 /// `(plane - origin) * inv_dir` (three operations of `2^-24` each).
@@ -96,9 +96,71 @@ pub(super) fn lower_is_near(ray: &Ray, axis: usize) -> bool {
     ray.inv_dir[axis] > 0.0
 }
 
+/// What the triangle box test reads of a ray, in SIMD lanes: the slab test's origins and the
+/// reciprocal direction.
+#[derive(Clone, Copy)]
+pub(super) struct SlabRay {
+    lo: Vec3A,
+    hi: Vec3A,
+    inv: Vec3A,
+}
+
+impl SlabRay {
+    #[inline(always)]
+    pub(super) fn new(ray: &Ray) -> Self {
+        Self {
+            lo: ray.slab_lo.into(),
+            hi: ray.slab_hi.into(),
+            inv: ray.inv_dir.into(),
+        }
+    }
+
+    /// Bit `i` set when the ray over `[tn, tf]` (a leaf's widened interval) may meet the box
+    /// of the `i`-th triangle's corners (at most 32 triangles), computed for every triangle
+    /// without a branch (a branch per triangle would often mispredict).
+    #[inline(always)]
+    pub(super) fn boxes_met<'t>(
+        &self,
+        tris: impl Iterator<Item = &'t [Vec3; 3]>,
+        tn: f32,
+        tf: f32,
+    ) -> u32 {
+        let mut keep = 0;
+        for (i, tri) in tris.enumerate() {
+            keep |= u32::from(self.meets_box(tri, tn, tf)) << i;
+        }
+        keep
+    }
+
+    /// Whether the ray over `[tn, tf]` may meet the box of `tri`'s corners: the slab test of
+    /// [`box_interval`], widened the same way, on SIMD lanes with plain `min`/`max` (one
+    /// instruction each, like `Ray::hit_box`). A NaN can only make the answer "may meet": it
+    /// drops out of a `min` or `max`, or of the choice against `tn` and `tf` (a looser bound).
+    /// The one exception, a lane with one NaN distance and one finite, comes from a ray that
+    /// does not move on that axis and a box face one ulp off its origin (see `Ray::slab_lo`):
+    /// the ray misses that box, and a triangle with a NaN coordinate, whose box may come out
+    /// wrong, is never hit by the watertight test either.
+    #[inline(always)]
+    pub(super) fn meets_box(&self, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
+        let (a, b, c) = (
+            Vec3A::from(tri[0]),
+            Vec3A::from(tri[1]),
+            Vec3A::from(tri[2]),
+        );
+        let t0 = (a.min(b).min(c) - self.lo) * self.inv;
+        let t1 = (a.max(b).max(c) - self.hi) * self.inv;
+        let near = lower(t0.min(t1).max_element());
+        let far = upper(t0.max(t1).min_element() * FAR_SCALE);
+        let near = if near > tn { near } else { tn };
+        let far = if far < tf { far } else { tf };
+        near <= far
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::{RayTriPrecomp, intersect_triangle};
 
     #[test]
     fn crossing_follows_the_course_rule() {
@@ -125,5 +187,48 @@ mod tests {
         let (tn, tf) = box_interval(&r, Vec3::ZERO, Vec3::ONE, f32::INFINITY).unwrap();
         assert!(tn <= 1.0 && tf >= 2.0 && tn > 0.99 && tf < 2.01);
         assert!(box_interval(&r, Vec3::ZERO, Vec3::ONE, 0.5).is_none());
+    }
+
+    /// Every hit the watertight test reports inside an interval is kept by `meets_box` over
+    /// that interval, also for rays along an axis and intervals that end just past the hit.
+    #[test]
+    fn triangle_box_test_keeps_every_hit() {
+        let mut seed = 0x2545_f491_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let mut hits = 0;
+        for i in 0..20_000 {
+            let tri = [(); 3].map(|()| Vec3::new(next(), next(), next()));
+            let origin = Vec3::new(next(), next(), next()) * 3.0;
+            let mut dir =
+                (tri[0] + tri[1] + tri[2]) / 3.0 - origin + Vec3::new(next(), next(), next()) * 0.3;
+            if i % 4 == 0 {
+                // Along one axis only.
+                let a = i / 4 % 3;
+                dir = Vec3::ZERO;
+                dir[a] = if next() > 0.0 { 1.0 } else { -1.0 };
+            }
+            let ray = Ray::new(origin, dir);
+            let slab = SlabRay::new(&ray);
+            let pre = RayTriPrecomp::new(ray.dir);
+            let Some((t, _, _)) =
+                intersect_triangle(&ray, &pre, tri[0], tri[1], tri[2], f32::INFINITY)
+            else {
+                continue;
+            };
+            hits += 1;
+            let (below, above) = (t * (1.0 - 1.0 / 4096.0), t * (1.0 + 1.0 / 4096.0));
+            for (tn, tf) in [
+                (0.0, f32::INFINITY),
+                (below, above),
+                (0.0, above),
+                (below, 2.0 * t),
+            ] {
+                assert!(slab.meets_box(&tri, tn, tf), "ray {i}: hit at {t} dropped");
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
     }
 }

@@ -11,13 +11,13 @@
 //! of a leaf run first, without branches, into a bit mask (whose outcome a branch per triangle
 //! would often mispredict); the triangles it keeps are then tested in order.
 
-use super::{KdTree, LeafTri, MAX_KD_DEPTH};
-use crate::accel::interval::{beyond, box_interval, lower, lower_is_near, upper};
+use super::{KdTree, MAX_KD_DEPTH};
+use crate::accel::interval::{SlabRay, beyond, box_interval, lower, lower_is_near, upper};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
-use crate::geom::{FAR_SCALE, Hit, Ray};
-use glam::{Vec3, Vec3A};
+use crate::geom::{Hit, Ray};
+use glam::Vec3;
 
 /// A node still to visit and the ray's interval in it, already widened (`tn` lowered and `tf`
 /// raised by [`PLANE_SLACK`](crate::accel::interval) once more), so that the descent compares a
@@ -44,15 +44,12 @@ impl Pending {
 /// What the descent reads of a ray at every node, gathered once: origin, reciprocal direction,
 /// and which child of a pair is the near one on each axis (bit `a` of `near` set when it is
 /// the second: a shift of a register at each node where an array needs one more load on the
-/// path from one node to the next); and the slab test's origins and reciprocal direction in
-/// SIMD lanes.
+/// path from one node to the next); and what the leaves' triangle box test reads.
 struct KdRay {
     origin: [f32; 3],
     inv_dir: [f32; 3],
     near: u32,
-    slab_lo: Vec3A,
-    slab_hi: Vec3A,
-    inv: Vec3A,
+    slab: SlabRay,
 }
 
 impl KdRay {
@@ -62,9 +59,7 @@ impl KdRay {
             origin: ray.origin.to_array(),
             inv_dir: ray.inv_dir.to_array(),
             near: (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum(),
-            slab_lo: ray.slab_lo.into(),
-            slab_hi: ray.slab_hi.into(),
-            inv: ray.inv_dir.into(),
+            slab: SlabRay::new(ray),
         }
     }
 }
@@ -125,7 +120,9 @@ impl KdTree {
         let leaf = self.nodes[at.node as usize];
         let range = leaf.index()..leaf.index() + leaf.count();
         for tris in self.leaf_tris[range].chunks(32) {
-            let mut keep = boxes_met(ray, tris, at.tn, at.tf);
+            let mut keep = ray
+                .slab
+                .boxes_met(tris.iter().map(|t| &t.corners), at.tn, at.tf);
             while keep != 0 {
                 let i = keep.trailing_zeros() as usize;
                 keep &= keep - 1;
@@ -214,93 +211,6 @@ impl KdTree {
     }
 }
 
-/// Bit `i` set when the ray over `[tn, tf]` (a leaf's widened interval) may meet the box of
-/// `tris[i]`'s corners (at most 32 triangles), computed for every triangle without a branch.
-#[inline(always)]
-fn boxes_met(ray: &KdRay, tris: &[LeafTri], tn: f32, tf: f32) -> u32 {
-    let mut keep = 0;
-    for (i, tri) in tris.iter().enumerate() {
-        keep |= u32::from(meets_box(ray, &tri.corners, tn, tf)) << i;
-    }
-    keep
-}
-
-/// Whether the ray over `[tn, tf]` may meet the box of `tri`'s corners: the slab test of
-/// `interval::box_interval`, widened the same way, on SIMD lanes with plain `min`/`max` (one
-/// instruction each, like `Ray::hit_box`). A NaN can only make the answer "may meet": it drops
-/// out of a `min` or `max`, or of the choice against `tn` and `tf` (a looser bound). The one
-/// exception, a lane with one NaN distance and one finite, comes from a ray that does not move
-/// on that axis and a box face one ulp off its origin (see `Ray::slab_lo`): the ray misses that
-/// box, and a triangle with a NaN coordinate, whose box may come out wrong, is never hit by
-/// the watertight test either.
-#[inline(always)]
-fn meets_box(ray: &KdRay, tri: &[Vec3; 3], tn: f32, tf: f32) -> bool {
-    let (a, b, c) = (
-        Vec3A::from(tri[0]),
-        Vec3A::from(tri[1]),
-        Vec3A::from(tri[2]),
-    );
-    let t0 = (a.min(b).min(c) - ray.slab_lo) * ray.inv;
-    let t1 = (a.max(b).max(c) - ray.slab_hi) * ray.inv;
-    let near = lower(t0.min(t1).max_element());
-    let far = upper(t0.max(t1).min_element() * FAR_SCALE);
-    let near = if near > tn { near } else { tn };
-    let far = if far < tf { far } else { tf };
-    near <= far
-}
-
 /// Stack entries for trees no deeper than this (the default depth limit at 4M triangles is 37):
 /// the stack is zeroed for every ray, and a shorter one costs less.
 const SHORT_STACK: usize = 40;
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geom::{RayTriPrecomp, intersect_triangle};
-
-    /// Every hit the watertight test reports inside an interval is kept by `meets_box` over
-    /// that interval, also for rays along an axis and intervals that end just past the hit.
-    #[test]
-    fn triangle_box_test_keeps_every_hit() {
-        let mut seed = 0x2545_f491_u64;
-        let mut next = move || {
-            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            ((seed >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
-        let mut hits = 0;
-        for i in 0..20_000 {
-            let tri = [(); 3].map(|()| Vec3::new(next(), next(), next()));
-            let origin = Vec3::new(next(), next(), next()) * 3.0;
-            let mut dir =
-                (tri[0] + tri[1] + tri[2]) / 3.0 - origin + Vec3::new(next(), next(), next()) * 0.3;
-            if i % 4 == 0 {
-                // Along one axis only.
-                let a = i / 4 % 3;
-                dir = Vec3::ZERO;
-                dir[a] = if next() > 0.0 { 1.0 } else { -1.0 };
-            }
-            let ray = Ray::new(origin, dir);
-            let kray = KdRay::new(&ray);
-            let pre = RayTriPrecomp::new(ray.dir);
-            let Some((t, _, _)) =
-                intersect_triangle(&ray, &pre, tri[0], tri[1], tri[2], f32::INFINITY)
-            else {
-                continue;
-            };
-            hits += 1;
-            let (below, above) = (t * (1.0 - 1.0 / 4096.0), t * (1.0 + 1.0 / 4096.0));
-            for (tn, tf) in [
-                (0.0, f32::INFINITY),
-                (below, above),
-                (0.0, above),
-                (below, 2.0 * t),
-            ] {
-                assert!(
-                    meets_box(&kray, &tri, tn, tf),
-                    "ray {i}: hit at {t} dropped"
-                );
-            }
-        }
-        assert!(hits > 1000, "{hits} hits");
-    }
-}

@@ -1,0 +1,47 @@
+//! One structure's closest-hit rate against the binary BVH's, both built once in one process
+//! and traced in alternating passes, each pass of the structure divided by the BVH pass just
+//! before it: `cargo run --release --example prof_accel_trace MESH.tri RAYS.rays NAME
+//! [PASSES]` (NAME as `build-bench --methods` takes it: kdtree, bih, grid, octree; PASSES
+//! default 12; `BIH_LEAF=n`: the BIH with leaves of at most `n` triangles). Run with
+//! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the median and every pass of the structure's
+//! time ÷ the BVH's (CPU), i.e. how many times slower the structure is.
+use dynbvh::accel::{Accel, AccelKind, Bih, BihParams};
+use dynbvh::bvh::{BuildParams, MeshBvh};
+
+#[path = "common/cpu.rs"]
+mod cpu;
+use cpu::{cpu_s, median};
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
+    let rays = dynbvh::io::read_rays(args.next().expect("rays").as_ref()).unwrap();
+    let kind: AccelKind = args.next().expect("name").parse().unwrap();
+    let passes: usize = args.next().map_or(12, |v| v.parse().unwrap());
+    let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let s: Box<dyn Accel> = match std::env::var("BIH_LEAF") {
+        Ok(n) if kind == AccelKind::Bih => Box::new(Bih::build(
+            &mesh,
+            &BihParams {
+                max_leaf_size: n.parse().unwrap(),
+            },
+        )),
+        _ => kind.build(&mesh),
+    };
+    let mut slower = Vec::new();
+    for _ in 0..passes {
+        let c = cpu_s();
+        let bvh_hits = rays.iter().filter(|r| bvh.closest_hit(r).is_some()).count();
+        let bvh_s = cpu_s() - c;
+        let c = cpu_s();
+        let hits = rays.iter().filter(|r| s.closest_hit(r).is_some()).count();
+        slower.push((cpu_s() - c) / bvh_s);
+        assert_eq!(bvh_hits, hits, "{kind} and the BVH disagree");
+    }
+    println!(
+        "{kind}: depth {}, {} rays, time / BVH time median {:.3}  {slower:.3?}",
+        s.depth(),
+        rays.len(),
+        median(slower.clone())
+    );
+}
