@@ -1,6 +1,7 @@
 //! Build time (CPU), size and traversal work per ray of the other structures beside the binned
-//! BVH, single-threaded: `cargo run --release --example prof_accel MESH.tri RAYS.rays [NAMES]`
-//! (NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`, `KD_CT`, `KD_EB`,
+//! BVH, single-threaded: `cargo run --release --example prof_accel MESH RAYS [NAMES]`
+//! (MESH and RAYS as `common/input.rs` reads them: `.tri`, `.obj` or glTF; `.rays`,
+//! `camera:SIDE` or `random:N`; NAMES comma-separated, default all; `bvh` is binned16; `KD_CI`, `KD_CT`, `KD_EB`,
 //! `KD_DEPTH`, `KD_PERFECT_ABOVE` (a triangle count, or `none`), `KD_LONGEST` (0 or 1): the
 //! kd-tree's intersection cost, traversal cost, empty bonus, depth limit, the nodes split
 //! perfectly and the longest-axis sweep in place of the defaults). Run with
@@ -11,11 +12,13 @@ use dynbvh::bvh::{BuildParams, MeshBvh, TraversalStats};
 #[path = "common/cpu.rs"]
 mod cpu;
 use cpu::cpu_s;
+#[path = "common/input.rs"]
+mod input;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
-    let rays = dynbvh::io::read_rays(args.next().expect("rays").as_ref()).unwrap();
+    let mesh = input::mesh(&args.next().expect("mesh"));
+    let rays = input::rays(&args.next().expect("rays"), &mesh);
     let names = args
         .next()
         .unwrap_or_else(|| "bvh,kdtree,kdtree-naive,bih,grid,octree".into());

@@ -1,6 +1,6 @@
 //! Build time (CPU) of the other structures against the binned BVH's, builds alternating in one
 //! process, medians: `cargo run --release --example prof_accel_build MESH.tri [NAMES] [RUNS]`
-//! (MESH a `.tri` file or a glTF file, flattened at rest; NAMES comma-separated, default
+//! (MESH a `.tri`, `.obj` or glTF file, flattened at rest; NAMES comma-separated, default
 //! `grid`; RUNS default 5). Run with `RAYON_NUM_THREADS=1` to
 //! build the BVH on one thread. Prints each structure's builds, the BVH's, and the ratio of
 //! the medians.
@@ -10,15 +10,12 @@ use dynbvh::bvh::{BuildParams, MeshBvh};
 #[path = "common/cpu.rs"]
 mod cpu;
 use cpu::{cpu_s, median};
+#[path = "common/input.rs"]
+mod input;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let path = std::path::PathBuf::from(args.next().expect("mesh"));
-    let mesh = if path.extension().is_some_and(|e| e == "tri") {
-        dynbvh::io::read_tri(&path).unwrap()
-    } else {
-        dynbvh::anim::Scene::load(&path).unwrap().0.flatten_rest()
-    };
+    let mesh = input::mesh(&args.next().expect("mesh"));
     let names = args.next().unwrap_or_else(|| "grid".into());
     let runs: usize = args.next().map_or(5, |r| r.parse().unwrap());
     let kinds: Vec<AccelKind> = names.split(',').map(|n| n.parse().unwrap()).collect();

@@ -1,8 +1,11 @@
 //! One structure's closest-hit rate against the binary BVH's, both built once in one process
 //! and traced in alternating passes, each pass of the structure divided by the BVH pass just
-//! before it: `cargo run --release --example prof_accel_trace MESH.tri RAYS.rays NAME
-//! [PASSES]` (NAME as `build-bench --methods` takes it: kdtree, bih, grid, octree; PASSES
-//! default 12; `BIH_LEAF=n`: the BIH with leaves of at most `n` triangles). Run with
+//! before it: `cargo run --release --example prof_accel_trace MESH RAYS NAME [PASSES]`.
+//!
+//! MESH and RAYS as `common/input.rs` reads them (`.tri`, `.obj` or glTF; `.rays`,
+//! `camera:SIDE` or `random:N`); NAME as `build-bench --methods` takes it (kdtree, bih,
+//! grid, octree); PASSES default 12; `BIH_LEAF=n` builds the BIH with leaves of at most `n`
+//! triangles. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the median and every pass of the structure's
 //! time ÷ the BVH's (CPU), i.e. how many times slower the structure is.
 use dynbvh::accel::{Accel, AccelKind, Bih, BihParams};
@@ -11,11 +14,13 @@ use dynbvh::bvh::{BuildParams, MeshBvh};
 #[path = "common/cpu.rs"]
 mod cpu;
 use cpu::{cpu_s, median};
+#[path = "common/input.rs"]
+mod input;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
-    let rays = dynbvh::io::read_rays(args.next().expect("rays").as_ref()).unwrap();
+    let mesh = input::mesh(&args.next().expect("mesh"));
+    let rays = input::rays(&args.next().expect("rays"), &mesh);
     let kind: AccelKind = args.next().expect("name").parse().unwrap();
     let passes: usize = args.next().map_or(12, |v| v.parse().unwrap());
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);

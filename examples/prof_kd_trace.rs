@@ -3,8 +3,9 @@
 //! so that every kd pass is divided by the BVH pass just before it:
 //! `cargo run --release --example prof_kd_trace MESH.tri RAYS.rays [PASSES] [ABOVE...]`
 //! (PASSES default 8; each ABOVE a triangle count or `none`, default `none`). Run with
-//! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints each tree's build time (CPU), size and the
-//! median and every pass of kd rate ÷ BVH rate (CPU time).
+//! `RAYON_NUM_THREADS=1 taskset -c 1`; `KD_CI` sets the intersection cost of every kd-tree.
+//! Prints each tree's build time (CPU), size and the median and every pass of kd rate ÷ BVH
+//! rate (CPU time).
 use dynbvh::accel::{Accel, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh};
 
@@ -36,14 +37,17 @@ fn main() {
             a.to_string()
         }
     };
+    let ci: Option<f32> = std::env::var("KD_CI").ok().map(|v| v.parse().unwrap());
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
     let kds: Vec<KdTree> = aboves
         .iter()
         .map(|&a| {
             let c = cpu_s();
+            let d = KdParams::default();
             let params = KdParams {
                 perfect_splits_above: a,
-                ..KdParams::default()
+                intersection_cost: ci.unwrap_or(d.intersection_cost),
+                ..d
             };
             let kd = KdTree::build(&mesh, &params);
             println!(
