@@ -16,6 +16,7 @@ pub fn mesh(path: &str) -> TriMesh {
 }
 
 /// The rays `arg` names over `mesh`.
+#[allow(dead_code)]
 pub fn rays(arg: &str, mesh: &TriMesh) -> Vec<Ray> {
     match arg.split_once(':') {
         Some(("camera", side)) => {
