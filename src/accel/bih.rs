@@ -8,8 +8,9 @@
 //! that empty side leaves a wide gap between the triangles and the box traversal knows, a node
 //! with an empty child cuts the gap off (without it, rays through the gap reach the subtree).
 //! Traversal clips the ray's interval by both planes; the children may overlap, so both are
-//! visited, nearer first. A refit keeps the tree and recomputes the planes from the moved
-//! triangles.
+//! visited, nearer first. In a leaf a triangle is tested only when the ray's interval there
+//! meets its box (it lies within the leaf's planes, so its hits do too). A refit keeps the
+//! tree and recomputes the planes from the moved triangles.
 
 use super::Accel;
 use super::interval::{SlabRay, beyond, box_interval, lower, lower_is_near, plane_distance, upper};

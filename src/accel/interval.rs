@@ -5,7 +5,9 @@
 //! roundings of `(plane - origin) * inv_dir`), so a cell the ray touches is never skipped. A
 //! traversal that keeps every hit it finds (never only those inside the current cell) may then
 //! stop once the best hit lies before every cell still to visit; since two triangles through
-//! one point compute slightly different `t`, that test allows [`HIT_SLACK`] more.
+//! one point compute slightly different `t`, that test allows [`HIT_SLACK`] more. A leaf may
+//! skip a triangle whose box the ray misses over the leaf's interval ([`SlabRay`]), widened
+//! the same way.
 
 use crate::geom::{FAR_SCALE, Ray};
 use glam::{Vec3, Vec3A};
