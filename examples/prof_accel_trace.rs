@@ -5,7 +5,7 @@
 //! MESH and RAYS as `common/input.rs` reads them (`.tri`, `.obj` or glTF; `.rays`,
 //! `camera:SIDE` or `random:N`); NAME as `build-bench --methods` takes it (kdtree, bih,
 //! grid, octree); PASSES default 12; `BIH_LEAF=n` builds the BIH with leaves of at most `n`
-//! triangles. Run with
+//! triangles; `ONLY=hits` or `ONLY=misses` keeps the rays that hit (miss) the mesh. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the median and every pass of the structure's
 //! time ÷ the BVH's (CPU), i.e. how many times slower the structure is.
 use dynbvh::accel::{Accel, AccelKind, Bih, BihParams};
@@ -24,6 +24,17 @@ fn main() {
     let kind: AccelKind = args.next().expect("name").parse().unwrap();
     let passes: usize = args.next().map_or(12, |v| v.parse().unwrap());
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let rays: Vec<_> = match std::env::var("ONLY").as_deref() {
+        Ok("hits") => rays
+            .into_iter()
+            .filter(|r| bvh.closest_hit(r).is_some())
+            .collect(),
+        Ok("misses") => rays
+            .into_iter()
+            .filter(|r| bvh.closest_hit(r).is_none())
+            .collect(),
+        _ => rays,
+    };
     let s: Box<dyn Accel> = match std::env::var("BIH_LEAF") {
         Ok(n) if kind == AccelKind::Bih => Box::new(Bih::build(
             &mesh,
