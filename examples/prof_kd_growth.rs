@@ -3,7 +3,8 @@
 //! meshes interleaved so that both see the same machine:
 //! `cargo run --release --example prof_kd_growth SMALL LARGE [RUNS]` (meshes as
 //! `common/input.rs` reads them; RUNS default 5). `KD_CI` and `KD_PERFECT_ABOVE` (a triangle
-//! count) replace the default intersection cost and perfect-split threshold. Run with
+//! count) replace the default intersection cost and perfect-split threshold; `KD_NAIVE=1`
+//! measures the naive O(N log² N) builder instead. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the medians (CPU time).
 //!
 //! Both meshes' builds take fresh pages from the system, as a single build in a new process
@@ -42,6 +43,11 @@ fn main() {
         intersection_cost: env("KD_CI").map_or(d.intersection_cost, |v| v.parse().unwrap()),
         perfect_splits_above: env("KD_PERFECT_ABOVE")
             .map_or(d.perfect_splits_above, |v| v.parse().unwrap()),
+        build: if env("KD_NAIVE").is_some() {
+            KdParams::NAIVE.build
+        } else {
+            d.build
+        },
         ..d
     };
     let time = |f: &dyn Fn()| {
