@@ -1315,19 +1315,17 @@ fn utc_now() -> String {
     )
 }
 
-/// The machine the run is on: the CPU's model name, its logical CPUs and the widest vector
-/// instructions it has.
+/// The machine the run is on: the CPU's model name, its logical CPUs (and how many this
+/// process may run on, e.g. under `taskset`) and the widest vector instructions it has.
 fn machine() -> String {
-    let model = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|c| {
-            c.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split_once(':'))
-                .map(|(_, m)| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
-    let cpus = std::thread::available_parallelism().map_or(0, usize::from);
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = info
+        .lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split_once(':'))
+        .map_or_else(|| "unknown CPU".into(), |(_, m)| m.trim().to_string());
+    let cpus = info.lines().filter(|l| l.starts_with("processor")).count();
+    let usable = std::thread::available_parallelism().map_or(0, usize::from);
     #[cfg(target_arch = "x86_64")]
     let simd = if std::arch::is_x86_feature_detected!("avx512f") {
         "AVX-512"
@@ -1338,7 +1336,7 @@ fn machine() -> String {
     };
     #[cfg(not(target_arch = "x86_64"))]
     let simd = std::env::consts::ARCH;
-    format!("{model}, {cpus} logical CPUs, {simd}")
+    format!("{model}, {cpus} logical CPUs ({usable} usable by this process), {simd}")
 }
 
 fn threads_in_process() -> Option<usize> {

@@ -1,11 +1,14 @@
-//! Camera (or any) rays through kd-trees built with different perfect-split thresholds,
-//! against the binary BVH, all built once in one process and traced in alternating passes,
-//! so that every kd pass is divided by the BVH pass just before it:
-//! `cargo run --release --example prof_kd_trace MESH.tri RAYS.rays [PASSES] [ABOVE...]`
-//! (PASSES default 8; each ABOVE a triangle count or `none`, default `none`). Run with
-//! `RAYON_NUM_THREADS=1 taskset -c 1`; `KD_CI` sets the intersection cost of every kd-tree.
-//! Prints each tree's build time (CPU), size and the median and every pass of kd rate ÷ BVH
-//! rate (CPU time).
+//! Camera (or any) rays through kd-trees built with different settings, against the binary
+//! BVH, all built once in one process and traced in alternating passes, so that every kd pass
+//! is divided by the BVH pass just before it:
+//! `cargo run --release --example prof_kd_trace MESH.tri RAYS.rays [PASSES] [SETTING...]`
+//! (PASSES default 8). Each SETTING is a triangle count or `none` (the nodes split perfectly
+//! above that many triangles), or comma-separated `key=value` pairs among `above`, `ci`
+//! (intersection cost), `ct` (traversal cost) and `eb` (empty bonus), e.g. `ci=0.3,eb=0.5`;
+//! what a setting does not name is the default. Default: one tree, the defaults. Run with
+//! `RAYON_NUM_THREADS=1 taskset -c 1`; `KD_CI` sets the intersection cost of every kd-tree
+//! that does not name its own. Prints each tree's build time (CPU), size and the median and
+//! every pass of kd rate ÷ BVH rate (CPU time).
 use dynbvh::accel::{Accel, KdParams, KdTree};
 use dynbvh::bvh::{BuildParams, MeshBvh};
 
@@ -13,46 +16,60 @@ use dynbvh::bvh::{BuildParams, MeshBvh};
 mod cpu;
 use cpu::{cpu_s, median};
 
+/// The parameters a SETTING names, on top of `base`.
+fn setting(arg: &str, base: KdParams) -> KdParams {
+    let above = |v: &str| {
+        if v == "none" {
+            usize::MAX
+        } else {
+            v.parse().expect("a triangle count or none")
+        }
+    };
+    if !arg.contains('=') {
+        return KdParams {
+            perfect_splits_above: above(arg),
+            ..base
+        };
+    }
+    let mut p = base;
+    for pair in arg.split(',') {
+        let (k, v) = pair.split_once('=').expect("key=value");
+        let f = || v.parse::<f32>().expect("a number");
+        match k {
+            "above" => p.perfect_splits_above = above(v),
+            "ci" => p.intersection_cost = f(),
+            "ct" => p.traversal_cost = f(),
+            "eb" => p.empty_bonus = f(),
+            _ => panic!("unknown key {k} (above, ci, ct, eb)"),
+        }
+    }
+    p
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let mesh = dynbvh::io::read_tri(args.next().expect("mesh").as_ref()).unwrap();
     let rays = dynbvh::io::read_rays(args.next().expect("rays").as_ref()).unwrap();
     let passes: usize = args.next().map_or(8, |v| v.parse().unwrap());
-    let mut aboves: Vec<usize> = args
-        .map(|v| {
-            if v == "none" {
-                usize::MAX
-            } else {
-                v.parse().unwrap()
-            }
-        })
-        .collect();
-    if aboves.is_empty() {
-        aboves.push(usize::MAX);
+    let mut names: Vec<String> = args.collect();
+    if names.is_empty() {
+        names.push("none".into());
     }
-    let name = |a: usize| {
-        if a == usize::MAX {
-            "none".to_string()
-        } else {
-            a.to_string()
-        }
+    let d = KdParams::default();
+    let base = KdParams {
+        intersection_cost: std::env::var("KD_CI")
+            .ok()
+            .map_or(d.intersection_cost, |v| v.parse().unwrap()),
+        ..d
     };
-    let ci: Option<f32> = std::env::var("KD_CI").ok().map(|v| v.parse().unwrap());
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
-    let kds: Vec<KdTree> = aboves
+    let kds: Vec<KdTree> = names
         .iter()
-        .map(|&a| {
+        .map(|name| {
             let c = cpu_s();
-            let d = KdParams::default();
-            let params = KdParams {
-                perfect_splits_above: a,
-                intersection_cost: ci.unwrap_or(d.intersection_cost),
-                ..d
-            };
-            let kd = KdTree::build(&mesh, &params);
+            let kd = KdTree::build(&mesh, &setting(name, base));
             println!(
-                "perfect above {}: build {:.1} ms cpu, {} nodes, sah {:.2}",
-                name(a),
+                "{name}: build {:.1} ms cpu, {} nodes, sah {:.2}",
                 (cpu_s() - c) * 1e3,
                 kd.nodes(),
                 kd.sah().unwrap_or(f32::NAN)
@@ -72,10 +89,9 @@ fn main() {
             assert_eq!(bvh_hits, kd_hits, "the kd-tree and the BVH disagree");
         }
     }
-    for (a, r) in aboves.iter().zip(&ratios) {
+    for (name, r) in names.iter().zip(&ratios) {
         println!(
-            "perfect above {}: kd rate / bvh rate median {:.3}  {r:.3?}",
-            name(*a),
+            "{name}: kd rate / bvh rate median {:.3}  {r:.3?}",
             median(r.clone())
         );
     }
