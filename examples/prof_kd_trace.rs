@@ -2,10 +2,10 @@
 //! BVH, all built once in one process and traced in alternating passes, so that every kd pass
 //! is divided by the BVH pass just before it:
 //! `cargo run --release --example prof_kd_trace MESH.tri RAYS.rays [PASSES] [SETTING...]`
-//! (PASSES default 8). Each SETTING is a triangle count or `none` (the nodes split perfectly
-//! above that many triangles), or comma-separated `key=value` pairs among `above`, `ci`
-//! (intersection cost), `ct` (traversal cost) and `eb` (empty bonus), e.g. `ci=0.3,eb=0.5`;
-//! what a setting does not name is the default. Default: one tree, the defaults. Run with
+//! (PASSES default 8). Each SETTING is `default`, a triangle count or `none` (the nodes split
+//! perfectly above that many triangles, or in none), or comma-separated `key=value` pairs
+//! among `above`, `ci` (intersection cost), `ct` (traversal cost) and `eb` (empty bonus), e.g.
+//! `ci=0.3,eb=0.5`; what a setting does not name is the default. Default: `default`. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`; `KD_CI` sets the intersection cost of every kd-tree
 //! that does not name its own. Prints each tree's build time (CPU), size and the median and
 //! every pass of kd rate ÷ BVH rate (CPU time).
@@ -25,6 +25,9 @@ fn setting(arg: &str, base: KdParams) -> KdParams {
             v.parse().expect("a triangle count or none")
         }
     };
+    if arg == "default" {
+        return base;
+    }
     if !arg.contains('=') {
         return KdParams {
             perfect_splits_above: above(arg),
@@ -53,7 +56,7 @@ fn main() {
     let passes: usize = args.next().map_or(8, |v| v.parse().unwrap());
     let mut names: Vec<String> = args.collect();
     if names.is_empty() {
-        names.push("none".into());
+        names.push("default".into());
     }
     let d = KdParams::default();
     let base = KdParams {
