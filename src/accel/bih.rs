@@ -535,21 +535,11 @@ impl Bih {
         &self,
         slab: &SlabRay,
         slots: std::ops::Range<usize>,
-        (tn, tf): (f32, f32),
+        interval: (f32, f32),
         mut visit: impl FnMut(usize) -> bool,
     ) -> bool {
         let first = slots.start;
-        for (k, tris) in self.tris[slots].chunks(32).enumerate() {
-            let mut keep = slab.boxes_met(tris.iter(), tn, tf);
-            while keep != 0 {
-                let i = keep.trailing_zeros() as usize;
-                keep &= keep - 1;
-                if visit(first + 32 * k + i) {
-                    return true;
-                }
-            }
-        }
-        false
+        slab.each_met(&self.tris[slots], |t| t, interval, |i, _| visit(first + i))
     }
 
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {

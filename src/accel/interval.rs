@@ -117,21 +117,32 @@ impl SlabRay {
         }
     }
 
-    /// Bit `i` set when the ray over `[tn, tf]` (a leaf's widened interval) may meet the box
-    /// of the `i`-th triangle's corners (at most 32 triangles), computed for every triangle
-    /// without a branch (a branch per triangle would often mispredict).
+    /// Calls `visit(i, &items[i])` for each item of a leaf whose triangle (`corners(item)`)
+    /// the ray over `[tn, tf]` (the leaf's widened interval) may meet, in order, until it
+    /// returns true (then returns true). The box tests of 32 items at a time run first,
+    /// without a branch, into a bit mask (a branch per triangle would often mispredict).
     #[inline(always)]
-    pub(super) fn boxes_met<'t>(
+    pub(super) fn each_met<T>(
         &self,
-        tris: impl Iterator<Item = &'t [Vec3; 3]>,
-        tn: f32,
-        tf: f32,
-    ) -> u32 {
-        let mut keep = 0;
-        for (i, tri) in tris.enumerate() {
-            keep |= u32::from(self.meets_box(tri, tn, tf)) << i;
+        items: &[T],
+        corners: impl Fn(&T) -> &[Vec3; 3],
+        (tn, tf): (f32, f32),
+        mut visit: impl FnMut(usize, &T) -> bool,
+    ) -> bool {
+        for (k, chunk) in items.chunks(32).enumerate() {
+            let mut keep = 0u32;
+            for (i, item) in chunk.iter().enumerate() {
+                keep |= u32::from(self.meets_box(corners(item), tn, tf)) << i;
+            }
+            while keep != 0 {
+                let i = keep.trailing_zeros() as usize;
+                keep &= keep - 1;
+                if visit(32 * k + i, &chunk[i]) {
+                    return true;
+                }
+            }
         }
-        keep
+        false
     }
 
     /// Whether the ray over `[tn, tf]` may meet the box of `tri`'s corners: the slab test of

@@ -119,19 +119,12 @@ impl KdTree {
     ) -> bool {
         let leaf = self.nodes[at.node as usize];
         let range = leaf.index()..leaf.index() + leaf.count();
-        for tris in self.leaf_tris[range].chunks(32) {
-            let mut keep = ray
-                .slab
-                .boxes_met(tris.iter().map(|t| &t.corners), at.tn, at.tf);
-            while keep != 0 {
-                let i = keep.trailing_zeros() as usize;
-                keep &= keep - 1;
-                if visit(&tris[i].corners, tris[i].id) {
-                    return true;
-                }
-            }
-        }
-        false
+        ray.slab.each_met(
+            &self.leaf_tris[range],
+            |t| &t.corners,
+            (at.tn, at.tf),
+            |_, t| visit(&t.corners, t.id),
+        )
     }
 
     /// The closest hit, counting the work, on a stack of `N` entries (`N` at least the depth).
