@@ -2,6 +2,8 @@
 //! `cargo run --release --example prof_packet MESH.tri PRIMARY.rays [WxH...]` (tile shapes,
 //! default 4x4 8x8; a tile is one packet, at most `MAX_PACKET` rays, its rays in 4x4 blocks),
 //! through the binary tree and the BVH8 collapsed from it (`TREES=bin` or `TREES=bvh8` for one).
+//! `SUBSET=n` traces about `n` rays of the image instead, a lower-resolution image of the same
+//! view (every k-th row and column, as the peers bench takes it): less coherent packets.
 use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8};
 use dynbvh::geom::Hit;
 use dynbvh::geom::Ray;
@@ -85,6 +87,10 @@ fn main() {
         shapes = vec![(4, 4), (8, 8)];
     }
     let single = std::env::var_os("SINGLE").is_some();
+    let rays = match std::env::var("SUBSET") {
+        Ok(n) => dynbvh::report::rays::image_subset(&rays, n.parse().expect("SUBSET: a ray count")),
+        Err(_) => rays,
+    };
     let w = (rays.len() as f64).sqrt() as usize;
     assert_eq!(w * w, rays.len(), "a square image of rays");
     let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
