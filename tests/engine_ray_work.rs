@@ -299,3 +299,75 @@ fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
         "an unmoved frame was sampled"
     );
 }
+
+/// A mesh whose tree is one leaf cannot degrade (its refit is the tree a rebuild makes): the
+/// deciding policies only refit it, and a frame where only such meshes moved is not sampled;
+/// with a deforming mesh of many leaves beside it, the frame is.
+#[test]
+fn a_one_leaf_mesh_is_only_refitted_and_not_sampled() {
+    use dynbvh::geom::{Ray, shapes};
+    use dynbvh::glam::{Affine3A, Vec3};
+    // 63 columns, so that the sample's stride of 64 rays runs across the image.
+    let rays: Vec<Ray> = (0..63 * 65)
+        .map(|i| {
+            let x = (i % 63) as f32 / 31.5 - 1.0;
+            let y = (i / 63) as f32 / 32.5 - 1.0;
+            Ray::new(Vec3::new(x, y, -3.0), Vec3::Z)
+        })
+        .collect();
+    let mut hits = vec![None; rays.len()];
+    // The triangle in the lower left of the rays' square, the ball in the upper right.
+    let tri = |k: f32| {
+        vec![
+            Vec3::new(-1.0, -1.0, k),
+            Vec3::new(-0.2, -1.0, -k),
+            Vec3::new(-0.6, -0.2 + 0.1 * k, 0.0),
+        ]
+    };
+    for with_ball in [false, true] {
+        let mut e = dynbvh::engine::Engine::new(EngineConfig::default());
+        let one = e.add_mesh(tri(0.0), vec![[0, 1, 2]]);
+        e.add_instance(one, Affine3A::IDENTITY);
+        let ball = with_ball.then(|| {
+            let b = shapes::icosphere(3);
+            let m = e.add_mesh(b.positions.clone(), b.indices);
+            e.add_instance(
+                m,
+                Affine3A::from_scale_rotation_translation(
+                    Vec3::splat(0.6),
+                    dynbvh::glam::Quat::IDENTITY,
+                    Vec3::new(0.35, 0.35, 0.0),
+                ),
+            );
+            (m, b.positions)
+        });
+        e.update();
+        e.trace_closest(&rays, &mut hits);
+        for f in 1..12 {
+            let k = f as f32 * 0.3;
+            e.set_positions(one, &tri(k));
+            if let Some((m, p)) = &ball {
+                let moved: Vec<Vec3> = p.iter().map(|v| *v * (1.0 + 0.05 * k * v.x)).collect();
+                e.set_positions(*m, &moved);
+            }
+            e.update();
+            assert_eq!(
+                e.mesh_stats(one).action,
+                dynbvh::engine::Action::Refit,
+                "frame {f}: the one-leaf mesh not refitted"
+            );
+            e.trace_closest(&rays, &mut hits);
+            match ball {
+                None => assert_eq!(
+                    e.sampled_work().nodes,
+                    0,
+                    "frame {f}: only the one-leaf mesh moved, yet the frame was sampled"
+                ),
+                Some((m, _)) => assert!(
+                    e.sampled_mesh_work(m).nodes > 0,
+                    "frame {f}: the deforming ball not sampled"
+                ),
+            }
+        }
+    }
+}

@@ -83,6 +83,12 @@ impl MeshEntry {
         matches!(policy, Policy::Partial(_) | Policy::Ladder)
     }
 
+    /// True when the mesh's tree is one leaf (or empty): its refit is then the tree a rebuild
+    /// would make, so nothing can degrade and there is nothing to measure or decide.
+    pub(super) fn one_leaf(&self) -> bool {
+        self.bvh.bvh().nodes().len() <= 1
+    }
+
     /// The pipeline for a mesh whose vertices moved.
     pub(super) fn update(&mut self, id: MeshId, cx: &mut FrameContext<'_>) -> MeshOutcome {
         let mut out = MeshOutcome::default();
@@ -93,7 +99,12 @@ impl MeshEntry {
         let swapped = self.swap_in_background_tree(id, cx);
         out.swapped = swapped;
         self.state.frames_left = cx.frames_left;
-        let early = self.state.before_refit(cx.policy);
+        // The deciding policies only refit a tree that cannot degrade; the fixed ones do as
+        // they say.
+        let early = match self.state.before_refit(cx.policy) {
+            None if self.one_leaf() => Some(Decision::Refit),
+            d => d,
+        };
         let (decision, raw_work_ratio) = match early {
             Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
             _ => {
