@@ -262,22 +262,27 @@ fn sampling_in_the_trace_pass_takes_the_same_sample_as_tracing_again() {
     }
 }
 
+/// `cols` x `rows` parallel rays along +z from `z = -3`, over the square from -1 to 1 in x and y.
+fn grid_rays(cols: usize, rows: usize) -> Vec<dynbvh::geom::Ray> {
+    (0..cols * rows)
+        .map(|i| {
+            let x = (i % cols) as f32 / (cols as f32 / 2.0) - 1.0;
+            let y = (i / cols) as f32 / (rows as f32 / 2.0) - 1.0;
+            dynbvh::geom::Ray::new(dynbvh::glam::Vec3::new(x, y, -3.0), dynbvh::glam::Vec3::Z)
+        })
+        .collect()
+}
+
 #[test]
 fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
-    use dynbvh::geom::{Ray, shapes};
-    use dynbvh::glam::{Affine3A, Vec3};
+    use dynbvh::geom::shapes;
+    use dynbvh::glam::Affine3A;
     let mut e = dynbvh::engine::Engine::new(EngineConfig::default());
     let ball = shapes::icosphere(3);
     let m = e.add_mesh(ball.positions, ball.indices);
     e.add_instance(m, Affine3A::IDENTITY);
     e.update();
-    let rays: Vec<Ray> = (0..4096)
-        .map(|i| {
-            let x = (i % 64) as f32 / 32.0 - 1.0;
-            let y = (i / 64) as f32 / 32.0 - 1.0;
-            Ray::new(Vec3::new(x, y, -3.0), Vec3::Z)
-        })
-        .collect();
+    let rays = grid_rays(64, 64);
     let mut hits = vec![None; rays.len()];
     // Nothing has moved, but the fresh tree's work is the measure's reference for the first
     // refits: the first trace is sampled.
@@ -305,16 +310,10 @@ fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
 /// with a deforming mesh of many leaves beside it, the frame is.
 #[test]
 fn a_one_leaf_mesh_is_only_refitted_and_not_sampled() {
-    use dynbvh::geom::{Ray, shapes};
+    use dynbvh::geom::shapes;
     use dynbvh::glam::{Affine3A, Vec3};
     // 63 columns, so that the sample's stride of 64 rays runs across the image.
-    let rays: Vec<Ray> = (0..63 * 65)
-        .map(|i| {
-            let x = (i % 63) as f32 / 31.5 - 1.0;
-            let y = (i / 63) as f32 / 32.5 - 1.0;
-            Ray::new(Vec3::new(x, y, -3.0), Vec3::Z)
-        })
-        .collect();
+    let rays = grid_rays(63, 65);
     let mut hits = vec![None; rays.len()];
     // The triangle in the lower left of the rays' square, the ball in the upper right.
     let tri = |k: f32| {
