@@ -890,9 +890,7 @@ impl Engine {
                             m.ray_observed = 1.0;
                         }
                         Some(base) => {
-                            let predicted = base.predict(s);
-                            if predicted > 0.0 {
-                                let seen = p.trace_ms(s.work) / predicted;
+                            if let Some(seen) = base.ratio(s, &p) {
                                 m.ray_observed =
                                     RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
                             }
