@@ -146,28 +146,6 @@ impl FreshWork {
         f64::from(s.hits) * self.hit.unwrap_or(self.all)
             + f64::from(misses) * self.miss.unwrap_or(self.all)
     }
-
-    /// The degradation sample `s` shows against this fresh tree: the geometric mean of its
-    /// work over the predicted work on all entries and of its work per hitting entry over the
-    /// fresh tree's (when both have [`MIN_STRATUM`] hits), else the first alone; `None` when
-    /// nothing is predicted. Over all entries the ratio is biased where the pose changes the
-    /// fresh tree's cost per miss (pieces spreading apart let misses through cheaply, which
-    /// the reference, taken at an earlier pose, does not know); over the hits alone it moves
-    /// less with the pose but rests on fewer entries. The figures behind the mean are in
-    /// `docs/ray_work.md`.
-    #[must_use]
-    pub fn ratio(&self, s: &MeshSample, p: &Prices) -> Option<f64> {
-        let predicted = self.predict(s);
-        if predicted <= 0.0 {
-            return None;
-        }
-        let pooled = p.trace_ms(s.work) / predicted;
-        let hits = self
-            .hit
-            .filter(|&h| h > 0.0 && s.hits >= MIN_STRATUM)
-            .map(|h| p.trace_ms(s.hit_work) / f64::from(s.hits) / h);
-        Some(hits.map_or(pooled, |h| (pooled * h).sqrt()))
-    }
 }
 
 /// Entries of a kind (hits, misses) a fresh tree's sample needs for its own per-entry cost.
@@ -391,30 +369,6 @@ mod tests {
         let all = (3.0 * 30.0 + 37.0 * 10.0) / 40.0;
         let predicted = few.predict(&entries(10, 30, 0, 10)) / node;
         assert!((predicted - 10.0 * all).abs() < 1e-6, "{predicted}");
-    }
-
-    #[test]
-    fn the_ratio_weighs_the_hits_alone_beside_all_entries() {
-        let p = Prices::default();
-        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p);
-        // The same tree and mix: no degradation either way.
-        let same = fresh.ratio(&entries(20, 30, 20, 10), &p).unwrap();
-        assert!((same - 1.0).abs() < 1e-9, "{same}");
-        // Hits 1.2x dearer, misses half as dear (the pieces spread apart): over all entries
-        // (720 + 100) / 800 nodes, over the hits 1.2; the ratio is their geometric mean.
-        let later = entries(20, 36, 20, 5);
-        let pooled = (20.0 * 36.0 + 20.0 * 5.0) / 800.0;
-        let hits = 36.0 / 30.0;
-        let r = fresh.ratio(&later, &p).unwrap();
-        assert!((r - f64::sqrt(pooled * hits)).abs() < 1e-9, "{r}");
-        assert!(pooled < r && r < hits);
-        // Too few hits in the sample: all entries alone.
-        let few = entries(3, 36, 37, 5);
-        let r = fresh.ratio(&few, &p).unwrap();
-        let pooled = (3.0 * 36.0 + 37.0 * 5.0) / (3.0 * 30.0 + 37.0 * 10.0);
-        assert!((r - pooled).abs() < 1e-9, "{r} against {pooled}");
-        // Nothing to predict from: no ratio.
-        assert!(fresh.ratio(&MeshSample::default(), &p).is_none());
     }
 
     #[test]

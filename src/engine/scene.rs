@@ -890,7 +890,9 @@ impl Engine {
                             m.ray_observed = 1.0;
                         }
                         Some(base) => {
-                            if let Some(seen) = base.ratio(s, &p) {
+                            let predicted = base.predict(s);
+                            if predicted > 0.0 {
+                                let seen = p.trace_ms(s.work) / predicted;
                                 m.ray_observed =
                                     RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
                             }
