@@ -13,7 +13,7 @@ mod scene;
 pub mod source;
 pub mod stats;
 
-pub use policy::{Action, ParsePolicyError, Policy};
+pub use policy::{Action, Decision, ParsePolicyError, Policy};
 pub use prices::Prices;
 pub use ray_work::{CostMeasure, Query, SampleEntry, WorkEstimate};
 pub use scene::{

@@ -13,6 +13,11 @@
 //! measure (measured update times, trace time modelled from the SAH and calibrated by
 //! [`SceneCosts::calibrate`]), kept beside it for comparison: it follows the machine's load,
 //! so policies can come out slightly below it (`docs/internals.md`, the benchmark).
+//! [`WorkCosts::best_with_rungs`] (`oracle/rungs.rs`) adds the rungs between refit and
+//! rebuild to the moves.
+
+mod rungs;
+pub use rungs::{Move, RungCosts, RungSchedule};
 
 /// The measured and recorded costs of one mesh over frames `0 ..= F` (index 0, the initial
 /// build, costs nothing).

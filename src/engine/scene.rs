@@ -15,7 +15,7 @@
 //! run the frame loop inside that pool's `install` (`docs/internals.md`, "Engine memory").
 
 use super::estimate::FreshSah;
-use super::policy::{Action, Policy, PolicyState};
+use super::policy::{Action, Decision, Policy, PolicyState};
 use super::prices::Prices;
 use super::ray_work::{CostMeasure, FreshWork, MeshSample, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
@@ -370,6 +370,9 @@ pub struct Engine {
     horizon: Option<u64>,
     /// A mesh was added since the last sampled trace.
     unsampled_meshes: bool,
+    /// The next update's action for every mesh that moved, in place of the policy's
+    /// ([`Engine::force_next`]).
+    forced: Option<Decision>,
 }
 
 impl Engine {
@@ -398,6 +401,7 @@ impl Engine {
             frame_trace_ms: 0.0,
             horizon: None,
             unsampled_meshes: false,
+            forced: None,
         }
     }
 
@@ -421,6 +425,13 @@ impl Engine {
     #[must_use]
     pub fn config(&self) -> &EngineConfig {
         &self.config
+    }
+
+    /// Makes the next update take `decision` for every mesh whose vertices moved, in place of
+    /// what the policy would decide (the policy's state is not told): a schedule scripted frame
+    /// by frame, as the oracle's pass and its tests play them.
+    pub fn force_next(&mut self, decision: Decision) {
+        self.forced = Some(decision);
     }
 
     /// Changes the mesh policy from the next update on. Switching to a policy that keeps the
@@ -735,6 +746,7 @@ impl Engine {
             background: &mut self.background,
             frame: self.frame,
             frame_trace_ms: self.frame_trace_ms,
+            forced: self.forced.take(),
             frames_left: self
                 .horizon
                 .and_then(|h| h.checked_sub(self.frame))

@@ -67,6 +67,9 @@ pub(super) struct FrameContext<'a> {
     pub frame_trace_ms: f64,
     /// Updates the run still makes, this one included, when it is known.
     pub frames_left: Option<u64>,
+    /// The action every mesh takes this frame whatever its policy says
+    /// ([`super::Engine::force_next`]).
+    pub forced: Option<Decision>,
 }
 
 /// What one mesh's update did, for the frame's statistics.
@@ -101,7 +104,7 @@ impl MeshEntry {
         self.state.frames_left = cx.frames_left;
         // The deciding policies only refit a tree that cannot degrade; the fixed ones do as
         // they say.
-        let early = match self.state.before_refit(cx.policy) {
+        let early = match cx.forced.or_else(|| self.state.before_refit(cx.policy)) {
             None if self.one_leaf() => Some(Decision::Refit),
             d => d,
         };
