@@ -79,6 +79,12 @@ pub struct BenchArgs {
     /// always-refit and always-rebuild runs it needs (unless asked for with `--policy`).
     #[arg(long)]
     no_oracle: bool,
+    /// Also compute the oracle whose moves include the rungs of the policies run (`optimize:B`,
+    /// `partial:F`, `ladder`), at most one between two rebuilds. It restructures the tree
+    /// built at every frame at every later frame and replays the sample on it through the
+    /// rest of the clip: `frames^3 / 6` replays per rung, minutes at 100k triangles.
+    #[arg(long)]
+    oracle_rungs: bool,
     /// Skip the builder points of the speed-against-accuracy chart (each rebuilds every frame
     /// with one builder, the full sweep included: slow on large meshes).
     #[arg(long)]
@@ -162,6 +168,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let mut opts = Options {
         trace_repeats: a.repeats as usize,
         oracle: !a.no_oracle,
+        oracle_rungs: a.oracle_rungs && !a.no_oracle,
         tlas_compare: !a.no_tlas_compare,
         known_length: !a.open_ended,
         traversal: a.traversal,

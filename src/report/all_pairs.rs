@@ -4,10 +4,10 @@
 //! sampled rays (the bench's sample, whose entries every run shares, replayed on this tree).
 //! `O(F^2)` refits and replays.
 
-use crate::engine::oracle::WorkCosts;
+use crate::engine::oracle::{RungCosts, WorkCosts};
 use crate::engine::ray_work::SampleEntry;
 use crate::engine::source::FrameSource;
-use crate::engine::{EngineConfig, Policy, Prices};
+use crate::engine::{Decision, EngineConfig, Policy, Prices};
 
 /// One frame's sampled rays, as every run of the bench saw them.
 #[derive(Clone, Debug, Default)]
@@ -82,4 +82,69 @@ pub fn measure(
         })
         .collect();
     AllPairs { sah, work }
+}
+
+/// The rungs' inputs to the oracle ([`WorkCosts::best_with_rungs`]): for each rung, build
+/// frame `b` and frame `o > b`, the scene is built at `b`, refitted to `o` and restructured
+/// there by the rung, then refitted through every later frame; each deforming mesh's update at
+/// `o` and trace cost at every frame from `o` on are recorded. `O(F^2)` builds and `O(F^3)`
+/// refits and replays per rung. Returns `[mesh][rung]`.
+pub fn measure_rungs(
+    src: &mut dyn FrameSource,
+    config: EngineConfig,
+    sampled: &[SampledFrame],
+    prices: &Prices,
+    frames: usize,
+    rungs: &[Decision],
+) -> Vec<Vec<RungCosts>> {
+    let ids = src.deforming().to_vec();
+    // The ladder's engine: its trees are cut for partial rebuilds at every build, as the
+    // rung policies' are.
+    let config = EngineConfig {
+        policy: Policy::Ladder,
+        ..config
+    };
+    let trace = |e: &crate::engine::Engine, m, f: usize| {
+        let frame: &SampledFrame = &sampled[f];
+        frame.scale * prices.trace_ms(e.mesh_work_on(m, &frame.entries))
+    };
+    let mut out = vec![Vec::new(); ids.len()];
+    for &rung in rungs {
+        let mut costs = vec![
+            RungCosts {
+                decision: Some(rung),
+                update_ms: vec![Vec::new(); frames + 1],
+                trace_ms: vec![Vec::new(); frames + 1],
+            };
+            ids.len()
+        ];
+        for b in 0..frames {
+            for o in b + 1..=frames {
+                let mut e = src.build(b, config);
+                src.advance(&mut e, o);
+                e.force_next(rung);
+                e.update();
+                let mut row = Vec::with_capacity(frames + 1 - o);
+                for (k, m) in ids.iter().enumerate() {
+                    costs[k].update_ms[b].push(e.mesh_stats(*m).model_ms);
+                    row.push(vec![trace(&e, *m, o)]);
+                }
+                for f in o + 1..=frames {
+                    src.advance(&mut e, f);
+                    e.force_next(Decision::Refit);
+                    e.update();
+                    for (k, m) in ids.iter().enumerate() {
+                        row[k].push(trace(&e, *m, f));
+                    }
+                }
+                for (k, r) in row.into_iter().enumerate() {
+                    costs[k].trace_ms[b].push(r);
+                }
+            }
+        }
+        for (k, c) in costs.into_iter().enumerate() {
+            out[k].push(c);
+        }
+    }
+    out
 }

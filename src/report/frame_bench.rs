@@ -4,11 +4,12 @@
 use crate::bvh::BuildParams;
 use crate::cputime::{CpuClock, Elapsed};
 use crate::engine::oracle::{MeshCosts, SceneCosts};
+use crate::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL};
 use crate::engine::ray_work::SAMPLE_STRIDE;
 use crate::engine::source::FrameSource;
 use crate::engine::{
-    Action, CostMeasure, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit, Timing,
-    TlasPolicy, Traversal,
+    Action, CostMeasure, Decision, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit,
+    Timing, TlasPolicy, Traversal,
 };
 use crate::geom::{Aabb, Ray};
 use crate::report::all_pairs::{self, SampledFrame};
@@ -88,6 +89,9 @@ pub struct Options {
     pub builder_frames: usize,
     /// Compute the oracle (costs `frames` builds and `frames^2 / 2` refits).
     pub oracle: bool,
+    /// With the oracle, also the one whose moves include the policies' rungs (costs
+    /// `frames^2 / 2` builds and `frames^3 / 6` refits and replays per rung).
+    pub oracle_rungs: bool,
     /// Also run the default mesh policy under each top-level tree policy (refit, rebuild, the
     /// configured one) and report what the top-level tree costs.
     pub tlas_compare: bool,
@@ -127,6 +131,7 @@ impl Default for Options {
             ],
             builder_frames: 8,
             oracle: true,
+            oracle_rungs: false,
             tlas_compare: true,
             traversal: Traversal::DEFAULT,
             cost: CostMeasure::default(),
@@ -262,6 +267,9 @@ pub struct PolicySummary {
     pub modelled_ms: f64,
     /// `modelled_ms` over the modelled oracle's total (0 without the oracle).
     pub oracle_ratio_modelled: f64,
+    /// `modelled_ms` over the total of the modelled oracle whose moves include the rungs (0
+    /// when it was not computed: only when a policy with rungs runs).
+    pub oracle_rungs_ratio_modelled: f64,
     /// Wall clock of the updates and traces (`total_ms`), ms.
     pub wall_ms: f64,
     /// CPU time of the process's threads over the same, ms.
@@ -366,6 +374,15 @@ pub struct ModelledOracle {
     pub rebuild_ms: f64,
     /// What the oracle's moves are and what it is not charged for.
     pub moves: String,
+    /// The oracle whose moves also include the rungs the policies run (computed only when a
+    /// policy with rungs runs; 0 otherwise): modelled total, ms.
+    pub rungs_total_ms: f64,
+    /// Those rungs, by name.
+    pub rungs: Vec<String>,
+    /// For each deforming mesh, that oracle's frames other than refits: `(frame, action)`.
+    pub rung_schedule: Vec<Vec<(usize, String)>>,
+    /// What that oracle's moves are.
+    pub rungs_moves: String,
 }
 
 /// How well each measure of degradation follows the trace time: per frame, the always-refit
@@ -440,6 +457,8 @@ struct Run {
     sah: Vec<Vec<f32>>,
     /// `[frame][mesh]`: the frame the mesh's tree was last built at.
     built: Vec<Vec<usize>>,
+    /// `[frame][mesh]`: what the mesh's update did.
+    actions: Vec<Vec<Action>>,
     /// Per frame: top-level tree rebuilt, its SAH ratio.
     tlas: Vec<(bool, f32)>,
 }
@@ -479,6 +498,7 @@ fn run_lockstep(
             share: vec![vec![0.0; deforming.len()]; frames + 1],
             sah: vec![vec![0.0; deforming.len()]; frames + 1],
             built: vec![vec![0; deforming.len()]; frames + 1],
+            actions: vec![vec![Action::None; deforming.len()]; frames + 1],
             tlas: Vec::with_capacity(frames),
         })
         .collect();
@@ -605,6 +625,7 @@ fn record_frame(
         run.rebuild[f][k] = ms.rebuild_ms;
         run.share[f][k] = e.mesh_trace_share(*m);
         run.sah[f][k] = ms.sah;
+        run.actions[f][k] = ms.action;
         run.built[f][k] = if ms.action == Action::Rebuild {
             f
         } else {
@@ -725,6 +746,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         median_trace_ms: median(rows.iter().map(|r| r.trace_ms)),
         modelled_ms: modelled,
         oracle_ratio_modelled: 0.0,
+        oracle_rungs_ratio_modelled: 0.0,
         wall_ms: total,
         cpu_ms: cpu,
         wait_ms: wait,
@@ -835,6 +857,23 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         let (refit_run, rebuild_run) = (find(Policy::Refit), find(Policy::Rebuild));
         oracle_total = wall_clock_oracle(&mut oracle, &pairs.sah, refit_run, rebuild_run, runs);
         modelled = modelled_oracle(&pairs.work, &sampled);
+        let rungs = if opts.oracle_rungs {
+            oracle_rungs(&wanted)
+        } else {
+            Vec::new()
+        };
+        if !rungs.is_empty() {
+            progress("oracle over the rungs: restructuring every tree at every later frame");
+            let rc = all_pairs::measure_rungs(
+                src,
+                config(Policy::Refit),
+                &sampled,
+                &opts.prices,
+                frames,
+                &rungs,
+            );
+            add_rungs(&mut modelled, &pairs.work, &rc, &rungs, &sampled);
+        }
         degradation = degradation_check(&pairs, refit_run, rebuild_run);
         // The true fresh ratio and ray-work ratio of every run's trees (same positions, same
         // deterministic build).
@@ -886,6 +925,15 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
                 below_oracle.push(format!(
                     "{}: modelled {:.6} ms below the oracle's {:.6} ms",
                     s.policy, s.modelled_ms, modelled.total_ms
+                ));
+            }
+        }
+        if modelled.rungs_total_ms > 0.0 {
+            s.oracle_rungs_ratio_modelled = s.modelled_ms / modelled.rungs_total_ms;
+            if s.modelled_ms < modelled.rungs_total_ms * (1.0 - 1e-9) && within_rung_moves(*p, r) {
+                below_oracle.push(format!(
+                    "{}: modelled {:.6} ms below the rung oracle's {:.6} ms",
+                    s.policy, s.modelled_ms, modelled.rungs_total_ms
                 ));
             }
         }
@@ -1012,6 +1060,95 @@ fn modelled_oracle(
             .push((1..n).filter(|&f| s.rebuild[f]).collect());
     }
     o
+}
+
+/// The rungs the rung oracle offers: those of the policies run (the ladder's budgets for
+/// `ladder`), each once.
+fn oracle_rungs(policies: &[Policy]) -> Vec<Decision> {
+    let mut rungs = Vec::new();
+    for p in policies {
+        let wanted: &[Decision] = match p {
+            Policy::Optimize(b) => &[Decision::Optimize(*b)],
+            Policy::Partial(b) => &[Decision::Partial(*b)],
+            Policy::Ladder => &[
+                Decision::Optimize(LADDER_OPTIMIZE),
+                Decision::Partial(LADDER_PARTIAL),
+            ],
+            _ => &[],
+        };
+        for d in wanted {
+            if !rungs.contains(d) {
+                rungs.push(*d);
+            }
+        }
+    }
+    rungs
+}
+
+/// The name of a rung as `--policy` spells it.
+fn rung_name(d: Decision) -> String {
+    match d {
+        Decision::Optimize(b) => format!("optimize:{b}"),
+        Decision::Partial(b) => format!("partial:{b}"),
+        _ => format!("{d:?}"),
+    }
+}
+
+/// Adds the oracle over the rungs to `o`.
+fn add_rungs(
+    o: &mut ModelledOracle,
+    work: &[crate::engine::oracle::WorkCosts],
+    rung_costs: &[Vec<crate::engine::oracle::RungCosts>],
+    rungs: &[Decision],
+    sampled: &[SampledFrame],
+) {
+    use crate::engine::oracle::Move;
+    o.rungs = rungs.iter().map(|&d| rung_name(d)).collect();
+    o.rungs_total_ms = sampled.iter().skip(1).map(|s| s.fixed_ms).sum();
+    for (w, rc) in work.iter().zip(rung_costs) {
+        let s = w.best_with_rungs(rc);
+        o.rungs_total_ms += s.cost_ms;
+        o.rung_schedule.push(
+            s.moves
+                .iter()
+                .enumerate()
+                .skip(1)
+                .filter_map(|(f, m)| match m {
+                    Move::Refit => None,
+                    Move::Rebuild => Some((f, "rebuild".to_string())),
+                    Move::Rung(k) => Some((f, o.rungs[*k].clone())),
+                })
+                .collect(),
+        );
+    }
+    o.rungs_moves = format!(
+        "per deforming mesh and frame: refit, rebuild, or refit then one of the rungs {}, \
+        with at most one rung between two rebuilds (a policy that restructures again before \
+        rebuilding makes moves outside these and may come out below); charged as the oracle \
+        above",
+        o.rungs.join(", ")
+    );
+}
+
+/// True when run `r` of policy `p` made only the rung oracle's moves: no rungs, or at most
+/// one rung on each mesh between two rebuilds (and no background rebuild).
+fn within_rung_moves(p: Policy, r: &Run) -> bool {
+    if p == Policy::Async {
+        return false;
+    }
+    let meshes = r.actions.first().map_or(0, Vec::len);
+    (0..meshes).all(|k| {
+        let mut restructured = false;
+        r.actions.iter().all(|a| match a[k] {
+            Action::Rebuild => {
+                restructured = false;
+                true
+            }
+            Action::Optimize | Action::Partial => !std::mem::replace(&mut restructured, true),
+            Action::AsyncStart | Action::AsyncSwap => false,
+            Action::None | Action::Refit => true,
+        })
+    })
 }
 
 /// Per frame, the refitted tree against the fresh one: measured trace-time ratio (always-refit
@@ -1225,6 +1362,19 @@ fn modelled_table(r: &Report) -> String {
             "{:<16} {:>12.3} {:>8} {:>8}   (always-refit {:.3}, always-rebuild {:.3}, no sampling)\n",
             "oracle", o.total_ms, "1", o.rebuilds, o.refit_ms, o.rebuild_ms
         ));
+        if o.rungs_total_ms > 0.0 {
+            s.push_str(&format!(
+                "{:<16} {:>12.3}   (moves also {}, at most one between rebuilds); over it: {}\n",
+                "oracle+rungs",
+                o.rungs_total_ms,
+                o.rungs.join(", "),
+                r.policies
+                    .iter()
+                    .map(|q| format!("{} {:.4}", q.policy, q.oracle_rungs_ratio_modelled))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
         let d = &r.degradation;
         s.push_str(&format!(
             "refitted against fresh trees, mean over {} frames: trace time {:.3}x, ray work \

@@ -98,8 +98,7 @@ impl WorkCosts {
             for (r, rc) in rungs.iter().enumerate() {
                 for b in 0..f {
                     // Those already restructured refit; the plain ones may take the rung now.
-                    for o in b + 1..f {
-                        let c = &mut rung[r][b][o];
+                    for (o, c) in rung[r][b].iter_mut().enumerate().take(f).skip(b + 1) {
                         if c.is_finite() {
                             *c += self.refit_ms[f] + rc.trace_ms[b][o - b - 1][f - o];
                         }
