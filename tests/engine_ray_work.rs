@@ -370,3 +370,52 @@ fn a_one_leaf_mesh_is_only_refitted_and_not_sampled() {
         }
     }
 }
+
+/// Each sampled closest-hit entry carries the triangle boxes its interval meets before its hit
+/// in the mesh, counted in the sample's own walk: the brute-force count over every triangle,
+/// on every frame of a clip, through the wide trees and the binary ones.
+#[test]
+fn a_sampled_entrys_box_count_is_the_brute_force_count() {
+    use dynbvh::engine::Traversal;
+    use dynbvh::geom::{RayTriPrecomp, intersect_triangle};
+    let s = scene("explode.glb");
+    let mut checked = 0;
+    for traversal in [Traversal::DEFAULT, Traversal::Binary] {
+        let config = EngineConfig {
+            timing: Timing::Priced,
+            traversal,
+            ..EngineConfig::default()
+        };
+        let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(12)).unwrap();
+        let rays = camera_rays(&src.build(0, config).bounds(), 64, 48);
+        for f in [0, 4, 8, 12] {
+            let e = src.build(f, config);
+            let m = src.deforming()[0];
+            let mut entries = Vec::new();
+            e.trace_sampled(&rays, Query::Closest, 3, 0, &mut entries);
+            let (pos, idx) = (e.positions(m), e.indices(m));
+            let corners = |t: &[u32; 3]| t.map(|i| pos[i as usize]);
+            for en in entries.iter().filter(|x| x.mesh == m) {
+                let r = &en.ray;
+                let pre = RayTriPrecomp::new(r.dir());
+                let hit = idx
+                    .iter()
+                    .filter_map(|t| {
+                        let [a, b, c] = corners(t);
+                        intersect_triangle(r, &pre, a, b, c, r.tmax).map(|h| h.0)
+                    })
+                    .fold(r.tmax, f32::min);
+                let boxes = idx
+                    .iter()
+                    .filter(|t| {
+                        let [a, b, c] = corners(t);
+                        r.hit_box(a.min(b).min(c), a.max(b).max(c), hit).is_some()
+                    })
+                    .count() as u32;
+                assert_eq!(en.pierced, Some(boxes.min(64)), "frame {f} {traversal:?}");
+                checked += usize::from(boxes > 0);
+            }
+        }
+    }
+    assert!(checked > 500, "{checked} entries met boxes");
+}

@@ -190,20 +190,22 @@ impl MeshBvh {
     /// [`MeshBvh::closest_hit`], counting nodes visited and triangles tested.
     #[must_use]
     #[inline]
-    pub fn closest_hit_counted(&self, ray: &Ray, counters: &mut impl Counters) -> Option<Hit> {
+    pub fn closest_hit_counted<C: Counters>(&self, ray: &Ray, counters: &mut C) -> Option<Hit> {
         let pre = RayTriPrecomp::new(ray.dir);
         let mut uv = (0.0, 0.0);
         let tris = self.tris.as_slice();
-        let (slot, t) = self.bvh.closest_slot(
-            ray,
-            |slot, tmax| {
-                let [a, b, c] = tris[slot];
-                let (t, u, v) = intersect_triangle(ray, &pre, a, b, c, tmax)?;
-                uv = (u, v);
-                Some(t)
-            },
-            counters,
-        )?;
+        let test = |slot: usize, tmax| {
+            let [a, b, c] = tris[slot];
+            let (t, u, v) = intersect_triangle(ray, &pre, a, b, c, tmax)?;
+            uv = (u, v);
+            Some(t)
+        };
+        let (slot, t) = if C::TRIANGLES {
+            let mut with = WithTriangles { counters, tris };
+            self.bvh.closest_slot(ray, test, &mut with)
+        } else {
+            self.bvh.closest_slot(ray, test, counters)
+        }?;
         Some(Hit {
             t,
             u: uv.0,
@@ -391,4 +393,25 @@ pub fn brute_force_any(mesh: &TriMesh, ray: &Ray) -> bool {
         let [a, b, c] = mesh.triangle(i);
         intersect_triangle(ray, &pre, a, b, c, ray.tmax).is_some()
     })
+}
+
+/// Counters that are also told each tested slot's triangle.
+struct WithTriangles<'a, C> {
+    counters: &'a mut C,
+    tris: &'a [[Vec3; 3]],
+}
+
+impl<C: Counters> Counters for WithTriangles<'_, C> {
+    #[inline(always)]
+    fn node(&mut self) {
+        self.counters.node();
+    }
+    #[inline(always)]
+    fn prim(&mut self) {
+        self.counters.prim();
+    }
+    #[inline(always)]
+    fn slot(&mut self, slot: usize, tmax: f32) {
+        self.counters.triangle(self.tris[slot], tmax);
+    }
 }

@@ -16,6 +16,17 @@ pub trait Counters {
     fn node(&mut self);
     /// One primitive was tested.
     fn prim(&mut self);
+    /// Primitive slot `slot` is tested, the ray's interval ending at `tmax` (for counters that
+    /// look at the primitives; nothing by default).
+    #[inline(always)]
+    fn slot(&mut self, _slot: usize, _tmax: f32) {}
+    /// A triangle with these corners is tested, the ray's interval ending at `tmax` (nothing
+    /// by default).
+    #[inline(always)]
+    fn triangle(&mut self, _corners: [Vec3; 3], _tmax: f32) {}
+    /// True when [`Counters::triangle`] does something: the walks that would have to look the
+    /// corners up for it do so only then.
+    const TRIANGLES: bool = false;
 }
 
 impl Counters for () {
@@ -119,6 +130,7 @@ impl Bvh {
             if node.is_leaf() {
                 for slot in node.first as usize..(node.first + node.count) as usize {
                     counters.prim();
+                    counters.slot(slot, tmax);
                     if let Some(t) = test(slot, tmax) {
                         if ANY {
                             return Some((slot, t));

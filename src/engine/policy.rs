@@ -4,8 +4,8 @@
 //! depends on the engine's [`super::CostMeasure`]:
 //! - **ray work** (the default): the frame's sampled rays ([`super::ray_work`]) give each
 //!   mesh's share of the trace cost, and the degradation is the sampled work into the mesh over
-//!   what its fresh tree cost on as many hitting and missing entries
-//!   ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
+//!   what its fresh tree would cost on the same entries, predicted from the triangle boxes
+//!   they pierce ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
 //!   trees; each rebuild is then judged by what it saved ([`Payback`]);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced

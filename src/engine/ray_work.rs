@@ -30,9 +30,9 @@ pub const SAMPLE_STRIDE: u64 = 64;
 pub enum CostMeasure {
     /// The SAH: expected cost for uniformly random lines, estimated fresh cost by a quick build.
     Sah,
-    /// Ray work: the sampled work into each mesh over what its fresh tree cost on as many
-    /// hitting and missing entries ([`FreshWork`]), scaled by what the last rebuilds' replays
-    /// showed, and the frame's trace cost by the sampled work per mesh.
+    /// Ray work: the sampled work into each mesh over what its fresh tree would cost on the
+    /// same entries ([`FreshWork`]: from the triangle boxes they pierce), scaled by what the
+    /// last rebuilds' replays showed, and the frame's trace cost by the sampled work per mesh.
     #[default]
     Rays,
 }
@@ -82,6 +82,9 @@ pub struct SampleEntry {
     /// It hit the mesh within its interval (blocked, for an any-hit ray): like the interval,
     /// the same whatever the trees.
     pub hit: bool,
+    /// Closest-hit entries: the triangle boxes its interval meets before its hit in the mesh
+    /// (the same whatever the trees, see [`Pierced`]); any-hit entries: `None`.
+    pub pierced: Option<u32>,
 }
 
 /// One mesh's part of a frame's sample: its entries and their work, and those of the entries
@@ -110,9 +113,10 @@ impl MeshSample {
     }
 }
 
-/// What a mesh's fresh tree cost per sampled entry (modelled ms), hits and misses apart: a
-/// fresh tree's work on a frame's entries is predicted as these per-entry costs times the
-/// frame's hits and misses, so that a change in how many rays hit the mesh is not taken for
+/// What a mesh's fresh tree cost per sampled entry (modelled ms): per hitting and per missing
+/// entry, and as a line in the triangle boxes the entry pierces ([`Pierced`]). A fresh tree's
+/// work on a later frame's entries is predicted from both ([`FreshWork::predict`]), so that a
+/// change in how many rays hit the mesh, or in the geometry they cross, is not taken for
 /// degradation.
 #[derive(Clone, Copy, Debug)]
 pub struct FreshWork {
@@ -122,12 +126,16 @@ pub struct FreshWork {
     hit: Option<f64>,
     /// Per missing entry; `None` with too few of them to tell.
     miss: Option<f64>,
+    /// Per entry as `a + b n`, `n` the boxes the entry pierces ([`Pierced`]), fitted on the
+    /// fresh tree's sample; `None` without enough counted entries.
+    pierced: Option<(f64, f64)>,
 }
 
 impl FreshWork {
-    /// The per-entry costs of a fresh tree's sample.
+    /// The per-entry costs of a fresh tree's sample `s`, and what they grow by with the boxes
+    /// its entries pierce (`pierced`, of the same entries).
     #[must_use]
-    pub fn of(s: &MeshSample, p: &Prices) -> Self {
+    pub fn of(s: &MeshSample, p: &Prices, pierced: &Pierced) -> Self {
         let total = p.trace_ms(s.work);
         let hit = p.trace_ms(s.hit_work);
         let misses = s.entries - s.hits;
@@ -136,15 +144,75 @@ impl FreshWork {
             all: total / f64::from(s.entries.max(1)),
             hit: per(hit, s.hits),
             miss: per(total - hit, misses),
+            pierced: pierced.fit(),
         }
     }
 
-    /// What a fresh tree would have cost on sample `s`'s entries (modelled ms).
+    /// What a fresh tree would have cost on sample `s`'s entries (modelled ms): the mean of
+    /// the predictions from their hits and misses and from the boxes they pierce when both this
+    /// fit and `pierced` (of `s`'s entries) have counts, else the first alone. Each errs where
+    /// the other holds: the kinds miss a change in the geometry the rays cross (the explosion's
+    /// misses), the line in the count, fitted at one pose, predicts too much at a denser one
+    /// (`docs/ray_work.md`).
     #[must_use]
-    pub fn predict(&self, s: &MeshSample) -> f64 {
+    pub fn predict(&self, s: &MeshSample, pierced: &Pierced) -> f64 {
         let misses = s.entries - s.hits;
-        f64::from(s.hits) * self.hit.unwrap_or(self.all)
-            + f64::from(misses) * self.miss.unwrap_or(self.all)
+        let kinds = f64::from(s.hits) * self.hit.unwrap_or(self.all)
+            + f64::from(misses) * self.miss.unwrap_or(self.all);
+        if let (Some((a, b)), Some(g)) = (self.pierced, pierced.mean()) {
+            return 0.5 * (f64::from(s.entries) * (a + b * g) + kinds);
+        }
+        kinds
+    }
+}
+
+/// The triangle boxes a mesh's sampled closest-hit entries meet before their hit
+/// ([`SampleEntry::pierced`], counted in the sample's own walk): the entries' geometry, which a
+/// fresh tree's work follows where their hits and misses do not (on `animations/explode.glb`
+/// a ray that misses the pieces costs a fresh tree less once they have flown apart than while
+/// they are close). The work is fitted as a line in the count (`docs/ray_work.md`). Sums.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Pierced {
+    n: f64,
+    g: f64,
+    gg: f64,
+    w: f64,
+    gw: f64,
+}
+
+impl Pierced {
+    /// Fewest counted entries a fit or a mean is made from.
+    const MIN: f64 = 16.0;
+
+    /// One counted entry: `boxes` met, `work_ms` its modelled work.
+    pub fn add(&mut self, boxes: u32, work_ms: f64) {
+        let g = f64::from(boxes);
+        self.n += 1.0;
+        self.g += g;
+        self.gg += g * g;
+        self.w += work_ms;
+        self.gw += g * work_ms;
+    }
+
+    /// Mean count over the counted entries.
+    fn mean(&self) -> Option<f64> {
+        (self.n >= Self::MIN).then(|| self.g / self.n)
+    }
+
+    /// The least-squares line `work = a + b count` (`b >= 0`, `a > 0`; else the mean work
+    /// alone).
+    fn fit(&self) -> Option<(f64, f64)> {
+        if self.n < Self::MIN {
+            return None;
+        }
+        let mean = (self.w / self.n, 0.0);
+        let d = self.n * self.gg - self.g * self.g;
+        if d <= 1e-12 * self.n * self.gg {
+            return Some(mean);
+        }
+        let b = (self.n * self.gw - self.g * self.w) / d;
+        let a = (self.w - b * self.g) / self.n;
+        Some(if b >= 0.0 && a > 0.0 { (a, b) } else { mean })
     }
 }
 
@@ -347,6 +415,7 @@ mod tests {
                     ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
                     work: TraversalStats { nodes, prims: 0 },
                     hit,
+                    pierced: None,
                 });
             }
         }
@@ -354,20 +423,22 @@ mod tests {
     }
 
     #[test]
-    fn a_fresh_trees_work_is_predicted_for_as_many_hits_and_misses() {
+    fn without_box_counts_a_fresh_trees_work_is_predicted_for_as_many_hits_and_misses() {
         let p = Prices::default();
+        // Without box counts (any-hit entries).
+        let none = Pierced::default();
         let node = p.trace_ms_f(1.0, 0.0);
         // Fresh: 20 hits of 30 nodes, 20 misses of 10.
-        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p);
+        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p, &none);
         // Later, 5 hits and 35 misses on the same (undegraded) tree: 50 + 350 nodes, which
         // the prediction matches, where the work per entry alone (20) would read 0.5.
         let later = entries(5, 30, 35, 10);
-        let predicted = fresh.predict(&later) / node;
+        let predicted = fresh.predict(&later, &none) / node;
         assert!((predicted - 500.0).abs() < 1e-6, "{predicted}");
         // Too few of a kind at the fresh tree: its cost per entry of any kind stands in.
-        let few = FreshWork::of(&entries(3, 30, 37, 10), &p);
+        let few = FreshWork::of(&entries(3, 30, 37, 10), &p, &none);
         let all = (3.0 * 30.0 + 37.0 * 10.0) / 40.0;
-        let predicted = few.predict(&entries(10, 30, 0, 10)) / node;
+        let predicted = few.predict(&entries(10, 30, 0, 10), &none) / node;
         assert!((predicted - 10.0 * all).abs() < 1e-6, "{predicted}");
     }
 
@@ -443,5 +514,52 @@ mod tests {
             assert_eq!(c.to_string().parse::<CostMeasure>().unwrap(), c);
         }
         assert!("ray".parse::<CostMeasure>().is_err());
+    }
+
+    #[test]
+    fn the_fresh_work_is_predicted_from_the_boxes_the_entries_pierce_and_their_kinds() {
+        let p = Prices::default();
+        // A fresh tree's work per entry is 10 + 3 per box pierced.
+        let work = |boxes: u32| {
+            p.trace_ms(TraversalStats {
+                nodes: 10 + 3 * u64::from(boxes),
+                prims: 0,
+            })
+        };
+        let sample = |counts: &[u32]| {
+            let (mut s, mut c) = (MeshSample::default(), Pierced::default());
+            for &n in counts {
+                s.add(&SampleEntry {
+                    mesh: MeshId(0),
+                    query: Query::Closest,
+                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                    work: TraversalStats {
+                        nodes: 10 + 3 * u64::from(n),
+                        prims: 0,
+                    },
+                    hit: n % 2 == 0,
+                    pierced: Some(n),
+                });
+                c.add(n, work(n));
+            }
+            (s, c)
+        };
+        let counts: Vec<u32> = (0..40).map(|i| i % 9).collect();
+        let (s, c) = sample(&counts);
+        let fresh = FreshWork::of(&s, &p, &c);
+        // Later entries that pierce fewer boxes: predicted from their counts, not from their
+        // hits and misses.
+        let later: Vec<u32> = (0..40).map(|i| i % 3).collect();
+        let (s2, c2) = sample(&later);
+        let by_boxes: f64 = later.iter().map(|&n| work(n)).sum();
+        // Without counts, per hit and per miss: here far off.
+        let by_kind = fresh.predict(&s2, &Pierced::default());
+        assert!(
+            (by_kind - by_boxes).abs() > 0.05 * by_boxes,
+            "{by_kind} {by_boxes}"
+        );
+        // With them, the mean of the line in the counts (exact here) and of that.
+        let want = 0.5 * (by_boxes + by_kind);
+        assert!((fresh.predict(&s2, &c2) - want).abs() < 1e-9 * want);
     }
 }

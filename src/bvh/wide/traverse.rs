@@ -131,21 +131,21 @@ impl<const K: usize> WideBvh<K> {
         // One fused multiply-add a plane for the rays it is safe for (nearly all), else the
         // exact test.
         if lanes.fma_ok(self.coord_max) {
-            self.walk::<ANY, N, true, X>(start, ray, &lanes, tmax, counters)
+            self.walk::<ANY, N, true, X, _>(start, ray, &lanes, tmax, counters)
         } else {
-            self.walk::<ANY, N, false, X>(start, ray, &lanes, tmax, counters)
+            self.walk::<ANY, N, false, X, _>(start, ray, &lanes, tmax, counters)
         }
     }
 
     /// [`WideBvh::traverse`] with the node test [`slab_fma`] (`FMA`) or [`slab`].
     #[inline(always)]
-    fn walk<const ANY: bool, const N: usize, const FMA: bool, const X: u32>(
+    fn walk<const ANY: bool, const N: usize, const FMA: bool, const X: u32, C: Counters>(
         &self,
         start: u32,
         ray: &Ray,
         lanes: &RayLanes,
         mut tmax: f32,
-        counters: &mut impl Counters,
+        counters: &mut C,
     ) -> Best {
         let nodes = self.nodes.as_slice();
         if nodes.is_empty() {
@@ -171,6 +171,9 @@ impl<const K: usize> WideBvh<K> {
                     for l in 0..4 {
                         if block.prims[l] != NO_PRIM {
                             counters.prim();
+                            if C::TRIANGLES {
+                                counters.triangle(block.get(l), tmax);
+                            }
                         }
                     }
                     let hit = match intersect4(block, &tri_lanes, tmax) {

@@ -9,7 +9,7 @@
 //! order.
 
 use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
-use crate::bvh::{MeshBvh, MeshBvh8, TraversalStats};
+use crate::bvh::{Counters, MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
 use crate::engine::ray_work::{
     MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
@@ -95,6 +95,7 @@ impl<'a> TaskBuf<'a> {
             ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
             work: TraversalStats::default(),
             hit: false,
+            pierced: None,
         };
         Self {
             items: [blank; BUF],
@@ -440,15 +441,16 @@ impl Engine {
             }
             let local = local_ray(inst, ray, tmax);
             let m = &meshes[inst.mesh as usize];
-            let mut w = TraversalStats::default();
+            let mut w = BoxCounter::new(&local);
             let h = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
-            inner += w;
+            inner += w.work;
             record(SampleEntry {
                 mesh: MeshId(inst.mesh),
                 query,
                 ray: local,
-                work: w,
+                work: w.work,
                 hit: h.is_some(),
+                pierced: (query == Query::Closest).then(|| w.before(h.map_or(local.tmax, |h| h.t))),
             });
             let h = h?;
             best = Some(SceneHit {
@@ -482,7 +484,7 @@ fn trace_counted(
     wide: Option<&MeshBvh8>,
     ray: &Ray,
     query: Query,
-    w: &mut TraversalStats,
+    w: &mut impl Counters,
 ) -> Option<Hit> {
     let blocked = Hit {
         t: 0.0,
@@ -510,4 +512,55 @@ pub(super) fn tree_work(
         let _ = trace_counted(bvh, wide, &e.ray, e.query, &mut w);
     }
     w
+}
+
+/// A sampled ray's counters: its work, and the entry distances of the triangle boxes it meets
+/// among the triangles it tests. An exact closest-hit walk tests every triangle whose box its
+/// interval meets before the final hit (no leaf holding one can be passed over), so those
+/// before the hit are the boxes the ray pierces there, whatever the tree ([`Pierced`]).
+struct BoxCounter {
+    work: TraversalStats,
+    ray: Ray,
+    entries: [f32; BOX_ENTRIES],
+    len: usize,
+}
+
+/// Box entry distances a sampled ray keeps (the count is capped there).
+const BOX_ENTRIES: usize = 64;
+
+impl BoxCounter {
+    fn new(ray: &Ray) -> Self {
+        Self {
+            work: TraversalStats::default(),
+            ray: *ray,
+            entries: [0.0; BOX_ENTRIES],
+            len: 0,
+        }
+    }
+
+    /// The boxes met before `t`.
+    fn before(&self, t: f32) -> u32 {
+        self.entries[..self.len].iter().filter(|&&e| e <= t).count() as u32
+    }
+}
+
+impl Counters for BoxCounter {
+    #[inline(always)]
+    fn node(&mut self) {
+        self.work.node();
+    }
+    #[inline(always)]
+    fn prim(&mut self) {
+        self.work.prim();
+    }
+    const TRIANGLES: bool = true;
+    #[inline(always)]
+    fn triangle(&mut self, [a, b, c]: [glam::Vec3; 3], tmax: f32) {
+        if self.len < BOX_ENTRIES
+            && let Some(t) = self.ray.hit_box(a.min(b).min(c), a.max(b).max(c), tmax)
+        {
+            self.entries[self.len] = t;
+            self.len += 1;
+        }
+    }
 }
