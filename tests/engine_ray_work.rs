@@ -4,12 +4,14 @@
 //! rays is the one a freshly built engine shows on the same rays; no policy falls below the
 //! oracle.
 
+mod common;
+
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::ray_work::SAMPLE_STRIDE;
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{CostMeasure, EngineConfig, Policy, Prices, Query, Timing};
-use dynbvh::report::all_pairs::{self, SampledFrame};
+use dynbvh::report::all_pairs;
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
 use dynbvh::report::rays::camera_rays;
 use std::path::PathBuf;
@@ -83,19 +85,7 @@ fn the_modelled_oracle_is_the_best_of_every_schedule_run() {
     let rays = camera_rays(&src.build(0, config).bounds(), 40, 40);
     let m = src.deforming()[0];
     // The shared sample of each frame: every 3rd ray, entries from an always-refit engine.
-    let mut sampled = vec![SampledFrame::default()];
-    let mut e = src.build(0, config);
-    for f in 1..=frames {
-        src.advance(&mut e, f);
-        e.update();
-        let mut entries = Vec::new();
-        let (top, _) = e.trace_sampled(&rays, Query::Closest, 3, f % 3, &mut entries);
-        sampled.push(SampledFrame {
-            entries,
-            fixed_ms: 3.0 * prices.trace_ms(top),
-            scale: 3.0,
-        });
-    }
+    let sampled = common::shared_sample(&mut src, config, &rays, frames, 3.0);
     let pairs = all_pairs::measure(&mut src, config, &sampled, &prices, frames);
     let costs = &pairs.work[0];
     let best = costs.best();

@@ -3,13 +3,15 @@
 //! `Engine::force_next`), its modelled cost counted on the same sampled rays: the oracle's
 //! table gives each run's cost, its total is the least of them, and the bench reports it.
 
+mod common;
+
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::oracle::Move;
 use dynbvh::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Decision, EngineConfig, Policy, Prices, Query, Timing};
-use dynbvh::report::all_pairs::{self, SampledFrame};
+use dynbvh::engine::{Decision, EngineConfig, Policy, Prices, Timing};
+use dynbvh::report::all_pairs;
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
 use dynbvh::report::rays::camera_rays;
 use std::path::PathBuf;
@@ -65,20 +67,7 @@ fn the_rung_oracle_is_the_best_of_every_schedule_run() {
         let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(frames)).unwrap();
         let rays = camera_rays(&src.build(0, config).bounds(), 40, 40);
         let m = src.deforming()[0];
-        let mut sampled = vec![SampledFrame::default()];
-        let mut e = src.build(0, config);
-        for f in 1..=frames {
-            src.advance(&mut e, f);
-            e.force_next(Decision::Refit);
-            e.update();
-            let mut entries = Vec::new();
-            let (top, _) = e.trace_sampled(&rays, Query::Closest, 3, f % 3, &mut entries);
-            sampled.push(SampledFrame {
-                entries,
-                fixed_ms: SCALE * prices.trace_ms(top),
-                scale: SCALE,
-            });
-        }
+        let sampled = common::shared_sample(&mut src, config, &rays, frames, SCALE);
         let rungs = [
             Decision::Optimize(LADDER_OPTIMIZE),
             Decision::Partial(LADDER_PARTIAL),

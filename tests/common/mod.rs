@@ -196,3 +196,32 @@ pub fn check_tree(mesh: &TriMesh, bvh: &MeshBvh, what: &str) {
         check_ray(mesh, bvh, &ray).unwrap_or_else(|e| panic!("{what}: {e}"));
     }
 }
+
+/// The bench's shared sample of frames `1 ..= frames` of `src`, as the oracle tests replay it:
+/// every 3rd of `rays` (from an offset that moves with the frame) traced on an always-refit
+/// engine made by `config`, each sampled ray standing for `scale` rays (entry 0 unused).
+pub fn shared_sample(
+    src: &mut dyn dynbvh::engine::source::FrameSource,
+    config: dynbvh::engine::EngineConfig,
+    rays: &[Ray],
+    frames: usize,
+    scale: f64,
+) -> Vec<dynbvh::report::all_pairs::SampledFrame> {
+    use dynbvh::engine::{Decision, Query};
+    let prices = config.prices;
+    let mut sampled = vec![dynbvh::report::all_pairs::SampledFrame::default()];
+    let mut e = src.build(0, config);
+    for f in 1..=frames {
+        src.advance(&mut e, f);
+        e.force_next(Decision::Refit);
+        e.update();
+        let mut entries = Vec::new();
+        let (top, _) = e.trace_sampled(rays, Query::Closest, 3, f % 3, &mut entries);
+        sampled.push(dynbvh::report::all_pairs::SampledFrame {
+            entries,
+            fixed_ms: scale * prices.trace_ms(top),
+            scale,
+        });
+    }
+    sampled
+}
