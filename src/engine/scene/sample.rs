@@ -517,7 +517,8 @@ pub(super) fn tree_work(
 /// A sampled ray's counters: its work, and the entry distances of the triangle boxes it meets
 /// among the triangles it tests. An exact closest-hit walk tests every triangle whose box its
 /// interval meets before the final hit (no leaf holding one can be passed over), so those
-/// before the hit are the boxes the ray pierces there, whatever the tree ([`Pierced`]).
+/// before the hit are the boxes the ray pierces there, whatever the tree
+/// ([`Pierced`](crate::engine::ray_work::Pierced)).
 struct BoxCounter {
     work: TraversalStats,
     ray: Ray,
