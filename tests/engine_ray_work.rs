@@ -110,7 +110,7 @@ fn the_modelled_oracle_is_the_best_of_every_schedule_run() {
             } else {
                 prices.refit_ms(tris)
             };
-            total += 3.0 * prices.trace_ms(e.mesh_work_on(m, &frame.entries));
+            total += frame.replay_ms(&e, m, &prices);
         }
         // The table's cost of this schedule is what running it cost.
         let table = costs.cost_of(&schedule);

@@ -90,7 +90,7 @@ fn the_rung_oracle_is_the_best_of_every_schedule_run() {
                 src.advance(&mut e, f);
                 e.update();
                 total += e.mesh_stats(m).model_ms;
-                total += SCALE * prices.trace_ms(e.mesh_work_on(m, &frame.entries));
+                total += frame.replay_ms(&e, m, &prices);
             }
             let table = work
                 .cost_with_rungs(rung_costs, &schedule)

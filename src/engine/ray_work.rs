@@ -87,8 +87,9 @@ pub struct SampleEntry {
     pub pierced: Option<u32>,
 }
 
-/// One mesh's part of a frame's sample: its entries and their work, and those of the entries
-/// that hit it (a fresh tree costs a hit and a miss differently, so the two are weighed apart).
+/// One mesh's part of a frame's sample: its entries and their work, those of the entries that
+/// hit it (a fresh tree costs a hit and a miss differently, so the two are weighed apart), and
+/// the boxes they pierce.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MeshSample {
     /// Sampled entries into the mesh's instances.
@@ -99,16 +100,21 @@ pub struct MeshSample {
     pub hits: u32,
     /// The hits' work.
     pub hit_work: TraversalStats,
+    /// The closest-hit entries' box counts and their work at `p`.
+    pub pierced: Pierced,
 }
 
 impl MeshSample {
-    /// Adds one entry.
-    pub fn add(&mut self, e: &SampleEntry) {
+    /// Adds one entry, its work priced at `p` for the box counts' fit.
+    pub fn add(&mut self, e: &SampleEntry, p: &Prices) {
         self.entries += 1;
         self.work += e.work;
         if e.hit {
             self.hits += 1;
             self.hit_work += e.work;
+        }
+        if let Some(boxes) = e.pierced {
+            self.pierced.add(boxes, p.trace_ms(e.work));
         }
     }
 }
@@ -133,9 +139,9 @@ pub struct FreshWork {
 
 impl FreshWork {
     /// The per-entry costs of a fresh tree's sample `s`, and what they grow by with the boxes
-    /// its entries pierce (`pierced`, of the same entries).
+    /// its entries pierce.
     #[must_use]
-    pub fn of(s: &MeshSample, p: &Prices, pierced: &Pierced) -> Self {
+    pub fn of(s: &MeshSample, p: &Prices) -> Self {
         let total = p.trace_ms(s.work);
         let hit = p.trace_ms(s.hit_work);
         let misses = s.entries - s.hits;
@@ -144,22 +150,22 @@ impl FreshWork {
             all: total / f64::from(s.entries.max(1)),
             hit: per(hit, s.hits),
             miss: per(total - hit, misses),
-            pierced: pierced.fit(),
+            pierced: s.pierced.fit(),
         }
     }
 
     /// What a fresh tree would have cost on sample `s`'s entries (modelled ms): the mean of
     /// the predictions from their hits and misses and from the boxes they pierce when both this
-    /// fit and `pierced` (of `s`'s entries) have counts, else the first alone. Each errs where
+    /// fit and `s` have counts, else the first alone. Each errs where
     /// the other holds: the kinds miss a change in the geometry the rays cross (the explosion's
     /// misses), the line in the count, fitted at one pose, predicts too much at a denser one
     /// (`docs/ray_work.md`).
     #[must_use]
-    pub fn predict(&self, s: &MeshSample, pierced: &Pierced) -> f64 {
+    pub fn predict(&self, s: &MeshSample) -> f64 {
         let misses = s.entries - s.hits;
         let kinds = f64::from(s.hits) * self.hit.unwrap_or(self.all)
             + f64::from(misses) * self.miss.unwrap_or(self.all);
-        if let (Some((a, b)), Some(g)) = (self.pierced, pierced.mean()) {
+        if let (Some((a, b)), Some(g)) = (self.pierced, s.pierced.mean()) {
             return 0.5 * (f64::from(s.entries) * (a + b * g) + kinds);
         }
         kinds
@@ -409,14 +415,17 @@ mod tests {
         let mut s = MeshSample::default();
         for (n, nodes, hit) in [(hits, hit_nodes, true), (misses, miss_nodes, false)] {
             for _ in 0..n {
-                s.add(&SampleEntry {
-                    mesh: MeshId(0),
-                    query: Query::Closest,
-                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
-                    work: TraversalStats { nodes, prims: 0 },
-                    hit,
-                    pierced: None,
-                });
+                s.add(
+                    &SampleEntry {
+                        mesh: MeshId(0),
+                        query: Query::Closest,
+                        ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                        work: TraversalStats { nodes, prims: 0 },
+                        hit,
+                        pierced: None,
+                    },
+                    &Prices::default(),
+                );
             }
         }
         s
@@ -424,21 +433,20 @@ mod tests {
 
     #[test]
     fn without_box_counts_a_fresh_trees_work_is_predicted_for_as_many_hits_and_misses() {
+        // Entries without box counts (any-hit ones).
         let p = Prices::default();
-        // Without box counts (any-hit entries).
-        let none = Pierced::default();
         let node = p.trace_ms_f(1.0, 0.0);
         // Fresh: 20 hits of 30 nodes, 20 misses of 10.
-        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p, &none);
+        let fresh = FreshWork::of(&entries(20, 30, 20, 10), &p);
         // Later, 5 hits and 35 misses on the same (undegraded) tree: 50 + 350 nodes, which
         // the prediction matches, where the work per entry alone (20) would read 0.5.
         let later = entries(5, 30, 35, 10);
-        let predicted = fresh.predict(&later, &none) / node;
+        let predicted = fresh.predict(&later) / node;
         assert!((predicted - 500.0).abs() < 1e-6, "{predicted}");
         // Too few of a kind at the fresh tree: its cost per entry of any kind stands in.
-        let few = FreshWork::of(&entries(3, 30, 37, 10), &p, &none);
+        let few = FreshWork::of(&entries(3, 30, 37, 10), &p);
         let all = (3.0 * 30.0 + 37.0 * 10.0) / 40.0;
-        let predicted = few.predict(&entries(10, 30, 0, 10), &none) / node;
+        let predicted = few.predict(&entries(10, 30, 0, 10)) / node;
         assert!((predicted - 10.0 * all).abs() < 1e-6, "{predicted}");
     }
 
@@ -526,40 +534,41 @@ mod tests {
                 prims: 0,
             })
         };
-        let sample = |counts: &[u32]| {
-            let (mut s, mut c) = (MeshSample::default(), Pierced::default());
+        // Entries with box counts `counts`, and the same without them.
+        let sample = |counts: &[u32], with: bool| {
+            let mut s = MeshSample::default();
             for &n in counts {
-                s.add(&SampleEntry {
-                    mesh: MeshId(0),
-                    query: Query::Closest,
-                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
-                    work: TraversalStats {
-                        nodes: 10 + 3 * u64::from(n),
-                        prims: 0,
+                s.add(
+                    &SampleEntry {
+                        mesh: MeshId(0),
+                        query: Query::Closest,
+                        ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                        work: TraversalStats {
+                            nodes: 10 + 3 * u64::from(n),
+                            prims: 0,
+                        },
+                        hit: n % 2 == 0,
+                        pierced: with.then_some(n),
                     },
-                    hit: n % 2 == 0,
-                    pierced: Some(n),
-                });
-                c.add(n, work(n));
+                    &p,
+                );
             }
-            (s, c)
+            s
         };
         let counts: Vec<u32> = (0..40).map(|i| i % 9).collect();
-        let (s, c) = sample(&counts);
-        let fresh = FreshWork::of(&s, &p, &c);
+        let fresh = FreshWork::of(&sample(&counts, true), &p);
         // Later entries that pierce fewer boxes: predicted from their counts, not from their
         // hits and misses.
         let later: Vec<u32> = (0..40).map(|i| i % 3).collect();
-        let (s2, c2) = sample(&later);
         let by_boxes: f64 = later.iter().map(|&n| work(n)).sum();
         // Without counts, per hit and per miss: here far off.
-        let by_kind = fresh.predict(&s2, &Pierced::default());
+        let by_kind = fresh.predict(&sample(&later, false));
         assert!(
             (by_kind - by_boxes).abs() > 0.05 * by_boxes,
             "{by_kind} {by_boxes}"
         );
         // With them, the mean of the line in the counts (exact here) and of that.
         let want = 0.5 * (by_boxes + by_kind);
-        assert!((fresh.predict(&s2, &c2) - want).abs() < 1e-9 * want);
+        assert!((fresh.predict(&sample(&later, true)) - want).abs() < 1e-9 * want);
     }
 }

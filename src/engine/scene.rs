@@ -17,7 +17,7 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Decision, Policy, PolicyState};
 use super::prices::Prices;
-use super::ray_work::{CostMeasure, FreshWork, MeshSample, Pierced, RaySample, SampleEntry};
+use super::ray_work::{CostMeasure, FreshWork, MeshSample, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
@@ -265,8 +265,6 @@ struct MeshEntry {
     ray_base: Option<FreshWork>,
     /// The same frame by frame since, over `ray_base`, smoothed over frames; 0 without.
     ray_observed: f64,
-    /// The boxes the last sampled frame's entries into this mesh pierce.
-    pierced: Pierced,
     /// The subtrees a partial rebuild keeps or rebuilds (taken at each full build when the
     /// policy may rebuild partly).
     cut: PartialCut,
@@ -561,7 +559,6 @@ impl Engine {
             world_area: 0.0,
             ray_base: None,
             ray_observed: 0.0,
-            pierced: Pierced::default(),
             cut,
             removed: false,
         }
@@ -895,27 +892,17 @@ impl Engine {
         self.frame_trace_ms = total;
         match self.config.cost {
             CostMeasure::Rays => {
-                for m in &mut self.meshes {
-                    m.pierced = Pierced::default();
-                }
-                for e in &self.entries {
-                    if let Some(boxes) = e.pierced {
-                        self.meshes[e.mesh.0 as usize]
-                            .pierced
-                            .add(boxes, p.trace_ms(e.work));
-                    }
-                }
                 for (m, s) in self.meshes.iter_mut().zip(&self.mesh_samples) {
                     if s.entries == 0 {
                         continue;
                     }
                     match m.ray_base {
                         None => {
-                            m.ray_base = Some(FreshWork::of(s, &p, &m.pierced));
+                            m.ray_base = Some(FreshWork::of(s, &p));
                             m.ray_observed = 1.0;
                         }
                         Some(base) => {
-                            let predicted = base.predict(s, &m.pierced);
+                            let predicted = base.predict(s);
                             if predicted > 0.0 {
                                 let seen = p.trace_ms(s.work) / predicted;
                                 m.ray_observed =

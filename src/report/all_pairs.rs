@@ -7,7 +7,7 @@
 use crate::engine::oracle::{RungCosts, WorkCosts};
 use crate::engine::ray_work::SampleEntry;
 use crate::engine::source::FrameSource;
-use crate::engine::{Decision, EngineConfig, Policy, Prices};
+use crate::engine::{Decision, Engine, EngineConfig, MeshId, Policy, Prices};
 
 /// One frame's sampled rays, as every run of the bench saw them.
 #[derive(Clone, Debug, Default)]
@@ -20,6 +20,15 @@ pub struct SampledFrame {
     pub fixed_ms: f64,
     /// From the sample's work to the frame's: rays per sampled ray.
     pub scale: f64,
+}
+
+impl SampledFrame {
+    /// Modelled cost of the frame's rays in `mesh`'s tree in `e` (the sample replayed on it,
+    /// scaled to the frame), ms.
+    #[must_use]
+    pub fn replay_ms(&self, e: &Engine, mesh: MeshId, prices: &Prices) -> f64 {
+        self.scale * prices.trace_ms(e.mesh_work_on(mesh, &self.entries))
+    }
 }
 
 /// What the all-pairs pass measured.
@@ -66,7 +75,7 @@ pub fn measure(
                 let w = if f == 0 {
                     0.0
                 } else {
-                    frame.scale * prices.trace_ms(e.mesh_work_on(*m, &frame.entries))
+                    frame.replay_ms(&e, *m, prices)
                 };
                 trace[k][b].push(w);
             }
@@ -104,15 +113,10 @@ pub fn measure_rungs(
         policy: Policy::Ladder,
         ..config
     };
-    let trace = |e: &crate::engine::Engine, m, f: usize| {
-        let frame: &SampledFrame = &sampled[f];
-        frame.scale * prices.trace_ms(e.mesh_work_on(m, &frame.entries))
-    };
     let mut out = vec![Vec::new(); ids.len()];
     for &rung in rungs {
         let mut costs = vec![
             RungCosts {
-                decision: Some(rung),
                 update_ms: vec![Vec::new(); frames + 1],
                 trace_ms: vec![Vec::new(); frames + 1],
             };
@@ -124,17 +128,19 @@ pub fn measure_rungs(
                 src.advance(&mut e, o);
                 e.force_next(rung);
                 e.update();
-                let mut row = Vec::with_capacity(frames + 1 - o);
+                let mut row = Vec::with_capacity(ids.len());
                 for (k, m) in ids.iter().enumerate() {
                     costs[k].update_ms[b].push(e.mesh_stats(*m).model_ms);
-                    row.push(vec![trace(&e, *m, o)]);
+                    let mut r = Vec::with_capacity(frames + 1 - o);
+                    r.push(sampled[o].replay_ms(&e, *m, prices));
+                    row.push(r);
                 }
-                for f in o + 1..=frames {
+                for (f, frame) in sampled.iter().enumerate().take(frames + 1).skip(o + 1) {
                     src.advance(&mut e, f);
                     e.force_next(Decision::Refit);
                     e.update();
                     for (k, m) in ids.iter().enumerate() {
-                        row[k].push(trace(&e, *m, f));
+                        row[k].push(frame.replay_ms(&e, *m, prices));
                     }
                 }
                 for (k, r) in row.into_iter().enumerate() {

@@ -268,7 +268,7 @@ pub struct PolicySummary {
     /// `modelled_ms` over the modelled oracle's total (0 without the oracle).
     pub oracle_ratio_modelled: f64,
     /// `modelled_ms` over the total of the modelled oracle whose moves include the rungs (0
-    /// when it was not computed: only when a policy with rungs runs).
+    /// when it was not computed: only with [`Options::oracle_rungs`] and a policy with rungs).
     pub oracle_rungs_ratio_modelled: f64,
     /// Wall clock of the updates and traces (`total_ms`), ms.
     pub wall_ms: f64,
@@ -374,8 +374,8 @@ pub struct ModelledOracle {
     pub rebuild_ms: f64,
     /// What the oracle's moves are and what it is not charged for.
     pub moves: String,
-    /// The oracle whose moves also include the rungs the policies run (computed only when a
-    /// policy with rungs runs; 0 otherwise): modelled total, ms.
+    /// The oracle whose moves also include the rungs the policies run (computed only with
+    /// [`Options::oracle_rungs`] and a policy with rungs; 0 otherwise): modelled total, ms.
     pub rungs_total_ms: f64,
     /// Those rungs, by name.
     pub rungs: Vec<String>,
@@ -592,7 +592,7 @@ fn judged_trace_ms(e: &Engine, judge: &SampledFrame, deforming: &[MeshId], price
     judge.fixed_ms
         + deforming
             .iter()
-            .map(|m| judge.scale * prices.trace_ms(e.mesh_work_on(*m, &judge.entries)))
+            .map(|m| judge.replay_ms(e, *m, prices))
             .sum::<f64>()
 }
 
@@ -1085,11 +1085,11 @@ fn oracle_rungs(policies: &[Policy]) -> Vec<Decision> {
     rungs
 }
 
-/// The name of a rung as `--policy` spells it.
+/// The name of a rung: that of the policy that takes it alone.
 fn rung_name(d: Decision) -> String {
     match d {
-        Decision::Optimize(b) => format!("optimize:{b}"),
-        Decision::Partial(b) => format!("partial:{b}"),
+        Decision::Optimize(b) => Policy::Optimize(b).to_string(),
+        Decision::Partial(b) => Policy::Partial(b).to_string(),
         _ => format!("{d:?}"),
     }
 }

@@ -10,13 +10,10 @@
 //! or with another budget, makes moves outside this set and may come out below it.
 
 use super::WorkCosts;
-use crate::engine::policy::Decision;
 
 /// One rung's costs for one mesh over frames `0 ..= F`, in the modelled measure.
 #[derive(Clone, Debug, Default)]
 pub struct RungCosts {
-    /// The rung (with its budget).
-    pub decision: Option<Decision>,
     /// `update_ms[b][o - b - 1]`: frame `o`'s update (the refit, then the rung) of the tree
     /// built at `b`, ms.
     pub update_ms: Vec<Vec<f64>>,
@@ -178,7 +175,6 @@ mod tests {
             trace_ms,
         };
         let rc = RungCosts {
-            decision: Some(Decision::Optimize(0.01)),
             update_ms: (0..=n)
                 .map(|b| (b + 1..=n).map(|_| 1.0 + rung_cost).collect())
                 .collect(),

@@ -312,8 +312,9 @@ impl Engine {
     fn close_log(&mut self, log: SampleLog, before: usize, model_ms: f64) {
         let grew = log.entries.capacity() != log.capacity;
         self.entries = log.entries;
+        let p = self.config.prices;
         for e in &self.entries[before..] {
-            self.mesh_samples[e.mesh.0 as usize].add(e);
+            self.mesh_samples[e.mesh.0 as usize].add(e, &p);
         }
         // Headroom once it has had to grow: later frames whose rays enter a few more instances
         // do not grow it again.
@@ -321,7 +322,6 @@ impl Engine {
             self.entries.reserve_exact(self.entries.len());
         }
         self.sample.merge(&log.sums);
-        let p = &self.config.prices;
         self.stats.model_trace_ms = self.sample.scale() * p.trace_ms(self.sample.work);
         self.stats.model_sample_ms += model_ms;
         self.stats.work = self.sample.estimate();
