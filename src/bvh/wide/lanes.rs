@@ -2,7 +2,7 @@
 //! node at once, the distance of a point to all of them, and the union of a node's child boxes. Written with the `wide` crate (AVX or
 //! SSE when the target has them, plain arrays otherwise), so there is no `unsafe` here.
 
-use crate::geom::{Aabb, FAR_SCALE, Ray};
+use crate::geom::{Aabb, FAR_SCALE, Ray, RayTriPrecomp};
 use glam::Vec3;
 use wide::{f32x4, f32x8};
 
@@ -34,13 +34,16 @@ const C_PAD: f32 = 1.0 / 4_194_304.0;
 impl RayLanes {
     #[inline(always)]
     pub(super) fn new(ray: &Ray) -> Self {
+        // Arrays, not `Vec3` indexing (a match per access in the per-ray setup).
+        let inv = ray.inv_dir.to_array();
+        let origin = ray.origin.to_array();
         let mut near = [0, 1, 2];
         let mut far = [3, 4, 5];
         for a in 0..3 {
             // A negative reciprocal enters through the max plane (a zero component's is `+inf`:
             // min plane first). For a box with min <= max this gives exactly the distances of
             // `Ray::hit_box` (which takes min/max of the two); an inverted (empty) box misses.
-            if ray.inv_dir[a].is_sign_negative() {
+            if inv[a].is_sign_negative() {
                 near[a] = 3 + a;
                 far[a] = a;
             }
@@ -54,7 +57,7 @@ impl RayLanes {
         let mut neg_c = [0f32; 6];
         let mut c_max = 0f32;
         for a in 0..3 {
-            let c = ray.origin[a] * ray.inv_dir[a];
+            let c = origin[a] * inv[a];
             let pad = (c.abs() * C_PAD).max(f32::MIN_POSITIVE);
             // A larger c gives a smaller distance: the near row gets the larger.
             neg_c[near[a]] = -(c + pad);
@@ -72,7 +75,7 @@ impl RayLanes {
                 ray.slab_hi.y,
                 ray.slab_hi.z,
             ],
-            inv: ray.inv_dir.into(),
+            inv,
             tmin: ray.tmin,
             near,
             far,
@@ -321,7 +324,7 @@ impl TriBlock {
 }
 
 /// Per-ray constants of the four-wide watertight triangle test: the rows holding each vertex's
-/// permuted coordinates, and the shear of [`RayTriPrecomp`](crate::geom::RayTriPrecomp).
+/// permuted coordinates, and the shear of [`RayTriPrecomp`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct TriLanes {
     k: [usize; 3],
@@ -333,9 +336,11 @@ pub(super) struct TriLanes {
 impl TriLanes {
     #[inline(always)]
     pub(super) fn new(ray: &Ray) -> Self {
-        // The same permutation and shear as `RayTriPrecomp::new`.
-        let d = ray.dir;
-        let a = d.abs();
+        // The same permutation and shear as `RayTriPrecomp::new`, on arrays (see
+        // `RayLanes::new`).
+        let d = ray.dir.to_array();
+        let o = ray.origin.to_array();
+        let a = ray.dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
         } else if a.y >= a.z {
@@ -351,9 +356,24 @@ impl TriLanes {
         let sz = 1.0 / d[kz];
         Self {
             k: [kx, ky, kz],
-            origin: [ray.origin[kx], ray.origin[ky], ray.origin[kz]],
+            origin: [o[kx], o[ky], o[kz]],
             shear: [d[kx] * sz, d[ky] * sz, sz],
             tmin: ray.tmin,
+        }
+    }
+
+    /// The scalar test's constants for the same ray (its rare fallback), from these.
+    #[inline(always)]
+    pub(super) fn precomp(&self) -> RayTriPrecomp {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.shear;
+        RayTriPrecomp {
+            kx,
+            ky,
+            kz,
+            sx,
+            sy,
+            sz,
         }
     }
 }
@@ -493,6 +513,49 @@ mod tests {
         *s ^= *s >> 7;
         *s ^= *s << 17;
         (*s >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// The scalar fallback's constants taken from the lanes are those the scalar test computes
+    /// itself, for directions of every sign, with ties and zero components.
+    #[test]
+    fn precomp_from_the_lanes_is_the_scalar_tests() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut dirs = vec![
+            Vec3::X,
+            -Vec3::Y,
+            Vec3::Z,
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(0.0, -0.0, 2.0),
+        ];
+        for _ in 0..1000 {
+            let mut r = || next(&mut s) * 2.0 - 1.0;
+            dirs.push(Vec3::new(r(), r(), r()));
+        }
+        for d in dirs {
+            let ray = Ray::new(Vec3::new(0.5, -2.0, 3.0), d);
+            let a = TriLanes::new(&ray).precomp();
+            let b = RayTriPrecomp::new(d);
+            assert_eq!(
+                (
+                    a.kx,
+                    a.ky,
+                    a.kz,
+                    a.sx.to_bits(),
+                    a.sy.to_bits(),
+                    a.sz.to_bits()
+                ),
+                (
+                    b.kx,
+                    b.ky,
+                    b.kz,
+                    b.sx.to_bits(),
+                    b.sy.to_bits(),
+                    b.sz.to_bits()
+                ),
+                "{d}"
+            );
+        }
     }
 
     /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins

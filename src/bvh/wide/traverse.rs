@@ -7,7 +7,7 @@
 use super::lanes::{BlockHit, RayLanes, TriLanes, intersect4, slab, slab_fma};
 use super::{LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::Counters;
-use crate::geom::{FAR_SCALE, Hit, Ray, RayTriPrecomp, intersect_triangle};
+use crate::geom::{FAR_SCALE, Hit, Ray, intersect_triangle};
 
 /// Stack entries of the traversal for trees whose bound fits (nearly all); deeper trees use
 /// [`BIG_STACK`].
@@ -154,7 +154,6 @@ impl<const K: usize> WideBvh<K> {
         let blocks = self.blocks.as_slice();
         let lanes = *lanes;
         let tri_lanes = TriLanes::new(ray);
-        let pre = RayTriPrecomp::new(ray.dir);
         let mut best: Best = None;
         let mut stack = crate::simd::Stack::<(u32, f32), N>::default();
         if X & x::ZERO_STACK != 0 {
@@ -181,6 +180,7 @@ impl<const K: usize> WideBvh<K> {
                         BlockHit::Hit(l, t, u, v) => Some((b * 4 + l, t, u, v)),
                         BlockHit::Scalar => {
                             // Lane by lane, nearest first hit kept, as the scalar loop does.
+                            let pre = tri_lanes.precomp();
                             let mut found = None;
                             for l in 0..4 {
                                 let [p, q, r] = block.get(l);
