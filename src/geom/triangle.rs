@@ -64,9 +64,10 @@ pub fn intersect_triangle(
     tmax: f32,
 ) -> Option<(f32, f32, f32)> {
     let (kx, ky, kz) = (pre.kx, pre.ky, pre.kz);
-    let a = v0 - ray.origin;
-    let b = v1 - ray.origin;
-    let c = v2 - ray.origin;
+    // As arrays: indexing a `Vec3` by a run-time axis is a `match` per access.
+    let a = (v0 - ray.origin).to_array();
+    let b = (v1 - ray.origin).to_array();
+    let c = (v2 - ray.origin).to_array();
     let ax = a[kx] - pre.sx * a[kz];
     let ay = a[ky] - pre.sy * a[kz];
     let bx = b[kx] - pre.sx * b[kz];
