@@ -6,6 +6,7 @@
 
 use super::{Bvh, MAX_DEPTH, Node};
 use crate::geom::{FAR_SCALE, Ray};
+use crate::simd::Stack;
 use bytemuck::cast;
 use glam::Vec3;
 use wide::{f32x8, u32x8};
@@ -122,8 +123,8 @@ impl Bvh {
         let root = &nodes[start];
         ray.hit_box(Vec3::from(root.min), Vec3::from(root.max), tmax)?;
         let mut best = None;
-        let mut stack = [(0u32, 0f32); MAX_DEPTH];
-        let mut sp = 0;
+        // Not zeroed for every ray (a 1 KiB `memset`): only entries below the top are read.
+        let mut stack = Stack::<(u32, f32), MAX_DEPTH>::default();
         let mut node = root;
         loop {
             counters.node();
@@ -151,8 +152,7 @@ impl Bvh {
                         } else {
                             (r, node.first, a)
                         };
-                        stack[sp] = (far, tfar);
-                        sp += 1;
+                        stack.push((far, tfar));
                         node = near;
                         continue;
                     }
@@ -169,11 +169,9 @@ impl Bvh {
             }
             // Pop the next subtree that may still hold a closer hit.
             loop {
-                if sp == 0 {
+                let Some((i, tnear)) = stack.pop() else {
                     return best;
-                }
-                sp -= 1;
-                let (i, tnear) = stack[sp];
+                };
                 if tnear <= tmax * FAR_SCALE {
                     node = &nodes[i as usize];
                     break;
@@ -198,8 +196,7 @@ impl Bvh {
             return;
         }
         let pair = PairSlab::new(ray, tmax);
-        let mut stack = [0u32; MAX_DEPTH];
-        let mut sp = 0;
+        let mut stack = Stack::<u32, MAX_DEPTH>::default();
         let mut node = root;
         loop {
             if node.is_leaf() {
@@ -212,8 +209,7 @@ impl Bvh {
                 let (hl, hr) = pair.hit(l, r);
                 if hl {
                     if hr {
-                        stack[sp] = node.first + 1;
-                        sp += 1;
+                        stack.push(node.first + 1);
                     }
                     node = l;
                     continue;
@@ -223,11 +219,10 @@ impl Bvh {
                     continue;
                 }
             }
-            if sp == 0 {
+            let Some(next) = stack.pop() else {
                 return;
-            }
-            sp -= 1;
-            node = &nodes[stack[sp] as usize];
+            };
+            node = &nodes[next as usize];
         }
     }
 }
