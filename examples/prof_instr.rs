@@ -1,6 +1,9 @@
-//! BVH8 closest hits in one function that is never inlined, so that callgrind can count the
+//! Closest hits in one function that is never inlined, so that callgrind can count the
 //! instructions a ray costs: a count that is the same on every run, whatever else the machine
-//! does, where times are not. Valgrind does not run AVX-512 code, so build for AVX2:
+//! does, where times are not. The structure is the BVH8 (`STRUCT=bvh8`, the default), the
+//! binary BVH (`bvh`) or one of `build-bench`'s other structures by name (`kdtree`, `bih`,
+//! `grid`, `octree`; called through `dyn Accel`). Valgrind does not run AVX-512 code, so build
+//! for AVX2:
 //!
 //! ```sh
 //! RUSTFLAGS="-C target-cpu=haswell" CARGO_TARGET_DIR=target/vg \
@@ -13,16 +16,27 @@
 //! about `RAYS` of them in the peers bench's tile order) and `DIR/INPUT_random.rays` (the first
 //! `RAYS`, default 16384). Each set is traced three times; the instructions per ray are
 //! callgrind's total over `6 * RAYS`. Prints the nodes and triangles per ray of each set.
+use dynbvh::accel::AccelKind;
 use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8, TraversalStats};
-use dynbvh::geom::Ray;
+use dynbvh::geom::{Hit, Ray};
 use std::hint::black_box;
 
 #[inline(never)]
-fn trace_rays(w: &MeshBvh8, rays: &[Ray]) -> f32 {
+fn trace_rays(closest: &impl Fn(&Ray) -> Option<Hit>, rays: &[Ray]) -> f32 {
     rays.iter()
-        .filter_map(|r| w.closest_hit(black_box(r)))
+        .filter_map(|r| closest(black_box(r)))
         .map(|h| h.t)
         .sum()
+}
+
+/// Each set traced three times.
+fn passes(closest: &impl Fn(&Ray) -> Option<Hit>, camera: &[Ray], random: &[Ray]) -> f32 {
+    let mut sum = 0.0;
+    for _ in 0..3 {
+        sum += trace_rays(closest, camera);
+        sum += trace_rays(closest, random);
+    }
+    sum
 }
 
 fn main() {
@@ -30,7 +44,13 @@ fn main() {
     let [dir, name] = [&args[0], &args[1]];
     let n: usize = args.get(2).map_or(16384, |s| s.parse().expect("RAYS"));
     let mesh = dynbvh::io::read_tri(format!("{dir}/{name}.tri").as_ref()).expect("mesh");
-    let w8 = MeshBvh8::from_mesh_bvh(&MeshBvh::build(&mesh, &BuildParams::BINNED));
+    let kind = std::env::var("STRUCT").unwrap_or_else(|_| "bvh8".into());
+    let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let w8 = MeshBvh8::from_mesh_bvh(&bvh);
+    let other = match kind.as_str() {
+        "bvh8" | "bvh" => None,
+        k => Some(k.parse::<AccelKind>().expect("STRUCT").build(&mesh)),
+    };
     let read = |set: &str| {
         dynbvh::io::read_rays(format!("{dir}/{name}_{set}.rays").as_ref()).expect("rays")
     };
@@ -41,19 +61,23 @@ fn main() {
         camera.extend(idx.iter().map(|&i| image[i]));
     });
     let random: Vec<Ray> = read("random").into_iter().take(n).collect();
-    let mut sum = 0.0;
-    for _ in 0..3 {
-        sum += trace_rays(&w8, &camera);
-        sum += trace_rays(&w8, &random);
-    }
+    let sum = match (kind.as_str(), &other) {
+        (_, Some(a)) => passes(&|r: &Ray| a.closest_hit(r), &camera, &random),
+        ("bvh", _) => passes(&|r: &Ray| bvh.closest_hit(r), &camera, &random),
+        _ => passes(&|r: &Ray| w8.closest_hit(r), &camera, &random),
+    };
     for (set, rays) in [("camera", &camera), ("random", &random)] {
         let mut st = TraversalStats::default();
         for r in rays {
-            let _ = w8.closest_hit_counted(r, &mut st);
+            let _ = match (kind.as_str(), &other) {
+                (_, Some(a)) => a.closest_hit_counted(r, &mut st),
+                ("bvh", _) => bvh.closest_hit_counted(r, &mut st),
+                _ => w8.closest_hit_counted(r, &mut st),
+            };
         }
         let per = |x: u64| x as f64 / rays.len() as f64;
         println!(
-            "{set}: {} rays, {:.2} nodes and {:.2} triangles a ray",
+            "{kind}, {set}: {} rays, {:.2} nodes and {:.2} triangles a ray",
             rays.len(),
             per(st.nodes),
             per(st.prims)
