@@ -46,7 +46,9 @@ pub(super) fn beyond(best: f32) -> f32 {
 /// The ray's distance to the plane `x[axis] = plane` (`±inf` or NaN when it runs parallel).
 #[inline(always)]
 pub(super) fn plane_distance(ray: &Ray, axis: usize, plane: f32) -> f32 {
-    (plane - ray.origin[axis]) * ray.inv_dir[axis]
+    // Through the vectors' arrays: `Vec3`'s run-time index is a `match` per access.
+    let (o, inv): (&[f32; 3], &[f32; 3]) = (ray.origin.as_ref(), ray.inv_dir.as_ref());
+    (plane - o[axis]) * inv[axis]
 }
 
 /// Conservative entry and exit distances of the ray through the box `[lo, hi]` within
@@ -95,7 +97,8 @@ pub(super) fn cross(d: f32, tn: f32, tf: f32) -> Crossing {
 /// lower side is then the near one.
 #[inline(always)]
 pub(super) fn lower_is_near(ray: &Ray, axis: usize) -> bool {
-    ray.inv_dir[axis] > 0.0
+    let inv: &[f32; 3] = ray.inv_dir.as_ref();
+    inv[axis] > 0.0
 }
 
 /// What the triangle box test reads of a ray, in SIMD lanes: the slab test's origins and the

@@ -26,6 +26,7 @@ impl RayTriPrecomp {
     #[inline]
     pub fn new(dir: Vec3) -> Self {
         let a = dir.abs();
+        let d = dir.to_array();
         let kz = if a.x >= a.y && a.x >= a.z {
             0
         } else if a.y >= a.z {
@@ -35,16 +36,16 @@ impl RayTriPrecomp {
         };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
+        if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let sz = 1.0 / dir[kz];
+        let sz = 1.0 / d[kz];
         Self {
             kx,
             ky,
             kz,
-            sx: dir[kx] * sz,
-            sy: dir[ky] * sz,
+            sx: d[kx] * sz,
+            sy: d[ky] * sz,
             sz,
         }
     }
