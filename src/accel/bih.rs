@@ -13,10 +13,13 @@
 //! tree and recomputes the planes from the moved triangles.
 
 use super::Accel;
-use super::interval::{SlabRay, beyond, box_interval, lower, lower_is_near, plane_distance, upper};
+use super::interval::{
+    SlabRay, beyond, box_interval, lower, lower_is_near, max_of, min_of, plane_distance, upper,
+};
 use super::triangles::{AnyHit, Closest};
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
+use crate::simd::Stack;
 use glam::Vec3;
 
 /// The deepest a BIH may be; traversal stacks have this many entries.
@@ -472,8 +475,8 @@ impl Bih {
         let Some((tn, tf)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
             return;
         };
-        let mut stack = [(0u32, 0f32, 0f32); MAX_BIH_DEPTH];
-        let mut sp = 0;
+        // Not zeroed for every ray: only entries below the top are read.
+        let mut stack = Stack::<(u32, f32, f32), MAX_BIH_DEPTH>::default();
         let (mut node, mut tn, mut tf) = (0usize, tn, tf);
         loop {
             c.node();
@@ -485,7 +488,8 @@ impl Bih {
             } else {
                 // Nothing beyond the best hit can help: a child that starts past it is not
                 // entered (children overlap, so one may start past a hit found in the other).
-                tf = tf.min(beyond(best()));
+                // `tf` and `tn` are never NaN: the root's interval passed `tn <= tf`.
+                tf = min_of(tf, beyond(best()));
                 let axis = n.axis();
                 let first = n.first_child();
                 let (near, far, near_plane, far_plane) = if lower_is_near(ray, axis) {
@@ -495,13 +499,20 @@ impl Bih {
                 };
                 let dn = plane_distance(ray, axis, near_plane);
                 let df = plane_distance(ray, axis, far_plane);
-                let near_end = if dn.is_nan() { tf } else { upper(dn).min(tf) };
-                let far_start = if df.is_nan() { tn } else { lower(df).max(tn) };
+                let near_end = if dn.is_nan() {
+                    tf
+                } else {
+                    min_of(tf, upper(dn))
+                };
+                let far_start = if df.is_nan() {
+                    tn
+                } else {
+                    max_of(tn, lower(df))
+                };
                 let (go_near, go_far) = (tn <= near_end, far_start <= tf);
                 if go_near {
                     if go_far {
-                        stack[sp] = (far as u32, far_start, tf);
-                        sp += 1;
+                        stack.push((far as u32, far_start, tf));
                     }
                     node = near;
                     tf = near_end;
@@ -514,11 +525,9 @@ impl Bih {
                 }
             }
             loop {
-                if sp == 0 {
+                let Some((n, a, b)) = stack.pop() else {
                     return;
-                }
-                sp -= 1;
-                let (n, a, b) = stack[sp];
+                };
                 if a <= beyond(best()) {
                     (node, tn, tf) = (n as usize, a, b);
                     break;
