@@ -1,6 +1,6 @@
 //! Rays with NaN or infinite origins, directions or ranges: every traversal (binary trees of
-//! every builder, BVH4, BVH8, and packets over each) returns what brute force returns and
-//! never panics. Such rays reach a library from simulators whose state has gone bad; they must
+//! every builder, BVH4, BVH8, and packets over each, and the course's other structures)
+//! returns what brute force returns and never panics. Such rays reach a library from simulators whose state has gone bad; they must
 //! not crash the caller.
 
 use dynbvh::bvh::{
@@ -138,6 +138,34 @@ fn non_finite_rays_match_brute_force_in_every_traversal() {
             check_wide(mesh, &w8, &rays, &format!("{name} {params:?} BVH8")).unwrap();
             let w4 = MeshBvh4::from_mesh_bvh(&bin);
             check_wide(mesh, &w4, &rays, &format!("{name} {params:?} BVH4")).unwrap();
+        }
+    }
+}
+
+/// The kd-tree, BIH, grid and octree on the same rays.
+#[test]
+fn non_finite_rays_match_brute_force_in_the_other_structures() {
+    use dynbvh::accel::AccelKind;
+    let rays = bad_rays();
+    for (name, mesh) in [
+        ("cube soup", cube_soup()),
+        ("NaN/inf soup", soup_with_nan_and_inf()),
+    ] {
+        for kind in AccelKind::ALL {
+            let a = kind.build(&mesh);
+            for r in &rays {
+                let want = brute_force_closest(&mesh, r);
+                let got = a.closest_hit(r);
+                assert!(
+                    same_closest(&mesh, r, want, got),
+                    "{name} {kind:?} {r:?}: want {want:?}, got {got:?}"
+                );
+                assert_eq!(
+                    a.any_hit(r),
+                    brute_force_any(&mesh, r),
+                    "{name} {kind:?} any {r:?}"
+                );
+            }
         }
     }
 }

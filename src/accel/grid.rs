@@ -303,7 +303,17 @@ impl Grid {
         let Some((tn, _)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
             return;
         };
-        let p = ray.at(tn.max(ray.tmin));
+        // The entry point. Where the direction is infinite on an axis and the distance zero,
+        // their product is NaN and the point's coordinate is the origin's.
+        let t0 = tn.max(ray.tmin);
+        let p: [f32; 3] = std::array::from_fn(|a| {
+            let s = ray.dir[a] * t0;
+            if s.is_nan() {
+                ray.origin[a]
+            } else {
+                ray.origin[a] + s
+            }
+        });
         let mut idx = [0u32; 3];
         let mut step = [0i32; 3];
         for a in 0..3 {
