@@ -477,6 +477,9 @@ impl Bih {
         };
         // Not zeroed for every ray: only entries below the top are read.
         let mut stack = Stack::<(u32, f32, f32), MAX_BIH_DEPTH>::default();
+        // Bit `a` set when the second child is the near one on axis `a`: the near child taken
+        // by arithmetic, not by a branch on each node's axis (as the kd-tree's walk does).
+        let second_near: u32 = (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum();
         let (mut node, mut tn, mut tf) = (0usize, tn, tf);
         loop {
             c.node();
@@ -492,11 +495,9 @@ impl Bih {
                 tf = min_of(tf, beyond(best()));
                 let axis = n.axis();
                 let first = n.first_child();
-                let (near, far, near_plane, far_plane) = if lower_is_near(ray, axis) {
-                    (first, first + 1, n.planes[0], n.planes[1])
-                } else {
-                    (first + 1, first, n.planes[1], n.planes[0])
-                };
+                let second = ((second_near >> axis) & 1) as usize;
+                let (near, far) = (first + second, first + (second ^ 1));
+                let (near_plane, far_plane) = (n.planes[second], n.planes[second ^ 1]);
                 let dn = plane_distance(ray, axis, near_plane);
                 let df = plane_distance(ray, axis, far_plane);
                 let near_end = if dn.is_nan() {
