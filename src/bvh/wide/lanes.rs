@@ -532,29 +532,11 @@ mod tests {
             let mut r = || next(&mut s) * 2.0 - 1.0;
             dirs.push(Vec3::new(r(), r(), r()));
         }
+        let key = |p: RayTriPrecomp| (p.kx, p.ky, p.kz, [p.sx, p.sy, p.sz].map(f32::to_bits));
         for d in dirs {
             let ray = Ray::new(Vec3::new(0.5, -2.0, 3.0), d);
             let a = TriLanes::new(&ray).precomp();
-            let b = RayTriPrecomp::new(d);
-            assert_eq!(
-                (
-                    a.kx,
-                    a.ky,
-                    a.kz,
-                    a.sx.to_bits(),
-                    a.sy.to_bits(),
-                    a.sz.to_bits()
-                ),
-                (
-                    b.kx,
-                    b.ky,
-                    b.kz,
-                    b.sx.to_bits(),
-                    b.sy.to_bits(),
-                    b.sz.to_bits()
-                ),
-                "{d}"
-            );
+            assert_eq!(key(a), key(RayTriPrecomp::new(d)), "{d}");
         }
     }
 
