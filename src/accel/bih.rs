@@ -14,7 +14,7 @@
 
 use super::Accel;
 use super::interval::{
-    SlabRay, beyond, box_interval, lower, lower_is_near, max_of, min_of, plane_distance, upper,
+    SlabRay, beyond, box_interval, lower, max_of, min_of, plane_distance, upper, upper_near_bits,
 };
 use super::triangles::{AnyHit, Closest};
 use crate::bvh::{Counters, TraversalStats};
@@ -477,9 +477,8 @@ impl Bih {
         };
         // Not zeroed for every ray: only entries below the top are read.
         let mut stack = Stack::<(u32, f32, f32), MAX_BIH_DEPTH>::default();
-        // Bit `a` set when the second child is the near one on axis `a`: the near child taken
-        // by arithmetic, not by a branch on each node's axis (as the kd-tree's walk does).
-        let second_near: u32 = (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum();
+        // The second child is the near one where the ray moves down the node's axis.
+        let second_near = upper_near_bits(ray);
         let (mut node, mut tn, mut tf) = (0usize, tn, tf);
         loop {
             c.node();

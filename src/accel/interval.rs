@@ -114,6 +114,14 @@ pub(super) fn lower_is_near(ray: &Ray, axis: usize) -> bool {
     inv[axis] > 0.0
 }
 
+/// Bit `a` set when the upper side of `axis` `a` is the near one ([`lower_is_near`] false):
+/// walks that split on one axis a node take their near child from it by arithmetic, with no
+/// branch on the node's axis.
+#[inline(always)]
+pub(super) fn upper_near_bits(ray: &Ray) -> u32 {
+    (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum()
+}
+
 /// What the triangle box test reads of a ray, in SIMD lanes: the slab test's origins and the
 /// reciprocal direction.
 #[derive(Clone, Copy)]

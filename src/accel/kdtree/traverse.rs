@@ -12,7 +12,7 @@
 //! would often mispredict); the triangles it keeps are then tested in order.
 
 use super::{KdTree, MAX_KD_DEPTH};
-use crate::accel::interval::{SlabRay, beyond, box_interval, lower, lower_is_near, upper};
+use crate::accel::interval::{SlabRay, beyond, box_interval, lower, upper, upper_near_bits};
 use crate::accel::mailbox::Mailbox;
 use crate::accel::triangles::{AnyHit, Closest};
 use crate::bvh::Counters;
@@ -58,7 +58,7 @@ impl KdRay {
         Self {
             origin: ray.origin.to_array(),
             inv_dir: ray.inv_dir.to_array(),
-            near: (0..3).map(|a| u32::from(!lower_is_near(ray, a)) << a).sum(),
+            near: upper_near_bits(ray),
             slab: SlabRay::new(ray),
         }
     }
