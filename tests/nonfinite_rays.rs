@@ -1,12 +1,15 @@
 //! Rays with NaN or infinite origins, directions or ranges: every traversal (binary trees of
 //! every builder, BVH4, BVH8, and packets over each, and the course's other structures)
-//! returns what brute force returns and never panics. Such rays reach a library from simulators whose state has gone bad; they must
+//! returns what brute force returns and never panics; and the simulator's queries (closest
+//! point, overlap, all hits) on such inputs. Such rays reach a library from simulators whose state has gone bad; they must
 //! not crash the caller.
 
 use dynbvh::bvh::{
-    MeshBvh, MeshBvh4, MeshBvh8, PacketMode, WideBvh, brute_force_any, brute_force_closest,
+    BuildParams, MeshBvh, MeshBvh4, MeshBvh8, PacketMode, WideBvh, brute_force_all_hits,
+    brute_force_any, brute_force_closest, brute_force_closest_point, brute_force_overlap_box,
+    brute_force_overlap_sphere,
 };
-use dynbvh::geom::{Ray, TriMesh};
+use dynbvh::geom::{Aabb, Ray, TriMesh};
 use glam::Vec3;
 
 mod common;
@@ -166,6 +169,71 @@ fn non_finite_rays_match_brute_force_in_the_other_structures() {
                     "{name} {kind:?} any {r:?}"
                 );
             }
+        }
+    }
+}
+
+/// The simulator's queries on non-finite inputs: closest points from NaN and infinite points
+/// and with NaN, infinite, zero and negative reaches; boxes and spheres holding NaN or infinite
+/// values; all hits of the bad rays. The binary tree and the BVH8 answer as brute force does.
+#[test]
+fn non_finite_query_inputs_match_brute_force() {
+    let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    let base = [0.2, -0.3, 0.1];
+    let mut points = vec![Vec3::from(base)];
+    for v in bad {
+        for a in 0..3 {
+            let mut p = base;
+            p[a] = v;
+            points.push(Vec3::from(p));
+        }
+        points.push(Vec3::splat(v));
+    }
+    let mut boxes = vec![Aabb::new(Vec3::splat(-0.3), Vec3::splat(0.3))];
+    for v in bad {
+        for a in 0..3 {
+            let (mut lo, mut hi) = ([-0.3f32; 3], [0.3f32; 3]);
+            lo[a] = v;
+            boxes.push(Aabb::new(Vec3::from(lo), Vec3::from(hi)));
+            hi[a] = v;
+            boxes.push(Aabb::new(Vec3::splat(-0.3), Vec3::from(hi)));
+        }
+    }
+    let bits = |d: Option<f32>| d.map(f32::to_bits);
+    let (mut got, mut hits) = (Vec::new(), Vec::new());
+    for (name, mesh) in [
+        ("cube soup", cube_soup()),
+        ("NaN/inf soup", soup_with_nan_and_inf()),
+    ] {
+        let bin = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let w8 = MeshBvh8::from_mesh_bvh(&bin);
+        for &p in &points {
+            for reach in [f32::INFINITY, 0.5, 0.0, -1.0, f32::NAN] {
+                let want = bits(brute_force_closest_point(&mesh, p, reach).map(|h| h.distance));
+                let b = bits(bin.closest_point(p, reach).map(|h| h.distance));
+                assert_eq!(
+                    b, want,
+                    "{name}: binary closest point of {p} within {reach}"
+                );
+                let w = bits(w8.closest_point(p, reach).map(|h| h.distance));
+                assert_eq!(w, want, "{name}: BVH8 closest point of {p} within {reach}");
+            }
+            for r in [0.3, 0.0, -1.0, f32::INFINITY, f32::NAN] {
+                bin.overlap_sphere(p, r, &mut got);
+                let want = brute_force_overlap_sphere(&mesh, p, r);
+                assert_eq!(got, want, "{name}: sphere {p} {r}");
+            }
+        }
+        for q in &boxes {
+            bin.overlap_box(*q, &mut got);
+            assert_eq!(got, brute_force_overlap_box(&mesh, *q), "{name}: box {q:?}");
+        }
+        for r in &bad_rays() {
+            let want = brute_force_all_hits(&mesh, r);
+            bin.all_hits(r, usize::MAX, &mut hits);
+            assert_eq!(hits, want, "{name}: binary all hits of {r:?}");
+            w8.all_hits(r, usize::MAX, &mut hits);
+            assert_eq!(hits, want, "{name}: BVH8 all hits of {r:?}");
         }
     }
 }

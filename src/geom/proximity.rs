@@ -97,7 +97,8 @@ pub fn box_distance_squared(p: Vec3, b: Aabb) -> f32 {
 }
 
 /// True when triangle `a b c` and box `bx` share a point (faces and edges included; a
-/// triangle with a non-finite vertex touches nothing): the
+/// triangle with a non-finite vertex touches nothing, nor does a box with a NaN coordinate,
+/// which holds no point): the
 /// separating axis test over the box's three axes, the triangle's normal and the nine cross
 /// products of box axes and triangle edges.
 #[must_use]
@@ -105,7 +106,7 @@ pub fn triangle_overlaps_box(a: Vec3, b: Vec3, c: Vec3, bx: Aabb) -> bool {
     // The box axes: exactly the triangle's box against the query box.
     let tmin = a.min(b).min(c);
     let tmax = a.max(b).max(c);
-    if !(tmin.is_finite() && tmax.is_finite()) {
+    if !(tmin.is_finite() && tmax.is_finite()) || bx.min.is_nan() || bx.max.is_nan() {
         return false;
     }
     if tmin.cmpgt(bx.max).any() || tmax.cmplt(bx.min).any() {
