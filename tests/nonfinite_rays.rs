@@ -52,6 +52,36 @@ fn bad_rays() -> Vec<Ray> {
     rays
 }
 
+/// A point in the cube and the same with one or every coordinate NaN, +inf or -inf.
+fn bad_points() -> Vec<Vec3> {
+    let base = [0.2, -0.3, 0.1];
+    let mut points = vec![Vec3::from(base)];
+    for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        for a in 0..3 {
+            let mut p = base;
+            p[a] = v;
+            points.push(Vec3::from(p));
+        }
+        points.push(Vec3::splat(v));
+    }
+    points
+}
+
+/// A box in the cube and the same with one bound of one axis NaN, +inf or -inf.
+fn bad_boxes() -> Vec<Aabb> {
+    let mut boxes = vec![Aabb::new(Vec3::splat(-0.3), Vec3::splat(0.3))];
+    for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        for a in 0..3 {
+            let (mut lo, mut hi) = ([-0.3f32; 3], [0.3f32; 3]);
+            lo[a] = v;
+            boxes.push(Aabb::new(Vec3::from(lo), Vec3::splat(0.3)));
+            hi[a] = v;
+            boxes.push(Aabb::new(Vec3::splat(-0.3), Vec3::from(hi)));
+        }
+    }
+    boxes
+}
+
 /// 500 small finite triangles in the unit cube.
 fn cube_soup() -> TriMesh {
     let mut rng = common::Rng(3);
@@ -178,27 +208,7 @@ fn non_finite_rays_match_brute_force_in_the_other_structures() {
 /// values; all hits of the bad rays. The binary tree and the BVH8 answer as brute force does.
 #[test]
 fn non_finite_query_inputs_match_brute_force() {
-    let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
-    let base = [0.2, -0.3, 0.1];
-    let mut points = vec![Vec3::from(base)];
-    for v in bad {
-        for a in 0..3 {
-            let mut p = base;
-            p[a] = v;
-            points.push(Vec3::from(p));
-        }
-        points.push(Vec3::splat(v));
-    }
-    let mut boxes = vec![Aabb::new(Vec3::splat(-0.3), Vec3::splat(0.3))];
-    for v in bad {
-        for a in 0..3 {
-            let (mut lo, mut hi) = ([-0.3f32; 3], [0.3f32; 3]);
-            lo[a] = v;
-            boxes.push(Aabb::new(Vec3::from(lo), Vec3::from(hi)));
-            hi[a] = v;
-            boxes.push(Aabb::new(Vec3::splat(-0.3), Vec3::from(hi)));
-        }
-    }
+    let (points, boxes) = (bad_points(), bad_boxes());
     let bits = |d: Option<f32>| d.map(f32::to_bits);
     let (mut got, mut hits) = (Vec::new(), Vec::new());
     for (name, mesh) in [
@@ -235,6 +245,67 @@ fn non_finite_query_inputs_match_brute_force() {
             w8.all_hits(r, usize::MAX, &mut hits);
             assert_eq!(hits, want, "{name}: BVH8 all hits of {r:?}");
         }
+    }
+}
+
+/// The engine's queries on the same non-finite inputs, over two instances (one moved): what
+/// brute force finds over the world-space triangles of both.
+#[test]
+fn non_finite_query_inputs_through_the_engine() {
+    use dynbvh::engine::{Engine, EngineConfig};
+    use glam::Affine3A;
+    let mesh = cube_soup();
+    let shift = Vec3::new(0.5, 0.0, 0.0);
+    let placed = |t: Vec3| TriMesh {
+        positions: mesh.positions.iter().map(|&p| p + t).collect(),
+        indices: mesh.indices.clone(),
+    };
+    let worlds = [placed(Vec3::ZERO), placed(shift)];
+    let mut e = Engine::new(EngineConfig::default());
+    let id = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+    let ids = [
+        e.add_instance(id, Affine3A::IDENTITY),
+        e.add_instance(id, Affine3A::from_translation(shift)),
+    ];
+    e.update();
+    let nearest = |p: Vec3, reach: f32| {
+        worlds
+            .iter()
+            .filter_map(|w| brute_force_closest_point(w, p, reach).map(|h| h.distance))
+            .min_by(f32::total_cmp)
+    };
+    let union = |per: &dyn Fn(&TriMesh) -> Vec<u32>| {
+        let mut all: Vec<_> = ids
+            .iter()
+            .zip(&worlds)
+            .flat_map(|(&i, w)| per(w).into_iter().map(move |k| (i, k)))
+            .collect();
+        all.sort_unstable();
+        all
+    };
+    let mut got = Vec::new();
+    for p in bad_points() {
+        for reach in [f32::INFINITY, 0.5, 0.0, -1.0, f32::NAN] {
+            let have = e.closest_point(p, reach).map(|h| h.distance.to_bits());
+            let want = nearest(p, reach).map(f32::to_bits);
+            assert_eq!(have, want, "closest point of {p} within {reach}");
+        }
+        for r in [0.3, 0.0, -1.0, f32::INFINITY, f32::NAN] {
+            e.overlap_sphere(p, r, &mut got);
+            let want = union(&|w| brute_force_overlap_sphere(w, p, r));
+            assert_eq!(got, want, "sphere {p} {r}");
+        }
+    }
+    for q in bad_boxes() {
+        e.overlap_box(q, &mut got);
+        assert_eq!(got, union(&|w| brute_force_overlap_box(w, q)), "box {q:?}");
+    }
+    for r in &bad_rays() {
+        let want: usize = worlds
+            .iter()
+            .map(|w| brute_force_all_hits(w, r).len())
+            .sum();
+        assert_eq!(e.count_hits(r) as usize, want, "hits of {r:?}");
     }
 }
 

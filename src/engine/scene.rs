@@ -1257,11 +1257,30 @@ fn local_ray(inst: &InstanceEntry, ray: &Ray, tmax: f32) -> Ray {
     } else {
         Ray::with_range(
             inst.inverse.transform_point3(ray.origin),
-            inst.inverse.transform_vector3(ray.dir),
+            local_dir(&inst.inverse, ray.dir),
             ray.tmin,
             tmax,
         )
     }
+}
+
+/// `m`'s linear part applied to the direction `d`. Where `d` is not finite, a zero entry of
+/// `m` times an infinite component counts as zero, as it does for the world-space ray (a
+/// translated instance keeps the direction), instead of making every axis NaN.
+fn local_dir(m: &Affine3A, d: Vec3) -> Vec3 {
+    if d.is_finite() {
+        return m.transform_vector3(d);
+    }
+    let cols = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis];
+    let mut out = [0f32; 3];
+    for (col, c) in cols.iter().zip(d.to_array()) {
+        for (o, e) in out.iter_mut().zip(col.to_array()) {
+            if e != 0.0 {
+                *o += e * c;
+            }
+        }
+    }
+    Vec3::from(out)
 }
 
 /// The box of `b` transformed by `m` ([`Aabb::transformed`]).
