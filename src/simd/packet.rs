@@ -117,7 +117,11 @@ impl RayLanes {
     #[inline(always)]
     #[must_use]
     pub fn permute_uniform(tri: &[Vec3; 3], k: [usize; 3]) -> PermutedTri {
-        let one = |p: Vec3| [F::splat(p[k[0]]), F::splat(p[k[1]]), F::splat(p[k[2]])];
+        // Through an array: `Vec3`'s run-time index is a `match` per access.
+        let one = |p: Vec3| {
+            let p = p.to_array();
+            [F::splat(p[k[0]]), F::splat(p[k[1]]), F::splat(p[k[2]])]
+        };
         [one(tri[0]), one(tri[1]), one(tri[2])]
     }
 
