@@ -441,16 +441,27 @@ impl Engine {
             }
             let local = local_ray(inst, ray, tmax);
             let m = &meshes[inst.mesh as usize];
-            let mut w = BoxCounter::new(&local);
-            let h = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
-            inner += w.work;
+            // Box counts for closest-hit entries only: an any-hit entry has none to give.
+            let (h, work, pierced) = match query {
+                Query::Closest => {
+                    let mut w = BoxCounter::new(&local);
+                    let h = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
+                    (h, w.work, Some(w.before(h.map_or(local.tmax, |h| h.t))))
+                }
+                Query::Any => {
+                    let mut w = TraversalStats::default();
+                    let h = trace_counted(&m.bvh, m.wide.as_ref(), &local, query, &mut w);
+                    (h, w, None)
+                }
+            };
+            inner += work;
             record(SampleEntry {
                 mesh: MeshId(inst.mesh),
                 query,
                 ray: local,
-                work: w.work,
+                work,
                 hit: h.is_some(),
-                pierced: (query == Query::Closest).then(|| w.before(h.map_or(local.tmax, |h| h.t))),
+                pierced,
             });
             let h = h?;
             best = Some(SceneHit {
