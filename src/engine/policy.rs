@@ -6,7 +6,8 @@
 //!   mesh's share of the trace cost, and the degradation is the sampled work into the mesh over
 //!   what its fresh tree would cost on the same entries, predicted from the triangle boxes
 //!   they pierce ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
-//!   trees; each rebuild is then judged by what it saved ([`Payback`]);
+//!   trees; a rebuild whose tree the replay finds worse is dropped in the same frame (a trial),
+//!   and each kept one is judged by what it saved ([`Payback`]);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
@@ -599,6 +600,15 @@ impl PolicyState {
     /// much.
     pub fn rebuild_failed(&mut self) {
         self.rebuild_scale = (self.rebuild_scale * 2.0).min(MAX_REBUILD_SCALE);
+    }
+
+    /// Learns from a trial rebuild undone because its tree did worse on the replayed rays than
+    /// the refitted one (`cost_ms` spent for nothing): the extra trace time counts afresh, and
+    /// the next rebuild must be expected to save twice as much ([`PolicyState::rebuild_failed`]).
+    pub fn rebuild_rejected(&mut self, cost_ms: f64) {
+        self.rebuild_ms = cost_ms;
+        self.extra_ms = 0.0;
+        self.rebuild_failed();
     }
 
     /// Learns that a rebuild paid for itself.

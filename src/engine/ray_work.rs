@@ -225,6 +225,49 @@ impl Pierced {
 /// Entries of a kind (hits, misses) a fresh tree's sample needs for its own per-entry cost.
 const MIN_STRATUM: u32 = 8;
 
+/// A mesh's ray-work degradation since its tree was built: the sampled work into it over what
+/// the fresh tree cost on entries like them ([`FreshWork`], measured on the first frame traced
+/// after the build), smoothed over frames.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Degradation {
+    base: Option<FreshWork>,
+    observed: f64,
+}
+
+impl Degradation {
+    /// Starts over: the tree was (re)built.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// The smoothed ratio, or `None` before the fresh tree's cost is known.
+    #[must_use]
+    pub fn ratio(&self) -> Option<f64> {
+        (self.base.is_some() && self.observed > 0.0).then_some(self.observed)
+    }
+
+    /// One more frame's sample `s` of the mesh, priced at `p`; `smoothing` is the weight of
+    /// the past in the smoothed ratio.
+    pub fn observe(&mut self, s: &MeshSample, p: &Prices, smoothing: f64) {
+        if s.entries == 0 {
+            return;
+        }
+        match self.base {
+            None => {
+                self.base = Some(FreshWork::of(s, p));
+                self.observed = 1.0;
+            }
+            Some(base) => {
+                let predicted = base.predict(s);
+                if predicted > 0.0 {
+                    let seen = p.trace_ms(s.work) / predicted;
+                    self.observed = smoothing * self.observed + (1.0 - smoothing) * seen;
+                }
+            }
+        }
+    }
+}
+
 /// Which rays of a batch the frame's sample takes: every `stride`-th from `first`.
 #[derive(Clone, Copy, Debug)]
 pub struct SamplePlan {

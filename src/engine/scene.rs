@@ -17,7 +17,7 @@
 use super::estimate::FreshSah;
 use super::policy::{Action, Decision, Policy, PolicyState};
 use super::prices::Prices;
-use super::ray_work::{CostMeasure, FreshWork, MeshSample, RaySample, SampleEntry};
+use super::ray_work::{CostMeasure, Degradation, MeshSample, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
@@ -239,8 +239,10 @@ struct MeshEntry {
     /// With [`Traversal::Wide`], the 8-wide tree rays walk, collapsed from `bvh`.
     wide: Option<MeshBvh8>,
     /// While probing, the tree the last rebuild replaced, refitted alongside; otherwise spare
-    /// storage the next probed rebuild goes into.
+    /// storage the next probed or trial rebuild goes into.
     prev: MeshBvh,
+    /// Spare storage for the wide tree a trial rebuild replaces (see [`Engine::trials`]).
+    prev_wide: Option<MeshBvh8>,
     probe: Option<Probe>,
     sah: f32,
     dirty: bool,
@@ -259,12 +261,9 @@ struct MeshEntry {
     weight: f64,
     /// Sum over its visible instances of their world box's half area.
     world_area: f64,
-    /// Ray-work measure: the modelled work per sampled entry into this mesh on its tree when it
-    /// was fresh (the first frame traced after a (re)build), by the boxes its entries pierce; `None`
-    /// until measured.
-    ray_base: Option<FreshWork>,
-    /// The same frame by frame since, over `ray_base`, smoothed over frames; 0 without.
-    ray_observed: f64,
+    /// Ray-work measure: the sampled work into this mesh since its tree was built, over the
+    /// fresh tree's.
+    degradation: Degradation,
     /// The subtrees a partial rebuild keeps or rebuilds (taken at each full build when the
     /// policy may rebuild partly).
     cut: PartialCut,
@@ -421,6 +420,14 @@ impl Engine {
         PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Sah
     }
 
+    /// True when the policy's rebuilds are trials: under the ray-work measure, the refitted
+    /// tree is kept until the previous frame's sampled rays, replayed on both, have judged the
+    /// new one, and stays if the new one does worse (a binned SAH build is a heuristic: on the
+    /// rays actually cast it is not always the better tree).
+    fn trials(&self) -> bool {
+        PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Rays
+    }
+
     /// The configuration.
     #[must_use]
     pub fn config(&self) -> &EngineConfig {
@@ -450,9 +457,16 @@ impl Engine {
                 self.restructure.warm_up(&m.bvh, &self.config.build);
             }
         }
-        if self.probes() {
+        if self.probes() || self.trials() {
             for m in &mut self.meshes {
                 m.prev.reserve_like(&m.bvh);
+            }
+        }
+        if self.trials() {
+            for m in &mut self.meshes {
+                if m.prev_wide.is_none() && !m.removed {
+                    m.prev_wide = m.wide.as_ref().map(|_| MeshBvh8::from_mesh_bvh(&m.bvh));
+                }
             }
         }
         if policy == Policy::Async {
@@ -517,9 +531,14 @@ impl Engine {
         // The spare a probed rebuild goes into, reserved now so that the frame loop never
         // allocates it (address space only until the first probed rebuild writes it).
         let mut prev = MeshBvh::default();
-        if self.probes() {
+        if self.probes() || self.trials() {
             prev.reserve_like(&bvh);
         }
+        // A collapse into empty storage leaves headroom, so the spare fits later rebuilds.
+        let prev_wide = wide
+            .as_ref()
+            .filter(|_| self.trials())
+            .map(|_| MeshBvh8::from_mesh_bvh(&bvh));
         let mut cut = PartialCut::default();
         if MeshEntry::wants_cut(self.config.policy) {
             cut.reset(&bvh, &mut self.restructure.partial);
@@ -538,6 +557,7 @@ impl Engine {
             bvh,
             wide,
             prev,
+            prev_wide,
             probe: None,
             sah,
             dirty: false,
@@ -557,8 +577,7 @@ impl Engine {
             },
             weight: 0.0,
             world_area: 0.0,
-            ray_base: None,
-            ray_observed: 0.0,
+            degradation: Degradation::default(),
             cut,
             removed: false,
         }
@@ -732,6 +751,8 @@ impl Engine {
             && (PolicyState::needs_fresh_ratio(policy) || matches!(policy, Policy::Threshold(_)));
         // The previous frame's sampled rays, replayed on both trees at a rebuild.
         let replay = rays_cost && self.sample.frame == self.frame && self.sample.sampled > 0;
+        // A scripted schedule's rebuilds stand, whatever the replay says.
+        let trials = self.trials() && self.forced.is_none();
         let mut cx = FrameContext {
             policy,
             build: self.config.build,
@@ -740,6 +761,7 @@ impl Engine {
             estimate,
             ray_judged,
             probes: self.probes(),
+            trials,
             entries: if replay { &self.entries } else { &[] },
             workspace: &mut self.workspace,
             restructure: &mut self.restructure,
@@ -893,23 +915,7 @@ impl Engine {
         match self.config.cost {
             CostMeasure::Rays => {
                 for (m, s) in self.meshes.iter_mut().zip(&self.mesh_samples) {
-                    if s.entries == 0 {
-                        continue;
-                    }
-                    match m.ray_base {
-                        None => {
-                            m.ray_base = Some(FreshWork::of(s, &p));
-                            m.ray_observed = 1.0;
-                        }
-                        Some(base) => {
-                            let predicted = base.predict(s);
-                            if predicted > 0.0 {
-                                let seen = p.trace_ms(s.work) / predicted;
-                                m.ray_observed =
-                                    RAY_SMOOTHING * m.ray_observed + (1.0 - RAY_SMOOTHING) * seen;
-                            }
-                        }
-                    }
+                    m.degradation.observe(s, &p, RAY_SMOOTHING);
                 }
                 for (m, s) in self.meshes.iter_mut().zip(&self.mesh_samples) {
                     let share = if modelled > 0.0 {

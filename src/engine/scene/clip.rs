@@ -52,8 +52,7 @@ impl Engine {
         m.probe = None;
         let (rebuild_ms, estimate) = (m.state.rebuild_ms, m.state.build_estimate);
         m.state.rebuilt(m.sah, estimate, rebuild_ms);
-        m.ray_base = None;
-        m.ray_observed = 0.0;
+        m.degradation.reset();
         for inst in &mut self.instances {
             if inst.mesh == mesh.0 {
                 inst.dirty = true;

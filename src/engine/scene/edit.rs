@@ -83,6 +83,7 @@ impl Engine {
         m.indices = Vec::new();
         m.bvh = MeshBvh::default();
         m.prev = MeshBvh::default();
+        m.prev_wide = None;
         m.wide = None;
         m.probe = None;
         m.dirty = false;

@@ -56,6 +56,8 @@ pub(super) struct FrameContext<'a> {
     pub ray_judged: bool,
     /// Rebuilds are probed (the replaced tree kept and refitted alongside).
     pub probes: bool,
+    /// Rebuilds after a refit are trials, undone when the replay finds the new tree worse.
+    pub trials: bool,
     /// The previous frame's sampled entries, replayed on the trees an action replaces and
     /// makes; empty when there is no sample of the previous frame or the SAH measures.
     pub entries: &'a [SampleEntry],
@@ -122,7 +124,7 @@ impl MeshEntry {
         let mut action = Action::from(decision);
         match decision {
             Decision::Refit => self.follow_wide(out.reverted, cx),
-            Decision::Rebuild => self.rebuild(id, refitted, raw_work_ratio, cx),
+            Decision::Rebuild => out.reverted |= self.rebuild(id, refitted, raw_work_ratio, cx),
             Decision::Optimize(_) | Decision::Partial(_) => self.restructure(id, decision, cx),
             Decision::Background => {
                 self.follow_wide(out.reverted, cx);
@@ -178,8 +180,7 @@ impl MeshEntry {
             t => t.build_ms(job.build_ms, tris, &cx.prices),
         };
         self.state.rebuilt(self.sah, 0.0, cost);
-        self.ray_base = None;
-        self.ray_observed = 0.0;
+        self.degradation.reset();
         cx.background.recycle(job);
         true
     }
@@ -241,11 +242,7 @@ impl MeshEntry {
         let (fresh, judged) = if cx.ray_judged {
             // Without a sample (the caller traces without `trace_frame` or `sample_rays`),
             // the SAH's ratio to the last build stands in.
-            raw = if self.ray_observed > 0.0 {
-                self.ray_observed as f32
-            } else {
-                ratio
-            };
+            raw = self.degradation.ratio().map_or(ratio, |r| r as f32);
             self.stats.work_ratio = 1.0 + self.state.estimate_gain * (raw - 1.0).max(0.0);
             (raw, self.stats.work_ratio)
         } else {
@@ -340,14 +337,15 @@ impl MeshEntry {
         old + new
     }
 
-    /// A full rebuild, after a refit (`refitted`) or instead of one.
+    /// A full rebuild, after a refit (`refitted`) or instead of one. Returns true when it was a
+    /// trial the replay rejected (the refitted tree stays).
     fn rebuild(
         &mut self,
         id: MeshId,
         refitted: bool,
         raw_work_ratio: f32,
         cx: &mut FrameContext<'_>,
-    ) {
+    ) -> bool {
         let tris = self.indices.len();
         let refit_sah = refitted.then_some(self.sah);
         let probe = cx.probes && refitted;
@@ -357,9 +355,13 @@ impl MeshEntry {
         } else {
             None
         };
-        if probe {
+        let trial = cx.trials && old_work.is_some();
+        if probe || trial {
             // Keep the refitted tree: rebuild into the spare.
             std::mem::swap(&mut self.bvh, &mut self.prev);
+        }
+        if let (true, Some(w), Some(spare)) = (trial, &mut self.wide, &mut self.prev_wide) {
+            std::mem::swap(w, spare);
         }
         self.bvh
             .rebuild_indexed(&self.positions, &self.indices, &cx.build, cx.workspace);
@@ -379,6 +381,11 @@ impl MeshEntry {
             self.stats.model_ms += cx.prices.estimate_ms(self.fresh.sample_len());
         }
         let replay_ms = self.replay_after(id, old_work, cx);
+        let worse = self.stats.measured_work_ratio > 0.0 && self.stats.measured_work_ratio < 1.0;
+        if let (true, true, Some(refit_sah)) = (trial, worse, refit_sah) {
+            self.reject_rebuild(refit_sah, raw_work_ratio, ms_since(t), replay_ms, cx);
+            return true;
+        }
         if Self::wants_cut(cx.policy) {
             self.cut.reset(&self.bvh, &mut cx.restructure.partial);
         }
@@ -423,9 +430,35 @@ impl MeshEntry {
         self.stats.sah_ratio = 1.0;
         self.stats.fresh_ratio = if cx.estimate { 1.0 } else { 0.0 };
         self.stats.work_ratio = if cx.ray_judged { 1.0 } else { 0.0 };
-        self.ray_base = None;
-        self.ray_observed = 0.0;
+        self.degradation.reset();
         self.stats.rebuild_ms = rebuild_ms;
+        false
+    }
+
+    /// Undoes a trial rebuild whose tree did worse on the replayed rays than the refitted one
+    /// it was to replace: the refitted trees come back, and the policy learns from the replay
+    /// and from what the rebuild cost ([`crate::engine::policy::PolicyState::rebuild_rejected`]).
+    fn reject_rebuild(
+        &mut self,
+        refit_sah: f32,
+        raw_work_ratio: f32,
+        ms: f64,
+        replay_ms: f64,
+        cx: &FrameContext<'_>,
+    ) {
+        std::mem::swap(&mut self.bvh, &mut self.prev);
+        if let (Some(w), Some(spare)) = (&mut self.wide, &mut self.prev_wide) {
+            std::mem::swap(w, spare);
+        }
+        self.sah = refit_sah;
+        self.state
+            .calibrate_rays(raw_work_ratio, self.stats.measured_work_ratio);
+        let cost = match cx.timing {
+            Timing::Measured => ms,
+            t => t.build_ms(ms, self.indices.len(), &cx.prices) + replay_ms,
+        };
+        self.state.rebuild_rejected(cost);
+        self.stats.rebuild_ms = ms;
     }
 
     /// An intermediate rung after the refit: optimise or partly rebuild the tree, collapse the
