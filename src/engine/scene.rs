@@ -420,12 +420,14 @@ impl Engine {
         PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Sah
     }
 
-    /// True when the policy's rebuilds are trials: under the ray-work measure, the refitted
-    /// tree is kept until the previous frame's sampled rays, replayed on both, have judged the
-    /// new one, and stays if the new one does worse (a binned SAH build is a heuristic: on the
-    /// rays actually cast it is not always the better tree).
+    /// True when the policy's rebuilds (`amortized`'s and the ladder's) are trials: under the
+    /// ray-work measure, the refitted tree is kept until the previous frame's sampled rays,
+    /// replayed on both, have judged the new one, and stays if the new one does worse (a
+    /// binned SAH build is a heuristic: on the rays actually cast it is not always the better
+    /// tree).
     fn trials(&self) -> bool {
-        PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Rays
+        matches!(self.config.policy, Policy::Amortized | Policy::Ladder)
+            && self.config.cost == CostMeasure::Rays
     }
 
     /// The configuration.
