@@ -1,14 +1,22 @@
 //! Under the ray-work measure the default policy's rebuilds are trials: the previous frame's
 //! sampled rays are replayed on the refitted tree and the new one, and a new tree that does
 //! worse is dropped in the same frame. What must hold when that happens: the mesh keeps
-//! exactly the refitted trees (binary and wide, bit for bit), the replay did read worse, and
-//! every hit stays right. Costs are priced from work counts (`Timing::Priced`), so the
-//! decisions are the same on every run.
+//! exactly the refitted trees (binary and wide, bit for bit), the replay did read worse, every
+//! hit stays right, and the update allocates nothing (the spares were reserved when the mesh
+//! was added). Costs are priced from work counts (`Timing::Priced`), so the decisions are the
+//! same on every run. The frames run in a one-thread pool, as in `engine_alloc.rs` (from
+//! outside a pool rayon's queue allocates), and this binary holds one test (the allocation
+//! counter is global).
 
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{Action, EngineConfig, FrameSource, Policy, Timing};
 use dynbvh::report::rays::camera_rays;
+use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
+use std::alloc::System;
+
+#[global_allocator]
+static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 /// Runs `file` under the default configuration beside an always-refit engine; returns the
 /// rebuilds and the rejected trials.
@@ -38,7 +46,13 @@ fn run(file: &str) -> (u32, u32) {
             .collect();
         src.advance(&mut e, f);
         src.advance(&mut refit, f);
+        let region = Region::new(GLOBAL);
         let s = *e.update();
+        let c = region.change();
+        assert!(
+            f == 1 || c.allocations + c.reallocations == 0,
+            "{file} frame {f}: the update allocated"
+        );
         refit.update();
         rebuilds += s.rebuilds;
         for (&m, (mut bvh, mut wide)) in src.deforming().iter().zip(before) {

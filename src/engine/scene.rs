@@ -269,6 +269,9 @@ struct MeshEntry {
     cut: PartialCut,
     /// Removed ([`Engine::remove_mesh`]): empty, never placed again.
     removed: bool,
+    /// Its tree's node storage (and the spare's) holds any tree over its triangles: set at its
+    /// first update as a deforming mesh, so that no rebuild after it grows the storage.
+    any_shape: bool,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -467,7 +470,7 @@ impl Engine {
         if self.trials() {
             for m in &mut self.meshes {
                 if m.prev_wide.is_none() && !m.removed {
-                    m.prev_wide = m.wide.as_ref().map(|_| MeshBvh8::from_mesh_bvh(&m.bvh));
+                    m.prev_wide = m.wide.as_ref().map(spare_wide);
                 }
             }
         }
@@ -536,11 +539,7 @@ impl Engine {
         if self.probes() || self.trials() {
             prev.reserve_like(&bvh);
         }
-        // A collapse into empty storage leaves headroom, so the spare fits later rebuilds.
-        let prev_wide = wide
-            .as_ref()
-            .filter(|_| self.trials())
-            .map(|_| MeshBvh8::from_mesh_bvh(&bvh));
+        let prev_wide = wide.as_ref().filter(|_| self.trials()).map(spare_wide);
         let mut cut = PartialCut::default();
         if MeshEntry::wants_cut(self.config.policy) {
             cut.reset(&bvh, &mut self.restructure.partial);
@@ -582,6 +581,7 @@ impl Engine {
             degradation: Degradation::default(),
             cut,
             removed: false,
+            any_shape: false,
         }
     }
 
@@ -764,6 +764,7 @@ impl Engine {
             ray_judged,
             probes: self.probes(),
             trials,
+            spare: self.probes() || self.trials(),
             entries: if replay { &self.entries } else { &[] },
             workspace: &mut self.workspace,
             restructure: &mut self.restructure,
@@ -1155,6 +1156,14 @@ impl Engine {
 /// meshes). Small enough that the estimate does not show in the total, large enough that the
 /// decisions do not get worse (`docs/internals.md`, "Constants and the runs behind them").
 const ESTIMATE_SHARE: f64 = 0.01;
+
+/// Spare storage for a trial rebuild's wide tree: `w`'s capacities (its collapse left a
+/// quarter of headroom), reserved and not written.
+fn spare_wide(w: &MeshBvh8) -> MeshBvh8 {
+    let mut spare = MeshBvh8::default();
+    spare.reserve_like(w);
+    spare
+}
 
 /// How much refitting the replaced tree alongside a new one may cost, as a share of the
 /// rebuild's cost, before the probation ends undecided: with the whole rebuild cost, a failed

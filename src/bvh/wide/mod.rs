@@ -272,6 +272,22 @@ impl<const K: usize> WideBvh<K> {
         w
     }
 
+    /// Storage (and collapse scratch) for a tree the size of `like`, reserved but not written
+    /// (address space until a collapse writes it), so that collapsing a rebuild of the same mesh
+    /// into it allocates nothing: a spare that a rebuild goes into while `like` is kept.
+    pub fn reserve_like(&mut self, like: &Self) {
+        fn to<T>(v: &mut Vec<T>, cap: usize) {
+            crate::simd::reserve_huge(v, cap.saturating_sub(v.len()), 0);
+        }
+        to(&mut self.nodes, like.nodes.capacity());
+        to(&mut self.blocks, like.blocks.capacity());
+        to(&mut self.block_indices, like.block_indices.capacity());
+        to(&mut self.ranges, like.ranges.capacity());
+        to(&mut self.need, like.need.capacity());
+        to(&mut self.choice, like.choice.capacity());
+        self.method = like.method;
+    }
+
     /// The collapse that [`WideBvh::collapse_from`] uses.
     #[must_use]
     pub fn collapse_method(&self) -> CollapseMethod {

@@ -58,6 +58,9 @@ pub(super) struct FrameContext<'a> {
     pub probes: bool,
     /// Rebuilds after a refit are trials, undone when the replay finds the new tree worse.
     pub trials: bool,
+    /// The policy rebuilds into a spare tree (probes or trials, even on frames whose
+    /// schedule is forced).
+    pub spare: bool,
     /// The previous frame's sampled entries, replayed on the trees an action replaces and
     /// makes; empty when there is no sample of the previous frame or the SAH measures.
     pub entries: &'a [SampleEntry],
@@ -96,6 +99,16 @@ impl MeshEntry {
 
     /// The pipeline for a mesh whose vertices moved.
     pub(super) fn update(&mut self, id: MeshId, cx: &mut FrameContext<'_>) -> MeshOutcome {
+        if !self.any_shape {
+            // A rebuild at another pose can have more nodes than the first build's tree (up to
+            // 2n - 1): room for any, once, at the mesh's first frame as a deforming mesh, not
+            // for meshes that never move. The spare a rebuild may go into gets the same.
+            self.bvh.reserve_any_shape();
+            if cx.spare {
+                self.prev.reserve_like(&self.bvh);
+            }
+            self.any_shape = true;
+        }
         let mut out = MeshOutcome::default();
         self.stats.model_ms = 0.0;
         self.stats.measured_work_ratio = 0.0;
