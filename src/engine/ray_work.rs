@@ -494,6 +494,29 @@ mod tests {
     }
 
     #[test]
+    fn degradation_is_the_work_over_the_fresh_trees_smoothed_and_starts_over_at_a_rebuild() {
+        let p = Prices::default();
+        let mut d = Degradation::default();
+        assert_eq!(d.ratio(), None, "nothing traced yet");
+        d.observe(&MeshSample::default(), &p, 0.5);
+        assert_eq!(d.ratio(), None, "a frame without entries says nothing");
+        // The first traced frame is the fresh tree's: the reference, ratio 1.
+        d.observe(&entries(20, 30, 20, 10), &p, 0.5);
+        assert_eq!(d.ratio(), Some(1.0));
+        // The same entries at twice the work: 2, smoothed with the past at weight 0.5.
+        d.observe(&entries(20, 60, 20, 20), &p, 0.5);
+        let r = d.ratio().unwrap();
+        assert!((r - 1.5).abs() < 1e-9, "{r}");
+        d.observe(&entries(20, 60, 20, 20), &p, 0.5);
+        let r = d.ratio().unwrap();
+        assert!((r - 1.75).abs() < 1e-9, "{r}");
+        d.reset();
+        assert_eq!(d.ratio(), None, "rebuilt: the reference is taken again");
+        d.observe(&entries(20, 60, 20, 20), &p, 0.5);
+        assert_eq!(d.ratio(), Some(1.0));
+    }
+
+    #[test]
     fn every_ray_is_sampled_once_in_stride_whatever_the_batches() {
         for frame in 0..20 {
             let mut whole = RaySample::new(frame);
