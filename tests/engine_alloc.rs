@@ -132,15 +132,21 @@ fn frames_after_the_first_allocate_nothing_even_to_rebuild() {
 /// the trees built at later poses have up to a fifth more nodes than the first (a deforming
 /// mesh's node storage takes room for any tree at its first update).
 fn shipped_rebuilds_allocate_nothing(traversal: Traversal) {
-    for file in [
-        "explode.glb",
-        "swap.glb",
-        "tube.glb",
-        "wave.glb",
-        "lidar_cloth.glb",
-        "orbit.glb",
-    ] {
-        let path = format!("{}/animations/{file}", env!("CARGO_MANIFEST_DIR"));
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("animations");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "glb"))
+        .collect();
+    files.sort();
+    assert!(
+        files.len() >= 6,
+        "{}: {} animations",
+        dir.display(),
+        files.len()
+    );
+    for path in files {
+        let file = path.file_name().unwrap().to_string_lossy().into_owned();
         let (scene, _) = Scene::load(&path).unwrap();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
