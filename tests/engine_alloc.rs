@@ -137,7 +137,7 @@ fn frames_after_the_first_allocate_nothing_even_to_rebuild() {
 }
 
 /// The shipped animations rebuilt every frame. On the exploding mesh the pieces fly apart, so
-/// the trees built at later poses have up to a fifth more nodes than the first (a deforming
+/// the trees built at later poses have up to 2.2 times the first's nodes (a deforming
 /// mesh's node storage takes room for any tree at its first update).
 fn shipped_rebuilds_allocate_nothing(traversal: Traversal) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("animations");

@@ -423,6 +423,11 @@ impl Engine {
         PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Sah
     }
 
+    /// True when the policy's rebuilds go into a spare tree, kept reserved for them.
+    fn keeps_spare(&self) -> bool {
+        self.probes() || self.trials()
+    }
+
     /// True when the policy's rebuilds (`amortized`'s and the ladder's) are trials: under the
     /// ray-work measure, the refitted tree is kept until the previous frame's sampled rays,
     /// replayed on both, have judged the new one, and stays if the new one does worse (a
@@ -462,7 +467,7 @@ impl Engine {
                 self.restructure.warm_up(&m.bvh, &self.config.build);
             }
         }
-        if self.probes() || self.trials() {
+        if self.keeps_spare() {
             for m in &mut self.meshes {
                 m.prev.reserve_like(&m.bvh);
             }
@@ -536,7 +541,7 @@ impl Engine {
         // The spare a probed rebuild goes into, reserved now so that the frame loop never
         // allocates it (address space only until the first probed rebuild writes it).
         let mut prev = MeshBvh::default();
-        if self.probes() || self.trials() {
+        if self.keeps_spare() {
             prev.reserve_like(&bvh);
         }
         let prev_wide = wide.as_ref().filter(|_| self.trials()).map(spare_wide);
@@ -764,7 +769,7 @@ impl Engine {
             ray_judged,
             probes: self.probes(),
             trials,
-            spare: self.probes() || self.trials(),
+            spare: self.keeps_spare(),
             entries: if replay { &self.entries } else { &[] },
             workspace: &mut self.workspace,
             restructure: &mut self.restructure,

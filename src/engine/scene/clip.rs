@@ -49,6 +49,8 @@ impl Engine {
             m.cut.reset(&tree, &mut self.restructure.partial);
         }
         m.bvh = tree;
+        // A new tree in fresh storage: room for any tree is taken again at the next update.
+        m.any_shape = false;
         m.probe = None;
         let (rebuild_ms, estimate) = (m.state.rebuild_ms, m.state.build_estimate);
         m.state.rebuilt(m.sah, estimate, rebuild_ms);
