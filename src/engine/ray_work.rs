@@ -105,8 +105,8 @@ pub struct MeshSample {
 }
 
 impl MeshSample {
-    /// Adds one entry, its work priced at `p` for the box counts' fit.
-    pub fn add(&mut self, e: &SampleEntry, p: &Prices) {
+    /// Adds one entry.
+    pub fn add(&mut self, e: &SampleEntry) {
         self.entries += 1;
         self.work += e.work;
         if e.hit {
@@ -114,7 +114,7 @@ impl MeshSample {
             self.hit_work += e.work;
         }
         if let Some(boxes) = e.pierced {
-            self.pierced.add(boxes, p.trace_ms(e.work));
+            self.pierced.add(boxes, e.work);
         }
     }
 }
@@ -150,7 +150,7 @@ impl FreshWork {
             all: total / f64::from(s.entries.max(1)),
             hit: per(hit, s.hits),
             miss: per(total - hit, misses),
-            pierced: s.pierced.fit(),
+            pierced: s.pierced.fit(p),
         }
     }
 
@@ -176,48 +176,56 @@ impl FreshWork {
 /// ([`SampleEntry::pierced`], counted in the sample's own walk): the entries' geometry, which a
 /// fresh tree's work follows where their hits and misses do not (on `animations/explode.glb`
 /// a ray that misses the pieces costs a fresh tree less once they have flown apart than while
-/// they are close). The work is fitted as a line in the count (`docs/ray_work.md`). Sums.
+/// they are close). The work is fitted as a line in the count (`docs/ray_work.md`). Sums of
+/// integers (the work priced only in the fit), so that they do not depend on the order the
+/// pass's threads log their entries in.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Pierced {
-    n: f64,
-    g: f64,
-    gg: f64,
-    w: f64,
-    gw: f64,
+    n: u64,
+    g: u64,
+    gg: u64,
+    w: TraversalStats,
+    /// The work weighted by each entry's count.
+    gw: TraversalStats,
 }
 
 impl Pierced {
     /// Fewest counted entries a fit or a mean is made from.
-    const MIN: f64 = 16.0;
+    const MIN: u64 = 16;
 
-    /// One counted entry: `boxes` met, `work_ms` its modelled work.
-    pub fn add(&mut self, boxes: u32, work_ms: f64) {
-        let g = f64::from(boxes);
-        self.n += 1.0;
+    /// One counted entry: `boxes` met, `work` its work.
+    pub fn add(&mut self, boxes: u32, work: TraversalStats) {
+        let g = u64::from(boxes);
+        self.n += 1;
         self.g += g;
         self.gg += g * g;
-        self.w += work_ms;
-        self.gw += g * work_ms;
+        self.w += work;
+        self.gw += TraversalStats {
+            nodes: g * work.nodes,
+            prims: g * work.prims,
+        };
     }
 
     /// Mean count over the counted entries.
     fn mean(&self) -> Option<f64> {
-        (self.n >= Self::MIN).then(|| self.g / self.n)
+        (self.n >= Self::MIN).then(|| self.g as f64 / self.n as f64)
     }
 
-    /// The least-squares line `work = a + b count` (`b >= 0`, `a > 0`; else the mean work
-    /// alone).
-    fn fit(&self) -> Option<(f64, f64)> {
+    /// The least-squares line `work = a + b count` of the work priced at `p` (`b >= 0`,
+    /// `a > 0`; else the mean work alone).
+    fn fit(&self, p: &Prices) -> Option<(f64, f64)> {
         if self.n < Self::MIN {
             return None;
         }
-        let mean = (self.w / self.n, 0.0);
-        let d = self.n * self.gg - self.g * self.g;
-        if d <= 1e-12 * self.n * self.gg {
+        let (n, g, gg) = (self.n as f64, self.g as f64, self.gg as f64);
+        let (w, gw) = (p.trace_ms(self.w), p.trace_ms(self.gw));
+        let mean = (w / n, 0.0);
+        let d = n * gg - g * g;
+        if d <= 1e-12 * n * gg {
             return Some(mean);
         }
-        let b = (self.n * self.gw - self.g * self.w) / d;
-        let a = (self.w - b * self.g) / self.n;
+        let b = (n * gw - g * w) / d;
+        let a = (w - b * g) / n;
         Some(if b >= 0.0 && a > 0.0 { (a, b) } else { mean })
     }
 }
@@ -458,17 +466,14 @@ mod tests {
         let mut s = MeshSample::default();
         for (n, nodes, hit) in [(hits, hit_nodes, true), (misses, miss_nodes, false)] {
             for _ in 0..n {
-                s.add(
-                    &SampleEntry {
-                        mesh: MeshId(0),
-                        query: Query::Closest,
-                        ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
-                        work: TraversalStats { nodes, prims: 0 },
-                        hit,
-                        pierced: None,
-                    },
-                    &Prices::default(),
-                );
+                s.add(&SampleEntry {
+                    mesh: MeshId(0),
+                    query: Query::Closest,
+                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                    work: TraversalStats { nodes, prims: 0 },
+                    hit,
+                    pierced: None,
+                });
             }
         }
         s
@@ -604,20 +609,17 @@ mod tests {
         let sample = |counts: &[u32], with: bool| {
             let mut s = MeshSample::default();
             for &n in counts {
-                s.add(
-                    &SampleEntry {
-                        mesh: MeshId(0),
-                        query: Query::Closest,
-                        ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
-                        work: TraversalStats {
-                            nodes: 10 + 3 * u64::from(n),
-                            prims: 0,
-                        },
-                        hit: n % 2 == 0,
-                        pierced: with.then_some(n),
+                s.add(&SampleEntry {
+                    mesh: MeshId(0),
+                    query: Query::Closest,
+                    ray: Ray::new(glam::Vec3::ZERO, glam::Vec3::X),
+                    work: TraversalStats {
+                        nodes: 10 + 3 * u64::from(n),
+                        prims: 0,
                     },
-                    &p,
-                );
+                    hit: n % 2 == 0,
+                    pierced: with.then_some(n),
+                });
             }
             s
         };

@@ -314,7 +314,7 @@ impl Engine {
         self.entries = log.entries;
         let p = self.config.prices;
         for e in &self.entries[before..] {
-            self.mesh_samples[e.mesh.0 as usize].add(e, &p);
+            self.mesh_samples[e.mesh.0 as usize].add(e);
         }
         // Headroom once it has had to grow: later frames whose rays enter a few more instances
         // do not grow it again.
