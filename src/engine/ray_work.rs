@@ -286,11 +286,15 @@ pub struct SamplePlan {
 }
 
 impl SamplePlan {
-    /// True when the batch's ray `i` is sampled.
+    /// The first sampled index at or after `i`.
     #[must_use]
     #[inline]
-    pub fn takes(&self, i: usize) -> bool {
-        i >= self.first && (i - self.first).is_multiple_of(self.stride)
+    pub fn next_from(&self, i: usize) -> usize {
+        if i <= self.first {
+            self.first
+        } else {
+            self.first + (i - self.first).div_ceil(self.stride) * self.stride
+        }
     }
 }
 
@@ -550,6 +554,25 @@ mod tests {
                 .unwrap()] = true;
         }
         assert!(seen.iter().all(|&s| s));
+    }
+
+    #[test]
+    fn chunks_walked_from_next_from_take_the_plans_rays() {
+        for frame in 0..20 {
+            let mut s = RaySample::new(frame);
+            let _ = s.take(37);
+            let mut again = s;
+            let want: Vec<usize> = s.take(1000).collect();
+            let plan = again.plan(1000);
+            for size in [1, 63, 64, 256, 1000, 1024] {
+                let mut got = Vec::new();
+                for base in (0..1000).step_by(size) {
+                    let end = (base + size).min(1000);
+                    got.extend((plan.next_from(base)..end).step_by(plan.stride));
+                }
+                assert_eq!(got, want, "frame {frame}, chunks of {size}");
+            }
+        }
     }
 
     #[test]

@@ -42,38 +42,37 @@ struct SampleLog {
     clock: PassClock,
 }
 
-/// What a pass's sampling took beyond its trace, measured in pairs: every [`TIMED`]-th
-/// sampled ray's recorded trace and the plain trace of the ray cast right after it (a
-/// neighbour of the same kind), each timed, so that the clock's own cost cancels out of the
-/// difference; summed over the tasks, with the tasks' whole time.
+/// What a pass's sampling took beyond its trace: each task times its chunk's plain rays and,
+/// after them, its sampled rays traced with counters back to back; a sampled ray's extra is its
+/// time over the plain rays' mean (the sample is systematic, so the rays it takes cost the
+/// mean plainly, in expectation). Summed over the tasks, with the tasks' whole time.
 #[derive(Clone, Copy, Debug, Default)]
 struct PassClock {
     recorded_ns: f64,
-    neighbour_ns: f64,
-    pairs: u64,
+    recorded: u64,
+    plain_ns: f64,
+    plain: u64,
     pass_ns: f64,
 }
 
 impl PassClock {
     fn merge(&mut self, o: &Self) {
         self.recorded_ns += o.recorded_ns;
-        self.neighbour_ns += o.neighbour_ns;
-        self.pairs += o.pairs;
+        self.recorded += o.recorded;
+        self.plain_ns += o.plain_ns;
+        self.plain += o.plain;
         self.pass_ns += o.pass_ns;
     }
 
-    /// The share of the pass the sampling of `sampled` rays took.
-    fn share(&self, sampled: u64) -> f64 {
-        if self.pairs == 0 || self.pass_ns <= 0.0 {
+    /// The share of the pass its sampling took.
+    fn share(&self) -> f64 {
+        if self.recorded == 0 || self.plain == 0 || self.pass_ns <= 0.0 {
             return 0.0;
         }
-        let per_ray = (self.recorded_ns - self.neighbour_ns) / self.pairs as f64;
-        (per_ray * sampled as f64 / self.pass_ns).max(0.0)
+        let extra = self.recorded_ns - self.recorded as f64 * self.plain_ns / self.plain as f64;
+        (extra / self.pass_ns).max(0.0)
     }
 }
-
-/// One sampled ray in this many is timed against its neighbour.
-const TIMED: usize = 8;
 
 /// Entries a task keeps before moving them into the log.
 const BUF: usize = 32;
@@ -206,67 +205,50 @@ impl Engine {
         };
         let (before, log) = self.open_log();
         let this = &*self;
-        out.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
+        // Chunks of up to four times the plain pass's, while each thread still gets four:
+        // fewer task buffers to fill and merge, and more sampled rays back to back in each.
+        let size =
+            (rays.len() / (4 * rayon::current_num_threads())).clamp(RAY_CHUNK, 4 * RAY_CHUNK);
+        out.par_chunks_mut(size)
+            .zip(rays.par_chunks(size))
             .enumerate()
             .for_each(|(c, (o, chunk))| {
-                let base = c * RAY_CHUNK;
+                let base = c * size;
+                let first = plan.next_from(base) - base;
                 let mut buf = TaskBuf::new(&log);
+                // The plain rays first, then the sampled ones back to back: a sampled ray's
+                // longer walk then runs in code and branch history that are warm, not once
+                // among every `stride` plain ones.
                 let start = Instant::now();
-                // A timed ray's time until its pair is complete: half the pairs time the plain
-                // neighbour after the sampled ray, half before it, so that what the first leaves
-                // in the caches for the second favours neither side.
-                let mut pending: Option<(f64, bool)> = None;
-                let timed = |i: usize| {
-                    let k = (i - plan.first) / plan.stride;
-                    k.is_multiple_of(TIMED)
-                        .then_some((k / TIMED).is_multiple_of(2))
-                };
+                let mut next = first;
                 for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
-                    let i = base + j;
-                    if plan.takes(i) {
-                        let order = timed(i);
-                        let ts = order.map(|_| Instant::now());
-                        let t = this.trace_recording(r, query, &mut |e| buf.push(e));
-                        buf.sums.add(t.work, t.top);
-                        *o = recorded(&t);
-                        if let Some(ts) = ts {
-                            let ns = ts.elapsed().as_nanos() as f64;
-                            match pending.take() {
-                                Some((plain_ns, false)) => {
-                                    buf.clock.recorded_ns += ns;
-                                    buf.clock.neighbour_ns += plain_ns;
-                                    buf.clock.pairs += 1;
-                                }
-                                _ if order == Some(true) => pending = Some((ns, true)),
-                                _ => {}
-                            }
-                        }
+                    if j == next {
+                        next += plan.stride;
                         continue;
                     }
-                    let before_timed =
-                        j + 1 < chunk.len() && plan.takes(i + 1) && timed(i + 1) == Some(false);
-                    let after_timed = matches!(pending, Some((_, true)));
-                    if !(before_timed || after_timed) {
-                        *o = plain(this, r);
-                        continue;
-                    }
-                    let ts = Instant::now();
                     *o = plain(this, r);
-                    let ns = ts.elapsed().as_nanos() as f64;
-                    if let Some((recorded_ns, true)) = pending.take() {
-                        buf.clock.recorded_ns += recorded_ns;
-                        buf.clock.neighbour_ns += ns;
-                        buf.clock.pairs += 1;
-                    }
-                    if before_timed {
-                        pending = Some((ns, false));
-                    }
                 }
-                buf.clock.pass_ns += start.elapsed().as_nanos() as f64;
+                let mid = Instant::now();
+                let mut recorded_n = 0;
+                for j in (first..chunk.len()).step_by(plan.stride) {
+                    let t = this.trace_recording(&chunk[j], query, &mut |e| buf.push(e));
+                    buf.sums.add(t.work, t.top);
+                    o[j] = recorded(&t);
+                    recorded_n += 1;
+                }
+                let end = Instant::now();
+                let plain_ns = (mid - start).as_nanos() as f64;
+                let recorded_ns = (end - mid).as_nanos() as f64;
+                buf.clock.merge(&PassClock {
+                    recorded_ns,
+                    recorded: recorded_n,
+                    plain_ns,
+                    plain: (chunk.len() as u64).saturating_sub(recorded_n),
+                    pass_ns: plain_ns + recorded_ns,
+                });
             });
         let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
-        let share = log.clock.share(log.sums.sampled());
+        let share = log.clock.share();
         let model = self.config.prices.sample_ms(log.sums.sampled());
         self.close_log(log, before, model);
         self.stats.sample_ms += share * super::ms_since(pass);
