@@ -436,8 +436,9 @@ pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits
     if (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask() != 0 {
         return BlockHits::Scalar;
     }
-    let neg = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero)).to_bitmask();
-    let pos = (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero)).to_bitmask();
+    // No edge function is zero here, so the scalar test's "some negative and some positive"
+    // is "the sign bits differ" (a lane with a NaN one has a NaN determinant, rejected below).
+    let mixed = ((u ^ v) | (u ^ w)).to_bitmask();
     let det = u + v + w;
     let bad_det = (det.simd_eq(zero) | !det.is_finite()).to_bitmask();
     let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
@@ -446,10 +447,10 @@ pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits
     let in_range = (t.simd_ge(f32x4::splat(r.tmin)) & t.simd_lt(f32x4::splat(tmax))).to_bitmask();
     // A scaled distance that overflows f32 (coordinates past about 7e12) is redone in f64 by
     // the scalar test.
-    if (!t_scaled.is_finite()).to_bitmask() & !(neg & pos) & !bad_det != 0 {
+    if (!t_scaled.is_finite()).to_bitmask() & !mixed & !bad_det != 0 {
         return BlockHits::Scalar;
     }
-    let mask = in_range & !(neg & pos) & !bad_det;
+    let mask = in_range & !mixed & !bad_det;
     if mask == 0 {
         return BlockHits::None;
     }
@@ -538,6 +539,76 @@ mod tests {
             let a = TriLanes::new(&ray).precomp();
             assert_eq!(key(a), key(RayTriPrecomp::new(d)), "{d}");
         }
+    }
+
+    /// The four-lane watertight test answers lane by lane as the scalar test does, bit for bit,
+    /// whenever it does not hand the block to the scalar test: triangles around the ray, on
+    /// it, through its origin, and with NaN, infinite, huge and tiny corners.
+    #[test]
+    fn intersect4_all_is_the_scalar_test_lane_by_lane() {
+        use crate::geom::intersect_triangle;
+        let mut s = 0x2f0d_8b31_c4a7_e965u64;
+        let odd = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            1e30,
+            -1e-30,
+            3e12,
+        ];
+        let (mut hits, mut blocks) = (0, 0);
+        for i in 0..40_000 {
+            let mut r = || next(&mut s) * 2.0 - 1.0;
+            let mut d = Vec3::new(r(), r(), r());
+            if i % 9 == 0 {
+                d.z = 0.0;
+            }
+            let mut ray = Ray::new(Vec3::new(r(), r(), r()), d);
+            ray.tmin = if i % 3 == 0 { 0.0 } else { r().abs() * 0.3 };
+            let tmax = if i % 4 == 0 {
+                f32::INFINITY
+            } else {
+                r().abs() * 3.0
+            };
+            let mut b = TriBlock::EMPTY;
+            for l in 0..4 {
+                if i % 13 == l {
+                    continue;
+                }
+                let on = ray.origin + ray.dir * (r() * 3.0);
+                let mut t = [0; 3].map(|_| on + Vec3::new(r(), r(), r()) * 0.5);
+                if i % 7 == l {
+                    let k = ((r() + 1.0) * 4.5) as usize % 9;
+                    t[k / 3][k % 3] = odd[((r() + 1.0) * 3.5) as usize % 7];
+                }
+                b.set(l, &t);
+                b.prims[l] = l as u32;
+            }
+            let lanes = TriLanes::new(&ray);
+            let pre = lanes.precomp();
+            let (mask, t, u, v) = match intersect4_all(&b, &lanes, tmax) {
+                BlockHits::Scalar => continue,
+                BlockHits::None => (0, [0.0; 4], [0.0; 4], [0.0; 4]),
+                BlockHits::Lanes { mask, t, u, v } => (mask, t, u, v),
+            };
+            blocks += 1;
+            for l in 0..4 {
+                let [p, q, c] = b.get(l);
+                let want = intersect_triangle(&ray, &pre, p, q, c, tmax);
+                assert_eq!(mask >> l & 1 == 1, want.is_some(), "ray {i} lane {l}");
+                if let Some((wt, wu, wv)) = want {
+                    let bits = |x: [f32; 3]| x.map(f32::to_bits);
+                    assert_eq!(
+                        bits([t[l], u[l], v[l]]),
+                        bits([wt, wu, wv]),
+                        "ray {i} lane {l}"
+                    );
+                    hits += 1;
+                }
+            }
+        }
+        assert!(blocks > 30_000 && hits > 5_000, "{blocks} {hits}");
     }
 
     /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
