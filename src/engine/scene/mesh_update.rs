@@ -323,7 +323,7 @@ impl MeshEntry {
         if let Some(w) = &mut self.wide {
             w.refit_indexed(&self.positions, &self.indices);
         }
-        Some(sample::tree_work(
+        Some(sample::replay_work(
             &self.bvh,
             self.wide.as_ref(),
             id,
@@ -341,7 +341,7 @@ impl MeshEntry {
         cx: &FrameContext<'_>,
     ) -> f64 {
         let Some(old) = old else { return 0.0 };
-        let new = sample::tree_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
+        let new = sample::replay_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
         let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
         self.stats.model_ms += old + new;
         if new > 0.0 {

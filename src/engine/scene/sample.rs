@@ -12,7 +12,7 @@ use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{Counters, MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
 use crate::engine::ray_work::{
-    MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
+    MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate, splitmix,
 };
 use crate::geom::{Hit, Ray};
 use rayon::prelude::*;
@@ -493,6 +493,42 @@ fn trace_counted(
     }
 }
 
+/// Most entries of one mesh the policy's replays trace: a paired ratio of two trees on the same
+/// entries needs no more, and the replays' cost then stops growing with the frame's ray count
+/// (at a million rays a frame a full replay costs some fifteen times an 8,000-triangle
+/// rebuild).
+const REPLAY_MAX: usize = 1024;
+
+/// [`tree_work`] on at most about [`REPLAY_MAX`] of `mesh`'s entries: all of them when there
+/// are no more, else those whose ray falls in one residue of a hash of its bits, the same
+/// entries whatever their order (the log's order depends on the pass's threads) and for every
+/// tree they are replayed on.
+pub(super) fn replay_work(
+    bvh: &MeshBvh,
+    wide: Option<&MeshBvh8>,
+    mesh: MeshId,
+    entries: &[SampleEntry],
+) -> TraversalStats {
+    let n = entries.iter().filter(|e| e.mesh == mesh).count();
+    let keep = n.div_ceil(REPLAY_MAX).max(1) as u64;
+    let mut w = TraversalStats::default();
+    for e in entries.iter().filter(|e| e.mesh == mesh) {
+        if keep == 1 || ray_key(&e.ray).is_multiple_of(keep) {
+            let _ = trace_counted(bvh, wide, &e.ray, e.query, &mut w);
+        }
+    }
+    w
+}
+
+/// A hash of a ray's origin, direction and interval bits.
+fn ray_key(r: &Ray) -> u64 {
+    let [ox, oy, oz] = r.origin.to_array().map(f32::to_bits);
+    let [dx, dy, dz] = r.dir.to_array().map(f32::to_bits);
+    let word = |a: u32, b: u32| u64::from(a) << 32 | u64::from(b);
+    let h = splitmix(word(ox, oy) ^ splitmix(word(oz, dx) ^ splitmix(word(dy, dz))));
+    splitmix(h ^ u64::from(r.tmin.to_bits()))
+}
+
 /// The work a mesh's tree costs on the entries of `mesh` among `entries`.
 pub(super) fn tree_work(
     bvh: &MeshBvh,
@@ -556,5 +592,55 @@ impl Counters for BoxCounter {
             self.entries[self.len] = t;
             self.len += 1;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::BuildParams;
+    use crate::geom::shapes;
+    use glam::Vec3;
+
+    /// Entries of rays from a ring around a sphere towards points near its centre.
+    fn entries(n: usize, mesh: u32) -> Vec<SampleEntry> {
+        (0..n)
+            .map(|i| {
+                let a = i as f32 * 0.618;
+                let o = Vec3::new(3.0 * a.cos(), 3.0 * a.sin(), (i % 7) as f32 * 0.1);
+                let target = Vec3::new((i % 5) as f32 * 0.1, (i % 3) as f32 * 0.1, 0.0);
+                SampleEntry {
+                    mesh: MeshId(mesh),
+                    query: Query::Closest,
+                    ray: Ray::new(o, target - o),
+                    work: TraversalStats::default(),
+                    hit: false,
+                    pierced: None,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn replays_take_every_entry_up_to_the_cap_and_a_fixed_share_beyond_it() {
+        let bvh = MeshBvh::build(&shapes::icosphere(3), &BuildParams::BINNED);
+        let wide = MeshBvh8::from_mesh_bvh(&bvh);
+        let (id, other) = (MeshId(1), 2);
+        // Up to the cap: every entry of the mesh, the other mesh's left out.
+        let mut few = entries(REPLAY_MAX, id.0);
+        few.extend(entries(50, other));
+        assert_eq!(
+            replay_work(&bvh, Some(&wide), id, &few),
+            tree_work(&bvh, Some(&wide), id, &few)
+        );
+        // Beyond it: about the cap's worth, the same entries in any order.
+        let many = entries(8 * REPLAY_MAX, id.0);
+        let part = replay_work(&bvh, Some(&wide), id, &many);
+        let mut reversed = many.clone();
+        reversed.reverse();
+        assert_eq!(part, replay_work(&bvh, Some(&wide), id, &reversed));
+        let all = tree_work(&bvh, Some(&wide), id, &many);
+        let share = (part.nodes + part.prims) as f64 / (all.nodes + all.prims) as f64;
+        assert!((0.08..0.17).contains(&share), "{share}");
     }
 }
