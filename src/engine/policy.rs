@@ -7,7 +7,8 @@
 //!   what its fresh tree would cost on the same entries, predicted from the triangle boxes
 //!   they pierce ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
 //!   trees; a rebuild whose tree the replay finds worse is dropped in the same frame (a trial),
-//!   and each kept one is judged by what it saved ([`Payback`]);
+//!   and each kept one is judged by what it saved ([`Payback`]); a rebuild that costs under 2%
+//!   of the mesh's trace is made every frame, as no trial (`PolicyState::routine`);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
@@ -354,6 +355,9 @@ pub struct PolicyState {
     /// The last rebuild while it is being judged (ray-work measure): whether the trace time
     /// it saves against the replaced tree's degradation pays for it.
     pub payback: Option<Payback>,
+    /// The rebuild just decided is one of those made every frame because it costs next to
+    /// nothing against the mesh's trace ([`PolicyState::after_refit_sampled`]): not a trial.
+    pub routine: bool,
 }
 
 /// A rebuild being judged by what it saved: each frame the new tree's extra trace time is
@@ -401,6 +405,7 @@ impl Default for PolicyState {
             frame_extra_ms: 0.0,
             frames_left: None,
             payback: None,
+            routine: false,
         }
     }
 }
@@ -532,6 +537,15 @@ impl PolicyState {
                 self.frame_extra_ms = fresh_ms * degradation;
                 self.extra_ms = (self.extra_ms + self.frame_extra_ms).max(0.0);
                 self.judge_payback();
+                // A rebuild that costs under a small share of the mesh's trace is made every
+                // frame, and kept without a trial: against refitting it can lose no more than
+                // that share a frame, where any degradation above it pays (the sampled ratio
+                // does not resolve a few per cent reliably: `docs/ray_work.md`, tenth session).
+                self.routine = matches!(policy, Policy::Amortized | Policy::Ladder)
+                    && self.rebuild_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
+                if self.routine {
+                    return Decision::Rebuild;
+                }
                 self.choose(policy)
             }
             _ => self.after_refit(policy, judged, raw),
@@ -619,6 +633,7 @@ impl PolicyState {
     /// Resets after a (re)build of SAH cost `sah` (fresh-build estimate `estimate`, 0 when not
     /// computed) that took `ms`.
     pub fn rebuilt(&mut self, sah: f32, estimate: f32, ms: f64) {
+        self.routine = false;
         self.build_sah = sah;
         self.build_estimate = estimate;
         self.since_build = 0;
@@ -636,6 +651,10 @@ fn rebuild_if(yes: bool) -> Decision {
         Decision::Refit
     }
 }
+
+/// The share of a mesh's trace a frame under which its rebuild is made every frame
+/// ([`PolicyState::routine`]).
+const ROUTINE_REBUILD_SHARE: f64 = 0.02;
 
 /// Bound of the ray-work measure's gain: how much more the replays may show than the sampled
 /// ratio said (the fresh tree's own work per entry moves while the refitted one degrades).
@@ -838,6 +857,33 @@ mod tests {
         // Nothing to judge without a degraded tree replaced.
         s.judge_rebuild(0.0, 5.0);
         assert!(s.payback.is_none());
+    }
+
+    #[test]
+    fn a_rebuild_that_costs_next_to_nothing_against_the_trace_is_made_every_frame() {
+        let frame = |s: &mut PolicyState, policy: Policy| {
+            s.trace_share_ms = 100.0;
+            s.traced_ratio = 1.0;
+            // The sample sees no degradation at all.
+            s.after_refit_sampled(policy, 1.0, 1.0)
+        };
+        // 1.5 ms against 100 ms of trace: rebuilt every frame, without a trial.
+        let mut s = PolicyState::default();
+        for _ in 0..3 {
+            s.rebuilt(1.0, 1.0, 1.5);
+            assert_eq!(frame(&mut s, Policy::Amortized), Decision::Rebuild);
+            assert!(s.routine);
+        }
+        assert_eq!(frame(&mut s, Policy::Ladder), Decision::Rebuild);
+        // Not under the policies without trials, and not at 3 ms.
+        for p in [Policy::Refit, Policy::Async, Policy::Partial(0.25)] {
+            s.rebuilt(1.0, 1.0, 1.5);
+            assert_ne!(frame(&mut s, p), Decision::Rebuild, "{p}");
+            assert!(!s.routine);
+        }
+        s.rebuilt(1.0, 1.0, 3.0);
+        assert_eq!(frame(&mut s, Policy::Amortized), Decision::Refit);
+        assert!(!s.routine);
     }
 
     #[test]

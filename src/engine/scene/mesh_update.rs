@@ -369,8 +369,10 @@ impl MeshEntry {
             None
         };
         // A wide tree needs its spare too, or a dropped trial could not bring it back.
-        let trial =
-            cx.trials && old_work.is_some() && self.wide.is_some() == self.prev_wide.is_some();
+        let trial = cx.trials
+            && !self.state.routine
+            && old_work.is_some()
+            && self.wide.is_some() == self.prev_wide.is_some();
         if probe || trial {
             // Keep the refitted tree: rebuild into the spare.
             std::mem::swap(&mut self.bvh, &mut self.prev);
