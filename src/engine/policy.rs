@@ -7,8 +7,8 @@
 //!   what its fresh tree would cost on the same entries, predicted from the triangle boxes
 //!   they pierce ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
 //!   trees; a rebuild whose tree the replay finds worse is dropped in the same frame (a trial),
-//!   and each kept one is judged by what it saved ([`Payback`]); a rebuild that costs under 2%
-//!   of the mesh's trace is made every frame, as no trial (`PolicyState::routine`);
+//!   and each kept one is judged by what it saved ([`Payback`]); a rebuild that costs under a
+//!   small share of the mesh's trace is made every frame, as no trial (`PolicyState::routine`);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
@@ -539,8 +539,8 @@ impl PolicyState {
                 self.judge_payback();
                 // A rebuild that costs under a small share of the mesh's trace is made every
                 // frame, and kept without a trial: against refitting it can lose no more than
-                // that share a frame, where any degradation above it pays (the sampled ratio
-                // does not resolve a few per cent reliably: `docs/ray_work.md`, tenth session).
+                // that share a frame, where any degradation above it pays, and the sampled
+                // ratio does not resolve degradations that small reliably.
                 self.routine = matches!(policy, Policy::Amortized | Policy::Ladder)
                     && self.rebuild_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
                 if self.routine {

@@ -495,8 +495,7 @@ fn trace_counted(
 
 /// Most entries of one mesh the policy's replays trace: a paired ratio of two trees on the same
 /// entries needs no more, and the replays' cost then stops growing with the frame's ray count
-/// (at a million rays a frame a full replay costs some fifteen times an 8,000-triangle
-/// rebuild).
+/// (uncapped, it outgrows the rebuild it judges: `docs/ray_work.md`).
 const REPLAY_MAX: usize = 1024;
 
 /// [`tree_work`] on at most about [`REPLAY_MAX`] of `mesh`'s entries: all of them when there
