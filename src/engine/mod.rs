@@ -9,6 +9,7 @@ pub mod oracle;
 pub mod policy;
 pub mod prices;
 pub mod ray_work;
+pub mod routine;
 mod scene;
 pub mod source;
 pub mod stats;

@@ -8,7 +8,8 @@
 //!   they pierce ([`super::ray_work::FreshWork`]), corrected by each rebuild's replay of the rays on both
 //!   trees; a rebuild whose tree the replay finds worse is dropped in the same frame (a trial),
 //!   and each kept one is judged by what it saved ([`Payback`]); a rebuild that costs under a
-//!   small share of the mesh's trace is made every frame, as no trial (`PolicyState::routine`);
+//!   small share of the mesh's trace is made every frame, checked by a trial now and then
+//!   ([`super::routine`]);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
@@ -17,6 +18,7 @@
 //! passes a rebuild's cost: the optimal period for linearly growing degradation, and no rebuild
 //! without rays or degradation. `amortized-plain` is that rule without estimate, calibration or
 //! probation. The sweeps behind the default: `docs/policy_sweep.md`, `docs/ray_work.md`.
+use super::routine::{ROUTINE_REBUILD_SHARE, Routine};
 use std::fmt;
 use std::str::FromStr;
 
@@ -355,9 +357,11 @@ pub struct PolicyState {
     /// The last rebuild while it is being judged (ray-work measure): whether the trace time
     /// it saves against the replaced tree's degradation pays for it.
     pub payback: Option<Payback>,
-    /// The rebuild just decided is one of those made every frame because it costs next to
-    /// nothing against the mesh's trace ([`PolicyState::after_refit_sampled`]): not a trial.
-    pub routine: bool,
+    /// Rebuilds made every frame because they cost next to nothing against the mesh's trace
+    /// ([`PolicyState::after_refit_sampled`]), and the trials that check them.
+    pub routine: Routine,
+    /// What the last rebuild's replays cost (ms, part of `rebuild_ms`).
+    pub replay_ms: f64,
 }
 
 /// A rebuild being judged by what it saved: each frame the new tree's extra trace time is
@@ -405,7 +409,8 @@ impl Default for PolicyState {
             frame_extra_ms: 0.0,
             frames_left: None,
             payback: None,
-            routine: false,
+            routine: Routine::default(),
+            replay_ms: 0.0,
         }
     }
 }
@@ -537,13 +542,9 @@ impl PolicyState {
                 self.frame_extra_ms = fresh_ms * degradation;
                 self.extra_ms = (self.extra_ms + self.frame_extra_ms).max(0.0);
                 self.judge_payback();
-                // A rebuild that costs under a small share of the mesh's trace is made every
-                // frame, and kept without a trial: against refitting it can lose no more than
-                // that share a frame, where any degradation above it pays, and the sampled
-                // ratio does not resolve degradations that small reliably.
-                self.routine = matches!(policy, Policy::Amortized | Policy::Ladder)
-                    && self.rebuild_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
-                if self.routine {
+                let cheap = matches!(policy, Policy::Amortized | Policy::Ladder)
+                    && self.rebuild_ms - self.replay_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
+                if self.routine.decide(cheap) {
                     return Decision::Rebuild;
                 }
                 self.choose(policy)
@@ -633,7 +634,9 @@ impl PolicyState {
     /// Resets after a (re)build of SAH cost `sah` (fresh-build estimate `estimate`, 0 when not
     /// computed) that took `ms`.
     pub fn rebuilt(&mut self, sah: f32, estimate: f32, ms: f64) {
-        self.routine = false;
+        self.routine.now = false;
+        self.routine.checked = false;
+        self.replay_ms = 0.0;
         self.build_sah = sah;
         self.build_estimate = estimate;
         self.since_build = 0;
@@ -651,10 +654,6 @@ fn rebuild_if(yes: bool) -> Decision {
         Decision::Refit
     }
 }
-
-/// The share of a mesh's trace a frame under which its rebuild is made every frame
-/// ([`PolicyState::routine`]).
-const ROUTINE_REBUILD_SHARE: f64 = 0.02;
 
 /// Bound of the ray-work measure's gain: how much more the replays may show than the sampled
 /// ratio said (the fresh tree's own work per entry moves while the refitted one degrades).
@@ -867,23 +866,33 @@ mod tests {
             // The sample sees no degradation at all.
             s.after_refit_sampled(policy, 1.0, 1.0)
         };
-        // 1.5 ms against 100 ms of trace: rebuilt every frame, without a trial.
+        // 1.5 ms against 100 ms of trace: rebuilt every frame, checked after one routine
+        // rebuild, then after two while the checks find the fresh trees better.
         let mut s = PolicyState::default();
-        for _ in 0..3 {
+        for checked in [true, false, true] {
             s.rebuilt(1.0, 1.0, 1.5);
             assert_eq!(frame(&mut s, Policy::Amortized), Decision::Rebuild);
-            assert!(s.routine);
+            assert!(s.routine.now);
+            assert_eq!(s.routine.checked, checked);
+            if checked {
+                s.routine.record_check(true);
+            }
         }
         assert_eq!(frame(&mut s, Policy::Ladder), Decision::Rebuild);
-        // Not under the policies without trials, and not at 3 ms.
+        // Not under the policies without trials, and not at 6 ms.
         for p in [Policy::Refit, Policy::Async, Policy::Partial(0.25)] {
             s.rebuilt(1.0, 1.0, 1.5);
             assert_ne!(frame(&mut s, p), Decision::Rebuild, "{p}");
-            assert!(!s.routine);
+            assert!(!s.routine.now);
         }
-        s.rebuilt(1.0, 1.0, 3.0);
+        s.rebuilt(1.0, 1.0, 6.0);
         assert_eq!(frame(&mut s, Policy::Amortized), Decision::Refit);
-        assert!(!s.routine);
+        assert!(!s.routine.now);
+        // The replays that judged the last rebuild are not part of a routine one's price.
+        s.rebuilt(1.0, 1.0, 6.0);
+        s.replay_ms = 2.0;
+        assert_eq!(frame(&mut s, Policy::Amortized), Decision::Rebuild);
+        assert!(s.routine.now);
     }
 
     #[test]

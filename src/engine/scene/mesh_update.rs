@@ -363,14 +363,17 @@ impl MeshEntry {
         let refit_sah = refitted.then_some(self.sah);
         let probe = cx.probes && refitted;
         let t = Instant::now();
-        let old_work = if refitted {
+        // Routine rebuilds are replayed only when checked.
+        let routine = self.state.routine;
+        let judged = !routine.now || routine.checked;
+        let old_work = if refitted && judged {
             self.replay_before(id, cx)
         } else {
             None
         };
         // A wide tree needs its spare too, or a dropped trial could not bring it back.
         let trial = cx.trials
-            && !self.state.routine
+            && judged
             && old_work.is_some()
             && self.wide.is_some() == self.prev_wide.is_some();
         if probe || trial {
@@ -401,7 +404,17 @@ impl MeshEntry {
         let worse = self.stats.measured_work_ratio > 0.0 && self.stats.measured_work_ratio < 1.0;
         if let (true, true, Some(refit_sah)) = (trial, worse, refit_sah) {
             self.reject_rebuild(refit_sah, raw_work_ratio, ms_since(t), replay_ms, cx);
+            if routine.now {
+                self.state.routine.record_check(false);
+            }
             return true;
+        }
+        if trial && routine.now {
+            // A fresh tree no better than the refitted one (often the very same tree) is no
+            // reason to go on rebuilding.
+            self.state
+                .routine
+                .record_check(self.stats.measured_work_ratio > 1.0);
         }
         if Self::wants_cut(cx.policy) {
             self.cut.reset(&self.bvh, &mut cx.restructure.partial);
@@ -425,6 +438,7 @@ impl MeshEntry {
         };
         let level = self.state.frame_extra_ms;
         self.state.rebuilt(self.sah, est, rebuild_cost);
+        self.state.replay_ms = replay_ms;
         if cx.ray_judged && refitted {
             self.state.judge_rebuild(level, rebuild_cost);
         }
@@ -475,6 +489,7 @@ impl MeshEntry {
             t => t.build_ms(ms, self.indices.len(), &cx.prices) + replay_ms,
         };
         self.state.rebuild_rejected(cost);
+        self.state.replay_ms = replay_ms;
         self.stats.rebuild_ms = ms;
     }
 
