@@ -240,12 +240,33 @@ const MIN_STRATUM: u32 = 8;
 pub struct Degradation {
     base: Option<FreshWork>,
     observed: f64,
+    /// Entries of the last frame observed.
+    entries: u32,
 }
+
+/// Entries a frame under which a mesh's sampled ratio is capped by the SAH's
+/// ([`Degradation::judged`]).
+pub const FEW_ENTRIES: u32 = 64;
 
 impl Degradation {
     /// Starts over: the tree was (re)built.
     pub fn reset(&mut self) {
         *self = Self::default();
+    }
+
+    /// The degradation a policy weighs: the smoothed ratio, or the SAH's ratio of the refitted
+    /// tree to its build (`sah_ratio`) before the fresh tree's cost is known; capped at
+    /// `sah_ratio` (at least 1) while the frames give fewer than [`FEW_ENTRIES`] entries: from
+    /// a few dozen entries, against a reference of as few, the ratio can err by tens of per
+    /// cent for a whole period between rebuilds, while the SAH's ratio is exact for what it
+    /// measures (`docs/ray_work.md`).
+    #[must_use]
+    pub fn judged(&self, sah_ratio: f32) -> f32 {
+        match self.ratio() {
+            None => sah_ratio,
+            Some(r) if self.entries < FEW_ENTRIES => (r as f32).min(sah_ratio.max(1.0)),
+            Some(r) => r as f32,
+        }
     }
 
     /// The smoothed ratio, or `None` before the fresh tree's cost is known.
@@ -260,6 +281,7 @@ impl Degradation {
         if s.entries == 0 {
             return;
         }
+        self.entries = s.entries;
         match self.base {
             None => {
                 self.base = Some(FreshWork::of(s, p));
@@ -523,6 +545,28 @@ mod tests {
         assert_eq!(d.ratio(), None, "rebuilt: the reference is taken again");
         d.observe(&entries(20, 60, 20, 20), &p, 0.5);
         assert_eq!(d.ratio(), Some(1.0));
+    }
+
+    #[test]
+    fn a_few_entries_ratio_is_capped_by_the_sah_ratio() {
+        let p = Prices::default();
+        let mut d = Degradation::default();
+        // Before any reference: the SAH's ratio stands in.
+        assert_eq!(d.judged(1.3), 1.3);
+        let n = FEW_ENTRIES / 2;
+        d.observe(&entries(n / 2, 30, n / 2, 10), &p, 0.0);
+        // Three times the reference's work on as many entries.
+        d.observe(&entries(n / 2, 90, n / 2, 30), &p, 0.0);
+        assert!((d.ratio().unwrap() - 3.0).abs() < 1e-9);
+        assert_eq!(d.judged(1.2), 1.2, "capped at the SAH's ratio");
+        assert_eq!(d.judged(0.9), 1.0, "a cap below 1 is 1");
+        assert!((d.judged(4.0) - 3.0).abs() < 1e-6, "a cap, not a floor");
+        // With enough entries the sampled ratio stands.
+        let mut d = Degradation::default();
+        let n = FEW_ENTRIES;
+        d.observe(&entries(n / 2, 30, n / 2, 10), &p, 0.0);
+        d.observe(&entries(n / 2, 90, n / 2, 30), &p, 0.0);
+        assert!((d.judged(1.2) - 3.0).abs() < 1e-6);
     }
 
     #[test]

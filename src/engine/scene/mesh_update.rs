@@ -254,8 +254,8 @@ impl MeshEntry {
         let mut raw = 0.0;
         let (fresh, judged) = if cx.ray_judged {
             // Without a sample (the caller traces without `trace_frame` or `sample_rays`),
-            // the SAH's ratio to the last build stands in.
-            raw = self.degradation.ratio().map_or(ratio, |r| r as f32);
+            // the SAH's ratio to the last build stands in; it caps a sample of few entries.
+            raw = self.degradation.judged(ratio);
             self.stats.work_ratio = 1.0 + self.state.estimate_gain * (raw - 1.0).max(0.0);
             (raw, self.stats.work_ratio)
         } else {
