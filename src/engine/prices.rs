@@ -235,10 +235,16 @@ impl Prices {
         });
         let visit_ns =
             ((optimize * 1e6 - restructure_ns * n as f64) / visits.get().max(1) as f64).max(1e-3);
-        // Sampling in the trace's own pass: every ray counted and its entry kept, against the
-        // plain trace of the same rays.
-        let plain = median_cpu_ms(passes, || trace_all(&wide, &rays));
-        let recorded = median_cpu_ms(passes, || trace_all_recorded(&wide, &rays));
+        // Sampling in the trace's own pass: every ray traced through an engine as a sampled ray
+        // is (both levels counted, its box counts, its entries kept), against the plain trace
+        // of the same rays.
+        let mut engine = super::Engine::new(super::EngineConfig::default());
+        let id = engine.add_mesh(pos.clone(), idx.clone());
+        engine.add_instance(id, glam::Affine3A::IDENTITY);
+        engine.update();
+        let mut log = Vec::with_capacity(rays.len());
+        let plain = median_cpu_ms(passes, || engine.trace_as_sampled(&rays, false, &mut log));
+        let recorded = median_cpu_ms(passes, || engine.trace_as_sampled(&rays, true, &mut log));
         let sample_ns = ((recorded - plain) * 1e6 / rays.len().max(1) as f64).max(1e-3);
         let (w1, t1) = trace_with(2);
         let (w2, t2) = trace_with(16);
@@ -284,20 +290,6 @@ fn trace_all(w: &MeshBvh8, rays: &[Ray]) {
         for r in c {
             std::hint::black_box(w.closest_hit(r));
         }
-    });
-}
-
-/// [`trace_all`] with every ray counted and its entry kept, as a sampled ray of a pass is.
-fn trace_all_recorded(w: &MeshBvh8, rays: &[Ray]) {
-    use rayon::prelude::*;
-    rays.par_chunks(256).for_each(|c| {
-        let mut kept = [(TraversalStats::default(), Ray::new(Vec3::ZERO, Vec3::X)); 32];
-        for (i, r) in c.iter().enumerate() {
-            let mut work = TraversalStats::default();
-            std::hint::black_box(w.closest_hit_counted(r, &mut work));
-            kept[i % 32] = (work, *r);
-        }
-        std::hint::black_box(&kept);
     });
 }
 

@@ -373,6 +373,26 @@ impl Engine {
             })
     }
 
+    /// For the prices' calibration ([`crate::engine::Prices::calibrate`]): every ray of `rays`
+    /// traced as a sampled ray is in the batch's pass (counters, box counts, its entries kept
+    /// in `log`), or plainly.
+    pub(crate) fn trace_as_sampled(
+        &self,
+        rays: &[Ray],
+        recorded: bool,
+        log: &mut Vec<SampleEntry>,
+    ) {
+        log.clear();
+        for r in rays {
+            if recorded {
+                let t = self.trace_recording(r, Query::Closest, &mut |e| log.push(e));
+                std::hint::black_box(t.work);
+            } else {
+                std::hint::black_box(self.closest_hit(r));
+            }
+        }
+    }
+
     /// Traces every `stride`-th ray of `rays` from `offset` again with counters (a sample of the
     /// caller's own, e.g. a benchmark's denser one), appending each entry into an instance to
     /// `entries`; returns the work in the top-level tree and in each mesh's tree.
