@@ -141,7 +141,7 @@ fn a_rebuilds_measured_ratio_is_the_real_rebuilds() {
         ..EngineConfig::default()
     };
     let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(frames)).unwrap();
-    let rays = camera_rays(&src.build(0, config(Policy::Refit)).bounds(), 64, 64);
+    let rays = camera_rays(&src.build(0, config(Policy::Refit)).bounds(), 128, 128);
     let m = src.deforming()[0];
     let mut hits = vec![None; rays.len()];
     let mut e = src.build(0, config(Policy::Threshold(1.02)));

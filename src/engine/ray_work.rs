@@ -22,7 +22,7 @@ use std::fmt;
 use std::str::FromStr;
 
 /// One ray in this many is taken into the sample.
-pub const SAMPLE_STRIDE: u64 = 64;
+pub const SAMPLE_STRIDE: u64 = 128;
 
 /// What a policy measures a tree's degradation and a frame's trace cost by.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
