@@ -32,7 +32,7 @@ fn run(file: &str) -> (u32, u32) {
     let mut e = src.engine(config(Policy::DEFAULT));
     let mut refit = src.engine(config(Policy::Refit));
     e.plan_frames(Some(src.frames() as u64));
-    // At 200x200 rays, explode and swap make rebuilds the replay finds worse (four and one).
+    // At 200x200 rays, explode and swap make rebuilds the replay finds worse.
     let rays = camera_rays(&e.bounds(), 200, 200);
     let mut hits = vec![None; rays.len()];
     let (mut rebuilds, mut rejected) = (0, 0);

@@ -634,8 +634,6 @@ impl PolicyState {
     /// Resets after a (re)build of SAH cost `sah` (fresh-build estimate `estimate`, 0 when not
     /// computed) that took `ms`.
     pub fn rebuilt(&mut self, sah: f32, estimate: f32, ms: f64) {
-        self.routine.now = false;
-        self.routine.checked = false;
         self.replay_ms = 0.0;
         self.build_sah = sah;
         self.build_estimate = estimate;
@@ -861,6 +859,7 @@ mod tests {
     #[test]
     fn a_rebuild_that_costs_next_to_nothing_against_the_trace_is_made_every_frame() {
         let frame = |s: &mut PolicyState, policy: Policy| {
+            s.routine.new_frame();
             s.trace_share_ms = 100.0;
             s.traced_ratio = 1.0;
             // The sample sees no degradation at all.

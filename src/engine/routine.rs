@@ -8,9 +8,8 @@
 //! it better (a check after 1, 2, 4, ... routine rebuilds, up to [`MAX_ROUTINE_GAP`]); the
 //! unchecked ones pay no replay. Two checks in a row that find it no better hold routine
 //! rebuilds off for 2, 4, ... frames: a builder can do worse at every pose than the first tree
-//! refitted (a morphing cube's twelve triangles), and one replay of the last frame's rays can
-//! misjudge this frame's (a rotating sensor's fan). The sweeps behind the share:
-//! `docs/ray_work.md`.
+//! refitted, while a single check can misjudge (it replays the last frame's rays, not this
+//! frame's). The cases and sweeps behind these rules: `docs/ray_work.md`.
 
 /// The share of a mesh's trace a frame under which its rebuild is made every frame.
 pub const ROUTINE_REBUILD_SHARE: f64 = 0.05;
@@ -52,10 +51,16 @@ impl Default for Routine {
 }
 
 impl Routine {
-    /// One frame: true to rebuild routinely, when a rebuild is `cheap` and none is held off.
-    pub fn decide(&mut self, cheap: bool) -> bool {
+    /// A new frame: nothing decided yet (a decision made before the refit never asks
+    /// [`Routine::decide`], and must not read the last frame's).
+    pub fn new_frame(&mut self) {
         self.now = false;
         self.checked = false;
+    }
+
+    /// One frame: true to rebuild routinely, when a rebuild is `cheap` and none is held off.
+    pub fn decide(&mut self, cheap: bool) -> bool {
+        self.new_frame();
         if self.hold > 0 {
             self.hold -= 1;
             return false;

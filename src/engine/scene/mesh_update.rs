@@ -111,6 +111,7 @@ impl MeshEntry {
         }
         let mut out = MeshOutcome::default();
         self.stats.model_ms = 0.0;
+        self.state.routine.new_frame();
         self.stats.measured_work_ratio = 0.0;
         self.stats.refit_ms = 0.0;
         self.stats.rebuild_ms = 0.0;
@@ -401,20 +402,17 @@ impl MeshEntry {
             self.stats.model_ms += cx.prices.estimate_ms(self.fresh.sample_len());
         }
         let replay_ms = self.replay_after(id, old_work, cx);
-        let worse = self.stats.measured_work_ratio > 0.0 && self.stats.measured_work_ratio < 1.0;
-        if let (true, true, Some(refit_sah)) = (trial, worse, refit_sah) {
-            self.reject_rebuild(refit_sah, raw_work_ratio, ms_since(t), replay_ms, cx);
-            if routine.now {
-                self.state.routine.record_check(false);
-            }
-            return true;
-        }
         if trial && routine.now {
             // A fresh tree no better than the refitted one (often the very same tree) is no
             // reason to go on rebuilding.
             self.state
                 .routine
                 .record_check(self.stats.measured_work_ratio > 1.0);
+        }
+        let worse = self.stats.measured_work_ratio > 0.0 && self.stats.measured_work_ratio < 1.0;
+        if let (true, true, Some(refit_sah)) = (trial, worse, refit_sah) {
+            self.reject_rebuild(refit_sah, raw_work_ratio, ms_since(t), replay_ms, cx);
+            return true;
         }
         if Self::wants_cut(cx.policy) {
             self.cut.reset(&self.bvh, &mut cx.restructure.partial);
