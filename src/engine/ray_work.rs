@@ -298,25 +298,71 @@ impl Degradation {
     }
 }
 
-/// Which rays of a batch the frame's sample takes: every `stride`-th from `first`.
+/// Which rays of a batch the frame's sample takes: the frame's rays, counted across its
+/// batches, fall in blocks of [`SAMPLE_STRIDE`], and one ray of each block is taken, at a
+/// position drawn for the block (stratified sampling). A fixed position in every block would
+/// take one column of a camera image whose width divides the stride (a 128-wide image at one ray
+/// in 128): a line that crosses a small object on one frame and misses it on the next.
 #[derive(Clone, Copy, Debug)]
 pub struct SamplePlan {
-    /// Index in the batch of the first sampled ray (may be past its end).
-    pub first: usize,
-    /// One ray in this many.
-    pub stride: usize,
+    /// The batch's first ray, counted in the frame.
+    start: u64,
+    /// Rays in the batch.
+    len: u64,
+    /// The frame's offset and jitter seed ([`RaySample`]).
+    offset: u64,
+    jitter: u64,
 }
 
 impl SamplePlan {
-    /// The first sampled index at or after `i`.
-    #[must_use]
+    /// The frame's index of the ray the sample takes in block `k`.
     #[inline]
-    pub fn next_from(&self, i: usize) -> usize {
-        if i <= self.first {
-            self.first
-        } else {
-            self.first + (i - self.first).div_ceil(self.stride) * self.stride
+    fn pick(&self, k: u64) -> u64 {
+        k * SAMPLE_STRIDE + (self.offset + splitmix(self.jitter.wrapping_add(k))) % SAMPLE_STRIDE
+    }
+
+    /// The batch's sampled indices in `from..to`, increasing.
+    #[must_use]
+    pub fn picks(&self, from: usize, to: usize) -> Picks {
+        let to = (to as u64).min(self.len);
+        let (lo, hi) = (self.start + from as u64, self.start + to);
+        Picks {
+            plan: *self,
+            block: lo / SAMPLE_STRIDE,
+            lo,
+            hi,
         }
+    }
+
+    /// True when the batch takes no ray into the sample.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.picks(0, self.len as usize).next().is_none()
+    }
+}
+
+/// The sampled indices of a batch within a range ([`SamplePlan::picks`]).
+#[derive(Clone, Debug)]
+pub struct Picks {
+    plan: SamplePlan,
+    block: u64,
+    lo: u64,
+    hi: u64,
+}
+
+impl Iterator for Picks {
+    type Item = usize;
+
+    #[inline]
+    fn next(&mut self) -> Option<usize> {
+        while self.block * SAMPLE_STRIDE < self.hi {
+            let p = self.plan.pick(self.block);
+            self.block += 1;
+            if p >= self.lo && p < self.hi {
+                return Some((p - self.plan.start) as usize);
+            }
+        }
+        None
     }
 }
 
@@ -380,8 +426,15 @@ pub struct RaySample {
     /// Sum and sum of squares of each sampled ray's work (nodes plus triangles).
     sum: f64,
     sum_sq: f64,
+    /// Added to every block's drawn position (mod the stride): over the frames' offsets
+    /// every ray is taken equally often, whatever the draws.
     offset: u64,
+    /// Seed of the blocks' positions.
+    jitter: u64,
 }
+
+/// Mixed with the frame number into the seed of its blocks' positions.
+const JITTER_SEED: u64 = 0x005e_ed0f_b10c;
 
 /// The sample's estimate of the frame's mean work per ray.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -405,6 +458,7 @@ impl RaySample {
         Self {
             frame,
             offset: splitmix(frame) % SAMPLE_STRIDE,
+            jitter: splitmix(frame ^ JITTER_SEED),
             ..Self::default()
         }
     }
@@ -414,17 +468,17 @@ impl RaySample {
     pub fn plan(&mut self, n: usize) -> SamplePlan {
         let start = self.rays;
         self.rays += n as u64;
-        let first = (SAMPLE_STRIDE - (start + self.offset) % SAMPLE_STRIDE) % SAMPLE_STRIDE;
         SamplePlan {
-            first: first as usize,
-            stride: SAMPLE_STRIDE as usize,
+            start,
+            len: n as u64,
+            offset: self.offset,
+            jitter: self.jitter,
         }
     }
 
     /// Indices within a batch of `n` rays that the sample takes ([`RaySample::plan`]).
-    pub fn take(&mut self, n: usize) -> impl Iterator<Item = usize> + use<> {
-        let p = self.plan(n);
-        (p.first..n).step_by(p.stride)
+    pub fn take(&mut self, n: usize) -> Picks {
+        self.plan(n).picks(0, n)
     }
 
     /// Adds one sampled ray's work (`top` of it in the top-level tree).
@@ -570,7 +624,8 @@ mod tests {
     }
 
     #[test]
-    fn every_ray_is_sampled_once_in_stride_whatever_the_batches() {
+    fn one_ray_of_each_block_is_sampled_whatever_the_batches() {
+        let stride = SAMPLE_STRIDE as usize;
         for frame in 0..20 {
             let mut whole = RaySample::new(frame);
             let all: Vec<usize> = whole.take(1000).collect();
@@ -583,25 +638,28 @@ mod tests {
             }
             assert_eq!(all, parts, "frame {frame}");
             assert_eq!(split.rays, 1000);
-            // One ray in each stride-long run.
-            for w in all.windows(2) {
-                assert_eq!(w[1] - w[0], SAMPLE_STRIDE as usize);
+            // One ray in each block of the stride, the last block's if it falls in the batch.
+            for (k, &i) in all.iter().enumerate() {
+                assert_eq!(i / stride, k, "frame {frame}");
             }
-            assert!(all[0] < SAMPLE_STRIDE as usize);
+            assert!(all.len() == 1000 / stride || all.len() == 1000 / stride + 1);
         }
-        // The offset moves with the frame: over many frames every residue comes up.
-        let mut seen = [false; SAMPLE_STRIDE as usize];
+        // The positions vary from block to block (not one column of a 128-wide image) and
+        // from frame to frame: over many frames every position comes up in a block.
+        let rows: Vec<usize> = RaySample::new(3)
+            .take(16 * stride)
+            .map(|i| i % stride)
+            .collect();
+        assert!(rows.windows(2).any(|w| w[0] != w[1]), "{rows:?}");
+        let mut seen = vec![false; stride];
         for frame in 0..2000 {
-            seen[RaySample::new(frame)
-                .take(SAMPLE_STRIDE as usize)
-                .next()
-                .unwrap()] = true;
+            seen[RaySample::new(frame).take(stride).next().unwrap()] = true;
         }
         assert!(seen.iter().all(|&s| s));
     }
 
     #[test]
-    fn chunks_walked_from_next_from_take_the_plans_rays() {
+    fn chunks_walked_with_picks_take_the_plans_rays() {
         for frame in 0..20 {
             let mut s = RaySample::new(frame);
             let _ = s.take(37);
@@ -611,8 +669,7 @@ mod tests {
             for size in [1, 63, 64, 256, 1000, 1024] {
                 let mut got = Vec::new();
                 for base in (0..1000).step_by(size) {
-                    let end = (base + size).min(1000);
-                    got.extend((plan.next_from(base)..end).step_by(plan.stride));
+                    got.extend(plan.picks(base, base + size));
                 }
                 assert_eq!(got, want, "frame {frame}, chunks of {size}");
             }
@@ -621,7 +678,8 @@ mod tests {
 
     #[test]
     fn the_estimate_is_unbiased_over_offsets_and_its_interval_covers() {
-        // Work of ray i: a pattern with a strong trend, so a fixed offset would be biased.
+        // Work of ray i: a pattern with a strong trend, so a fixed offset would be biased. With
+        // the blocks' draws fixed, the frames' offsets take every ray once.
         let work = |i: usize| ((i * 37) % 101 + i / 50) as u64;
         let n = 5000;
         let truth = (0..n).map(|i| work(i) as f64).sum::<f64>() / n as f64;
@@ -630,6 +688,7 @@ mod tests {
         for offset in 0..SAMPLE_STRIDE {
             let mut s = RaySample {
                 offset,
+                jitter: 7,
                 ..RaySample::default()
             };
             for i in s.take(n).collect::<Vec<_>>() {

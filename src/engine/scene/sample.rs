@@ -12,7 +12,8 @@ use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{Counters, MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
 use crate::engine::ray_work::{
-    MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate, splitmix,
+    MeshSample, Query, RaySample, SAMPLE_STRIDE, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
+    splitmix,
 };
 use crate::geom::{Hit, Ray};
 use rayon::prelude::*;
@@ -143,16 +144,15 @@ impl Engine {
             return;
         };
         let (before, log) = self.open_log();
-        let first = plan.first.min(rays.len());
-        let sampled = (rays.len() - first).div_ceil(plan.stride);
-        let per_task = RAY_CHUNK / 16;
+        // Rays spanned by one task: about `RAY_CHUNK / 16` of them sampled.
+        let span = RAY_CHUNK / 16 * SAMPLE_STRIDE as usize;
         let this = &*self;
-        (0..sampled.div_ceil(per_task))
+        (0..rays.len().div_ceil(span))
             .into_par_iter()
             .for_each(|c| {
                 let mut buf = TaskBuf::new(&log);
-                for j in c * per_task..((c + 1) * per_task).min(sampled) {
-                    let t = this.trace_recording(&rays[first + j * plan.stride], query, &mut |e| {
+                for j in plan.picks(c * span, (c + 1) * span) {
+                    let t = this.trace_recording(&rays[j], query, &mut |e| {
                         buf.push(e);
                     });
                     buf.sums.add(t.work, t.top);
@@ -189,10 +189,7 @@ impl Engine {
         let pass = Instant::now();
         // Nothing to sample (no mesh moved, or the batch ends before its first sampled ray):
         // the plain pass.
-        let Some(plan) = self
-            .begin_sample(rays.len())
-            .filter(|p| p.first < rays.len())
-        else {
+        let Some(plan) = self.begin_sample(rays.len()).filter(|p| !p.is_empty()) else {
             let this = &*self;
             out.par_chunks_mut(RAY_CHUNK)
                 .zip(rays.par_chunks(RAY_CHUNK))
@@ -214,23 +211,24 @@ impl Engine {
             .enumerate()
             .for_each(|(c, (o, chunk))| {
                 let base = c * size;
-                let first = plan.next_from(base) - base;
+                let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
                 let mut buf = TaskBuf::new(&log);
                 // The plain rays first, then the sampled ones back to back: a sampled ray's
                 // longer walk then runs in code and branch history that are warm, not once
                 // among every `stride` plain ones.
                 let start = Instant::now();
-                let mut next = first;
+                let mut skip = picks.clone();
+                let mut next = skip.next().unwrap_or(usize::MAX);
                 for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
                     if j == next {
-                        next += plan.stride;
+                        next = skip.next().unwrap_or(usize::MAX);
                         continue;
                     }
                     *o = plain(this, r);
                 }
                 let mid = Instant::now();
                 let mut recorded_n = 0;
-                for j in (first..chunk.len()).step_by(plan.stride) {
+                for j in picks {
                     let t = this.trace_recording(&chunk[j], query, &mut |e| buf.push(e));
                     buf.sums.add(t.work, t.top);
                     o[j] = recorded(&t);
