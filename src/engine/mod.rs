@@ -13,6 +13,7 @@ pub mod routine;
 mod scene;
 pub mod source;
 pub mod stats;
+pub mod watch;
 
 pub use policy::{Action, Decision, ParsePolicyError, Policy};
 pub use prices::Prices;

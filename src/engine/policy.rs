@@ -9,7 +9,8 @@
 //!   trees; a rebuild whose tree the replay finds worse is dropped in the same frame (a trial),
 //!   and each kept one is judged by what it saved ([`Payback`]); a rebuild that costs under a
 //!   small share of the mesh's trace is made every frame, checked by a trial now and then
-//!   ([`super::routine`]);
+//!   ([`super::routine`]); frames that cannot make an action due go unsampled
+//!   ([`super::watch`]);
 //! - **SAH**: the degradation is the refitted tree's SAH over a fresh build's, estimated by
 //!   [`super::estimate::FreshSah`]; rebuilds are probed (the mesh goes back to the replaced
 //!   tree if it is better again before the rebuild has paid).
@@ -19,6 +20,7 @@
 //! without rays or degradation. `amortized-plain` is that rule without estimate, calibration or
 //! probation. The sweeps behind the default: `docs/policy_sweep.md`, `docs/ray_work.md`.
 use super::routine::{ROUTINE_REBUILD_SHARE, Routine};
+use super::watch::{MIN_PLANNED_DEGRADATION, Watch};
 use std::fmt;
 use std::str::FromStr;
 
@@ -362,6 +364,10 @@ pub struct PolicyState {
     pub routine: Routine,
     /// What the last rebuild's replays cost (ms, part of `rebuild_ms`).
     pub replay_ms: f64,
+    /// The frames the mesh's rays are sampled on.
+    pub watch: Watch,
+    /// Frames traced without a sample since the last sampled one.
+    pub unsampled: u32,
 }
 
 /// A rebuild being judged by what it saved: each frame the new tree's extra trace time is
@@ -411,6 +417,8 @@ impl Default for PolicyState {
             payback: None,
             routine: Routine::default(),
             replay_ms: 0.0,
+            watch: Watch::default(),
+            unsampled: 0,
         }
     }
 }
@@ -494,23 +502,9 @@ impl PolicyState {
     /// pay for itself before it: `recovery(a) * frame_extra * frames_left > cost(a)` (what it
     /// saves each frame, were the degradation to stay as it is, over the frames left).
     fn choose(&self, policy: Policy) -> Decision {
-        let rebuild = (Decision::Rebuild, 1.0, self.rebuild_ms * self.rebuild_scale);
-        let rung = |d: Decision| {
-            let m = self.rungs[d.rung().unwrap_or(0)];
-            (d, f64::from(m.recovery), m.cost_ms)
-        };
-        let options: &[(Decision, f64, f64)] = match policy {
-            Policy::Optimize(b) => &[rung(Decision::Optimize(b))],
-            Policy::Partial(b) => &[rung(Decision::Partial(b))],
-            Policy::Ladder => &[
-                rung(Decision::Optimize(LADDER_OPTIMIZE)),
-                rung(Decision::Partial(LADDER_PARTIAL)),
-                rebuild,
-            ],
-            _ => &[rebuild],
-        };
+        let (options, n) = self.options(policy);
         let mut best = (Decision::Refit, 0.0);
-        for &(d, recovery, cost) in options {
+        for &(d, recovery, cost) in &options[..n] {
             let won = match self.frames_left {
                 Some(left) => self.extra_ms.min(self.frame_extra_ms * left as f64),
                 None => self.extra_ms,
@@ -526,6 +520,59 @@ impl PolicyState {
         }
     }
 
+    /// The actions the amortized rule weighs under `policy`, each with its recovery and cost
+    /// (the first `n` of the array).
+    fn options(&self, policy: Policy) -> ([(Decision, f64, f64); 3], usize) {
+        let rebuild = (Decision::Rebuild, 1.0, self.rebuild_ms * self.rebuild_scale);
+        let rung = |d: Decision| {
+            let m = self.rungs[d.rung().unwrap_or(0)];
+            (d, f64::from(m.recovery), m.cost_ms)
+        };
+        match policy {
+            Policy::Optimize(b) => ([rung(Decision::Optimize(b)), rebuild, rebuild], 1),
+            Policy::Partial(b) => ([rung(Decision::Partial(b)), rebuild, rebuild], 1),
+            Policy::Ladder => (
+                [
+                    rung(Decision::Optimize(LADDER_OPTIMIZE)),
+                    rung(Decision::Partial(LADDER_PARTIAL)),
+                    rebuild,
+                ],
+                3,
+            ),
+            _ => ([rebuild, rebuild, rebuild], 1),
+        }
+    }
+
+    /// After a decision that read a fresh sample (ray-work measure): plans the frames the
+    /// mesh's rays can go without one ([`Watch`]): the room is the extra trace time still
+    /// missing before the cheapest action is due (a rebuild at its own cost, not the bar failed
+    /// rebuilds have raised: the next rebuild that pays lowers it again), the rate twice the
+    /// last frame's extra and at least [`MIN_PLANNED_DEGRADATION`] of the frame's whole trace
+    /// `frame_ms` (the mesh's own share, from the entries of a few sampled rays, can read
+    /// next to nothing on one frame and most of the trace on the next). `needed`, a rebuild
+    /// being judged and rebuilds within twice the routine share of the frame's trace sample
+    /// this frame whatever the room.
+    pub fn plan_sample(&mut self, policy: Policy, needed: bool, frame_ms: f64, sah_ratio: f32) {
+        let (options, n) = self.options(policy);
+        let due = options[..n]
+            .iter()
+            .map(|&(d, recovery, cost)| match d {
+                Decision::Rebuild => self.rebuild_ms,
+                _ => cost / recovery.max(1e-6),
+            })
+            .fold(f64::INFINITY, f64::min);
+        let rate = (2.0 * self.frame_extra_ms).max(MIN_PLANNED_DEGRADATION * frame_ms);
+        let near_routine =
+            self.rebuild_ms - self.replay_ms < 2.0 * ROUTINE_REBUILD_SHARE * frame_ms;
+        self.watch.plan(
+            needed || near_routine || self.payback.is_some(),
+            due - self.extra_ms,
+            rate,
+            self.since_build,
+            sah_ratio,
+        );
+    }
+
     /// [`PolicyState::after_refit`] under the ray-work measure, whose degradation `raw` is a
     /// sampled ratio with noise either side of the truth: `amortized` sums the extra trace time
     /// with its sign (kept at or above zero), so that noise cancels instead of adding up as if
@@ -539,8 +586,13 @@ impl PolicyState {
             | Policy::Async => {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
+                let last = self.frame_extra_ms;
                 self.frame_extra_ms = fresh_ms * degradation;
-                self.extra_ms = (self.extra_ms + self.frame_extra_ms).max(0.0);
+                // The frames traced without a sample since the last one: between the two
+                // sampled frames' extra times.
+                let gap = f64::from(std::mem::take(&mut self.unsampled));
+                let filled = gap * 0.5 * (last + self.frame_extra_ms);
+                self.extra_ms = (self.extra_ms + filled + self.frame_extra_ms).max(0.0);
                 self.judge_payback();
                 let cheap = matches!(policy, Policy::Amortized | Policy::Ladder)
                     && self.rebuild_ms - self.replay_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
@@ -551,6 +603,15 @@ impl PolicyState {
             }
             _ => self.after_refit(policy, judged, raw),
         }
+    }
+
+    /// A frame whose rays were not sampled ([`Watch`]; ray-work measure): nothing new to weigh.
+    /// Its extra trace time is counted at the next sampled frame, between the ratios on either
+    /// side: carrying the last one forward would count a passing degradation for every frame of
+    /// the gap.
+    pub fn after_refit_unsampled(&mut self, policy: Policy) -> Decision {
+        self.unsampled += 1;
+        self.choose(policy)
     }
 
     /// Starts judging the rebuild just made (cost `cost_ms`) against the degradation the
@@ -642,6 +703,7 @@ impl PolicyState {
         self.rebuild_ms = ms;
         self.traced_ratio = 1.0;
         self.payback = None;
+        self.unsampled = 0;
     }
 }
 

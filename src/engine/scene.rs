@@ -771,6 +771,8 @@ impl Engine {
             trials,
             spare: self.keeps_spare(),
             entries: if replay { &self.entries } else { &[] },
+            sampled: replay,
+            watched: rays_cost && PolicyState::needs_fresh_ratio(policy),
             workspace: &mut self.workspace,
             restructure: &mut self.restructure,
             background: &mut self.background,

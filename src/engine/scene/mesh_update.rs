@@ -64,6 +64,11 @@ pub(super) struct FrameContext<'a> {
     /// The previous frame's sampled entries, replayed on the trees an action replaces and
     /// makes; empty when there is no sample of the previous frame or the SAH measures.
     pub entries: &'a [SampleEntry],
+    /// The previous frame was sampled: the policy decides on a fresh sample.
+    pub sampled: bool,
+    /// Frames the policy's action cannot become due on go unsampled
+    /// ([`crate::engine::watch`]).
+    pub watched: bool,
     pub workspace: &'a mut BuildWorkspace,
     pub restructure: &'a mut Restructure,
     pub background: &'a mut Background,
@@ -115,6 +120,9 @@ impl MeshEntry {
         self.stats.measured_work_ratio = 0.0;
         self.stats.refit_ms = 0.0;
         self.stats.rebuild_ms = 0.0;
+        // The last frame went unsampled by this mesh's plan (not for want of rays): the policy
+        // has nothing new to weigh ([`crate::engine::watch`]).
+        let gap = cx.watched && !cx.sampled && !self.state.watch.due();
         let swapped = self.swap_in_background_tree(id, cx);
         out.swapped = swapped;
         self.state.frames_left = cx.frames_left;
@@ -129,11 +137,21 @@ impl MeshEntry {
             _ => {
                 let t = Instant::now();
                 out.reverted = self.refit(cx);
-                let (decision, raw) = self.observe_and_decide(cx, early, ms_since(t));
+                let (decision, raw) = self.observe_and_decide(cx, early, gap, ms_since(t));
                 self.stats.refit_ms = ms_since(t);
                 (decision, raw)
             }
         };
+        // An action decided in a gap waits for a sample of its own (its trial replays the
+        // previous frame's rays).
+        if gap && early.is_none() && decision != Decision::Refit {
+            self.watch(cx, gap);
+            self.state.watch.now();
+            self.follow_wide(out.reverted, cx);
+            self.stats.action = Action::Refit;
+            self.stats.sah = self.sah;
+            return out;
+        }
         let refitted = early != Some(Decision::Rebuild);
         let mut action = Action::from(decision);
         match decision {
@@ -171,9 +189,26 @@ impl MeshEntry {
         if swapped && action == Action::Refit {
             action = Action::AsyncSwap;
         }
+        self.watch(cx, gap);
         self.stats.action = action;
         self.stats.sah = self.sah;
         out
+    }
+
+    /// Plans the frames the mesh's rays go unsampled after a fresh sample, or counts one of
+    /// them down in a `gap` ([`crate::engine::watch`]); a new tree's reference and routine
+    /// rebuilds want this frame's sample.
+    fn watch(&mut self, cx: &FrameContext<'_>, gap: bool) {
+        if !cx.watched {
+            return;
+        }
+        let needed = self.degradation.ratio().is_none() || self.state.routine.now;
+        if cx.sampled {
+            self.state
+                .plan_sample(cx.policy, needed, cx.frame_trace_ms, self.stats.sah_ratio);
+        } else if gap {
+            self.state.watch.tick(needed, self.stats.sah_ratio);
+        }
     }
 
     /// Swaps in the tree the background worker finished for this mesh, if it has: its policy
@@ -214,12 +249,14 @@ impl MeshEntry {
     }
 
     /// Measures the refitted tree's degradation (SAH ratio, fresh-build estimate, ray-work
-    /// ratio) and asks the policy (unless it decided before the refit). Returns the decision
-    /// and the ray-work ratio before calibration (what a rebuild's replay checks).
+    /// ratio) and asks the policy (unless it decided before the refit; in a sampling `gap`, with
+    /// nothing new to weigh). Returns the decision and the ray-work ratio before calibration
+    /// (what a rebuild's replay checks).
     fn observe_and_decide(
         &mut self,
         cx: &FrameContext<'_>,
         early: Option<Decision>,
+        gap: bool,
         refit_ms: f64,
     ) -> (Decision, f32) {
         let tris = self.indices.len();
@@ -268,7 +305,11 @@ impl MeshEntry {
         }
         self.set_rung_priors(cx);
         let d = if cx.ray_judged {
-            self.state.after_refit_sampled(cx.policy, judged, fresh)
+            if gap {
+                self.state.after_refit_unsampled(cx.policy)
+            } else {
+                self.state.after_refit_sampled(cx.policy, judged, fresh)
+            }
         } else {
             self.state.after_refit(cx.policy, judged, fresh)
         };

@@ -254,15 +254,22 @@ impl Engine {
     }
 
     /// The frame's sample plan for a batch of `n` rays, starting a new sample at a new frame;
-    /// `None` (nothing sampled) when no mesh of more than one leaf was refitted or rebuilt.
+    /// `None` (nothing sampled) when no mesh of more than one leaf was refitted or rebuilt
+    /// whose policy wants this frame's sample.
     fn begin_sample(&mut self, n: usize) -> Option<SamplePlan> {
         if self.sample.frame != self.frame {
             // Nothing was refitted or rebuilt (or only trees of one leaf, which cannot
-            // degrade): no policy has anything to weigh, unless a mesh was added since the
-            // last sample (its fresh tree's work is the ray-work measure's reference for its
+            // degrade), or no policy can act before a later sample
+            // ([`crate::engine::watch`]): no policy has anything to weigh, unless a mesh was
+            // added since the last sample (its fresh tree's work is the ray-work measure's reference for its
             // first refits). Once a frame's sample has begun, every batch of the frame is
             // sampled.
-            if !self.unsampled_meshes && !self.meshes.iter().any(|m| m.moved && !m.one_leaf()) {
+            if !self.unsampled_meshes
+                && !self
+                    .meshes
+                    .iter()
+                    .any(|m| m.moved && !m.one_leaf() && m.state.watch.due())
+            {
                 return None;
             }
             self.unsampled_meshes = false;
