@@ -957,6 +957,65 @@ mod tests {
     }
 
     #[test]
+    fn frames_that_cannot_make_a_rebuild_due_go_unsampled_and_count_between_the_samples() {
+        // A 50 ms rebuild against 100 ms of trace a frame; the tree 2% degraded, 20 frames old.
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, 50.0);
+        s.since_build = 20;
+        s.trace_share_ms = 100.0;
+        s.traced_ratio = 1.02;
+        assert_eq!(
+            s.after_refit_sampled(Policy::Amortized, 1.02, 1.02),
+            Decision::Refit
+        );
+        let extra = s.extra_ms;
+        // The rate planned for is 5% of the frame's trace (above twice the 2% seen): 5 ms a
+        // frame against about 48 ms of room: 8 frames before the next sample (the cap too;
+        // 9.6 frames of room, less the sampled one). (The SAH ratio was 1.1 on
+        // the sampled frame too.)
+        s.watch.tick(false, 1.1);
+        s.plan_sample(Policy::Amortized, false, 100.0, 1.1);
+        let gap: Vec<bool> = (0..10)
+            .map(|_| {
+                let due = s.watch.due();
+                if !due {
+                    s.watch.tick(false, 1.1);
+                }
+                due
+            })
+            .collect();
+        assert_eq!(gap.iter().take_while(|&&d| !d).count(), 8, "{gap:?}");
+        // Eight frames without a sample add nothing; the next sampled frame (4% now) adds
+        // them at the mean of the extra times on either side, and its own.
+        for _ in 0..8 {
+            assert_eq!(s.after_refit_unsampled(Policy::Amortized), Decision::Refit);
+        }
+        assert_eq!(s.extra_ms, extra);
+        let before = s.frame_extra_ms;
+        s.after_refit_sampled(Policy::Amortized, 1.04, 1.04);
+        let filled = 8.0 * 0.5 * (before + s.frame_extra_ms) + s.frame_extra_ms;
+        assert!(
+            (s.extra_ms - (extra + filled)).abs() < 1e-9,
+            "{}",
+            s.extra_ms
+        );
+        // Near the rebuild's cost, every frame is sampled; so it is for a young tree's first
+        // frames, a rebuild being judged, and a rebuild near the routine share.
+        s.extra_ms = 48.0;
+        s.plan_sample(Policy::Amortized, false, 100.0, 1.1);
+        assert!(s.watch.due());
+        s.extra_ms = 0.0;
+        s.since_build = 1;
+        s.plan_sample(Policy::Amortized, false, 100.0, 1.1);
+        s.watch.tick(false, 1.1);
+        assert!(s.watch.due(), "a tree one frame old: one frame at most");
+        s.since_build = 20;
+        s.rebuild_ms = 8.0;
+        s.plan_sample(Policy::Amortized, false, 100.0, 1.1);
+        assert!(s.watch.due(), "within twice the routine share");
+    }
+
+    #[test]
     fn failed_rebuilds_raise_the_bar_and_paid_ones_lower_it() {
         let mut s = PolicyState::default();
         s.rebuilt(1.0, 1.0, 10.0);
