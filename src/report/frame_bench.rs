@@ -1394,10 +1394,23 @@ fn modelled_table(r: &Report) -> String {
         .map(|q| q.sample_share_modelled)
         .fold(0.0, f64::max);
     if !share.is_empty() {
-        let mean_ci = mean(r.per_frame.iter().map(|x| x.work_ci95_rel));
+        // Over the sampled frames only (an unsampled frame has no interval).
+        let mean_ci = mean(
+            r.per_frame
+                .iter()
+                .map(|x| x.work_ci95_rel)
+                .filter(|&c| c > 0.0),
+        );
+        // The default policy samples only the frames on which it could act (`engine::watch`).
+        let default = r.policies.iter().find(|q| q.default).map(|q| &q.policy);
+        let frames = r.per_frame.iter().filter(|x| Some(&x.policy) == default);
+        let (sampled, all) = frames.fold((0, 0), |(k, n), x| {
+            (k + usize::from(x.model_sample_ms > 0.0), n + 1)
+        });
         s.push_str(&format!(
-            "ray sample: 1 ray in {SAMPLE_STRIDE}, taken in the trace's own pass: {:.2}% of its \
-             wall-clock time (largest over the policies; {:.2}% modelled); mean work per ray known to +-{:.1}% (95%)\n",
+            "ray sample: 1 ray in {SAMPLE_STRIDE}, taken in the trace's own pass (the default \
+             policy's on {sampled} of {all} frames): {:.2}% of its wall-clock time (largest over \
+             the policies; {:.2}% modelled); mean work per ray known to +-{:.1}% (95%)\n",
             100.0 * share.iter().copied().fold(0.0, f64::max),
             100.0 * modelled,
             100.0 * mean_ci

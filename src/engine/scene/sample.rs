@@ -261,9 +261,9 @@ impl Engine {
             // Nothing was refitted or rebuilt (or only trees of one leaf, which cannot
             // degrade), or no policy can act before a later sample
             // ([`crate::engine::watch`]): no policy has anything to weigh, unless a mesh was
-            // added since the last sample (its fresh tree's work is the ray-work measure's reference for its
-            // first refits). Once a frame's sample has begun, every batch of the frame is
-            // sampled.
+            // added since the last sample (its fresh tree's work is the ray-work measure's
+            // reference for its first refits). Once a frame's sample has begun, every batch of
+            // the frame is sampled.
             if !self.unsampled_meshes
                 && !self
                     .meshes
