@@ -328,7 +328,9 @@ impl Engine {
         }
     }
 
-    /// The ray-work sample of the frame traced since the last update (empty before any).
+    /// The ray-work sample of the frame traced since the last update (empty before any, and
+    /// on a frame nothing was sampled in: under the ray-work measure `amortized` and the ladder
+    /// sample only the frames on which they could act, [`crate::engine::watch`]).
     #[must_use]
     pub fn work_estimate(&self) -> WorkEstimate {
         self.current(|e| e.sample.estimate())
