@@ -605,13 +605,15 @@ impl PolicyState {
         }
     }
 
-    /// A frame whose rays were not sampled ([`Watch`]; ray-work measure): nothing new to weigh.
-    /// Its extra trace time is counted at the next sampled frame, between the ratios on either
-    /// side: carrying the last one forward would count a passing degradation for every frame of
-    /// the gap.
-    pub fn after_refit_unsampled(&mut self, policy: Policy) -> Decision {
+    /// A frame in a sampling gap ([`Watch`]; ray-work measure): nothing new to weigh, so the
+    /// last sampled frame's decision to refit stands (the gap was planned so that no action
+    /// can become due in it; an action is only ever taken on a fresh sample, which its trial
+    /// replays). The frame's extra trace time is counted at the next sampled frame, between
+    /// the ratios on either side: carrying the last one forward would count a passing
+    /// degradation for every frame of the gap.
+    pub fn after_refit_unsampled(&mut self) -> Decision {
         self.unsampled += 1;
-        self.choose(policy)
+        Decision::Refit
     }
 
     /// Starts judging the rebuild just made (cost `cost_ms`) against the degradation the
@@ -988,7 +990,7 @@ mod tests {
         // Eight frames without a sample add nothing; the next sampled frame (4% now) adds
         // them at the mean of the extra times on either side, and its own.
         for _ in 0..8 {
-            assert_eq!(s.after_refit_unsampled(Policy::Amortized), Decision::Refit);
+            assert_eq!(s.after_refit_unsampled(), Decision::Refit);
         }
         assert_eq!(s.extra_ms, extra);
         let before = s.frame_extra_ms;

@@ -142,16 +142,6 @@ impl MeshEntry {
                 (decision, raw)
             }
         };
-        // An action decided in a gap waits for a sample of its own (its trial replays the
-        // previous frame's rays).
-        if gap && early.is_none() && decision != Decision::Refit {
-            self.watch(cx, gap);
-            self.state.watch.now();
-            self.follow_wide(out.reverted, cx);
-            self.stats.action = Action::Refit;
-            self.stats.sah = self.sah;
-            return out;
-        }
         let refitted = early != Some(Decision::Rebuild);
         let mut action = Action::from(decision);
         match decision {
@@ -306,7 +296,7 @@ impl MeshEntry {
         self.set_rung_priors(cx);
         let d = if cx.ray_judged {
             if gap {
-                self.state.after_refit_unsampled(cx.policy)
+                self.state.after_refit_unsampled()
             } else {
                 self.state.after_refit_sampled(cx.policy, judged, fresh)
             }
