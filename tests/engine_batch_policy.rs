@@ -58,9 +58,9 @@ fn rebuilds(file: &str, casting: Casting) -> u32 {
 
 #[test]
 fn batch_only_callers_get_rebuilds_from_the_default_policy() {
-    // On `wave.glb` the any-hit rays stop at the first crest they meet: the refitted tree costs
-    // them within a few per cent of a fresh one either way, and whether they rebuild within 24
-    // frames turns on the sample's noise, not on the batch they come in.
+    // On `wave.glb` the any-hit rays stop at the first crest they meet, so the refitted tree
+    // costs them about what a fresh one does: whether they rebuild there turns on the sample's
+    // noise, not on the batch they come in (`docs/ray_work.md`).
     let closest = [Casting::Closest, Casting::ClosestPackets];
     for (file, castings) in [
         (

@@ -3,16 +3,17 @@
 //! while an action could become due: after each frame that brought a sample, the policy knows
 //! the room left before its cheapest action is due (what the action costs, less the extra trace
 //! time counted so far) and bounds how fast that extra grows; the frames that cannot make the
-//! action due are traced without a sample, at most [`MAX_SAMPLE_GAP`] in a row, and the last
-//! sampled degradation stands for them. A rise of the refitted tree's SAH ratio (known after
+//! action due are traced without a sample, at most [`MAX_SAMPLE_GAP`] in a row; the mesh is
+//! refitted on them, and their extra trace time is counted at the next sample, between the
+//! degradations sampled on either side. A rise of the refitted tree's SAH ratio (known after
 //! every refit, at no cost) ends a gap early, as does anything the policy needs a fresh sample
 //! for (a new tree's reference, a rebuild being judged, routine rebuilds).
 
 /// Most frames in a row traced without a sample.
 pub const MAX_SAMPLE_GAP: u32 = 8;
 
-/// The least degradation a gap is planned for (share of the fresh tree's trace a frame), so
-/// that a mesh whose sampled ratio reads no degradation is still sampled every few frames.
+/// The least degradation a gap is planned for (share of the frame's whole trace), so that a
+/// mesh whose sampled ratio reads no degradation is still sampled every few frames.
 pub const MIN_PLANNED_DEGRADATION: f64 = 0.05;
 
 /// A rise of the SAH ratio (to the last build) over its value when the gap began that ends it.
@@ -71,11 +72,6 @@ impl Watch {
             self.skip = 0;
         }
         self.last_sah_ratio = sah_ratio;
-    }
-
-    /// Samples this frame.
-    pub fn now(&mut self) {
-        self.skip = 0;
     }
 }
 
