@@ -99,9 +99,13 @@ pub struct BenchArgs {
     open_ended: bool,
     /// Build each deforming mesh's first tree for the whole clip from this many poses spread
     /// over the frames (`MeshBvh::build_clip_aware`); 0: a plain build of frame 0. The
-    /// policies' rebuilds stay plain builds.
+    /// policies' rebuilds stay plain builds unless `--clip-rebuilds`.
     #[arg(long, allow_negative_numbers = true, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=dynbvh::bvh::build::clip::MAX_POSES as u64))]
     clip_aware: u64,
+    /// With `--clip-aware K`: every rebuild is clip-aware too, for the pose it is made at and
+    /// the sampled poses after it (priced as such; the oracle's rebuilds likewise).
+    #[arg(long, requires = "clip_aware")]
+    clip_rebuilds: bool,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
     repeats: u64,
@@ -230,8 +234,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 a.limits
                     .check_frames(&format!("--fps {fps} over the animation's {d} s"), n)?;
             }
-            let mut src =
-                GltfSource::new(&scene, anim, times)?.with_clip_aware(a.clip_aware as usize);
+            let mut src = GltfSource::new(&scene, anim, times)?
+                .with_clip_aware(a.clip_aware as usize)
+                .with_clip_rebuilds(a.clip_rebuilds);
             run_frames(&mut src, range, &opts)?
         }
         (None, Some(n)) => {
@@ -488,7 +493,9 @@ fn sweep(a: &BenchArgs, opts: &Options, times: FrameTimes) -> Result<()> {
                 }
             }
             let mut src = match GltfSource::new(&scene, Some(anim), times) {
-                Ok(s) => s.with_clip_aware(a.clip_aware as usize),
+                Ok(s) => s
+                    .with_clip_aware(a.clip_aware as usize)
+                    .with_clip_rebuilds(a.clip_rebuilds),
                 Err(e) => {
                     eprintln!("{label}: FAILED: {e}");
                     failed.push(SweepFailure {

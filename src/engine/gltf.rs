@@ -73,6 +73,7 @@ pub struct GltfSource<'s> {
     deforming: Vec<MeshId>,
     /// Poses a deforming mesh's first tree is built for (0: a plain build of frame 0).
     clip_poses: usize,
+    clip_rebuilds: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -145,17 +146,30 @@ impl<'s> GltfSource<'s> {
             plan: Vec::new(),
             deforming: Vec::new(),
             clip_poses: 0,
+            clip_rebuilds: false,
         })
     }
 
-    /// Builds each deforming mesh's first tree (an engine built at frame 0) for the whole
-    /// replay: from `poses` poses at frame times spread evenly over it, first and last included
-    /// ([`Engine::build_for_clip`]; at most [`crate::bvh::build::clip::MAX_POSES`] are used).
-    /// Engines built at later frames get plain builds, as the policies' rebuilds do. 0 (the
-    /// default): a plain build of frame 0.
+    /// Builds each deforming mesh's first tree (an engine built at frame 0) for the clip:
+    /// `poses` frames are sampled evenly over the replay, first and last included (at most
+    /// [`crate::bvh::build::clip::MAX_POSES`]), and the tree is built for them
+    /// ([`Engine::build_for_clip`]). Later rebuilds stay plain unless
+    /// [`GltfSource::with_clip_rebuilds`]. 0 (the default): plain builds throughout.
     #[must_use]
     pub fn with_clip_aware(mut self, poses: usize) -> Self {
         self.clip_poses = poses;
+        self
+    }
+
+    /// With [`GltfSource::with_clip_aware`]: the policies' rebuilds are clip-aware too. An
+    /// engine built at frame `b` builds each deforming mesh's tree for pose `b` and the
+    /// sampled poses after it, and is given those poses ([`Engine::set_clip_ahead`]), so that
+    /// each rebuild at a later frame is built the same way (the oracle's trees, built at every
+    /// frame, are then the policies' rebuilds). Once no sampled pose is ahead, builds are
+    /// plain.
+    #[must_use]
+    pub fn with_clip_rebuilds(mut self, yes: bool) -> Self {
+        self.clip_rebuilds = yes;
         self
     }
 
@@ -238,28 +252,40 @@ impl<'s> GltfSource<'s> {
 }
 
 impl GltfSource<'_> {
-    /// Poses the deforming meshes `posed` (mesh, instance) at the clip's sampled frames and
-    /// rebuilds their trees for them; leaves the poser at `frame`.
+    /// Poses the deforming meshes `posed` (mesh, instance) at the clip's sampled frames after
+    /// `frame`, builds their trees for `frame` and those poses, and with clip-aware rebuilds
+    /// gives the engine the poses for them; leaves the poser at `frame`. The engine has not been updated
+    /// yet (its first update takes in `frame`).
     fn build_for_clip(&mut self, engine: &mut Engine, posed: &[(MeshId, usize)], frame: usize) {
         let last = self.times.len() - 1;
         let k = self
             .clip_poses
             .min(crate::bvh::build::clip::MAX_POSES)
             .min(last + 1);
-        let mut poses: Vec<Vec<Vec<Vec3>>> = vec![Vec::with_capacity(k); posed.len()];
-        for j in 0..k {
-            let f = if k == 1 { frame } else { j * last / (k - 1) };
-            self.poser.pose(self.times[f]);
+        let sampled = (0..k).map(|j| if k == 1 { 0 } else { j * last / (k - 1) });
+        let ahead: Vec<usize> = sampled.filter(|&s| s > frame).collect();
+        if ahead.is_empty() {
+            return;
+        }
+        let mut poses: Vec<Vec<(u64, Vec<Vec3>)>> = vec![Vec::with_capacity(k); posed.len()];
+        for &s in &ahead {
+            self.poser.pose(self.times[s]);
             for (p, &(_, i)) in poses.iter_mut().zip(posed) {
-                p.push(self.poser.positions(i).to_vec());
+                p.push(((s - frame + 1) as u64, self.poser.positions(i).to_vec()));
             }
         }
         self.poser.pose(self.times[frame]);
-        for (p, &(mesh, _)) in poses.iter().zip(posed) {
-            let views: Vec<&[Vec3]> = p.iter().map(Vec::as_slice).collect();
-            // The poses come from the mesh's own instance: the counts agree.
+        for (p, &(mesh, i)) in poses.into_iter().zip(posed) {
+            let mut views: Vec<&[Vec3]> = vec![self.poser.positions(i)];
+            views.extend(p.iter().map(|(_, q)| q.as_slice()));
+            // The poses come from the mesh's own instance: the counts agree, and the updates
+            // ahead are at least 2.
             let built = engine.build_for_clip(mesh, &views);
             debug_assert!(built.is_ok(), "{built:?}");
+            if self.clip_rebuilds {
+                let set = engine.set_clip_ahead(mesh, p);
+                debug_assert!(set.is_ok(), "{set:?}");
+            }
         }
     }
 }
@@ -304,9 +330,9 @@ impl FrameSource for GltfSource<'_> {
                 InstanceClass::Static => Plan::Static,
             });
         }
-        // Only the replay's first tree: an engine built at a later frame stands for a rebuild
-        // there (as the oracle builds them), and the policies' rebuilds are plain builds.
-        if self.clip_poses > 0 && frame == 0 && !posed.is_empty() {
+        // An engine built at a later frame stands for a rebuild there (as the oracle builds
+        // them): built as the policies' rebuilds are.
+        if self.clip_poses > 0 && (frame == 0 || self.clip_rebuilds) && !posed.is_empty() {
             self.build_for_clip(&mut engine, &posed, frame);
         }
         engine.update();

@@ -36,6 +36,16 @@ pub struct Prices {
     /// (the counters and its entries kept), ns.
     #[serde(default = "default_sample")]
     pub sample_ns_per_ray: f64,
+    /// What a clip-aware rebuild for `k` sampled poses costs beyond a plain one, in plain
+    /// rebuilds per `k^2` (each reference's box grows into every pose's bins for every pose it
+    /// is binned in): a share of the rebuild's price, so that it holds with the prices of
+    /// another machine.
+    #[serde(default = "default_clip")]
+    pub clip_rebuild_share_per_pose2: f64,
+}
+
+fn default_clip() -> f64 {
+    Prices::default().clip_rebuild_share_per_pose2
 }
 
 fn default_sample() -> f64 {
@@ -64,6 +74,7 @@ impl Default for Prices {
             restructure_ns_per_tri: 40.0,
             optimize_ns_per_visit: 30.0,
             sample_ns_per_ray: 40.0,
+            clip_rebuild_share_per_pose2: 1.0,
         }
     }
 }
@@ -86,6 +97,14 @@ impl Prices {
     #[must_use]
     pub fn rebuild_ms(&self, tris: usize) -> f64 {
         self.rebuild_ns_per_tri_log * rebuild_units(tris) * 1e-6
+    }
+
+    /// Modelled clip-aware rebuild of a mesh of `tris` triangles for `poses` sampled poses
+    /// ([`crate::bvh::MeshBvh::rebuild_clip_aware`]; a plain rebuild with fewer than one), ms.
+    #[must_use]
+    pub fn clip_rebuild_ms(&self, tris: usize, poses: usize) -> f64 {
+        let k = poses as f64;
+        self.rebuild_ms(tris) * (1.0 + self.clip_rebuild_share_per_pose2 * k * k)
     }
 
     /// Modelled optimisation of a mesh of `tris` triangles whose searches looked at `visits`
@@ -147,6 +166,7 @@ impl Prices {
             p.trace_ns_per_tri,
             p.restructure_ns_per_tri,
             p.optimize_ns_per_visit,
+            p.clip_rebuild_share_per_pose2,
         ];
         if all.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(crate::Error::malformed(
@@ -192,6 +212,23 @@ impl Prices {
             bvh.rebuild_indexed(pos, idx, &build, &mut ws);
             wide.collapse_from(&bvh);
         });
+        // A clip-aware rebuild for four poses (the sphere squashed along each axis in turn),
+        // beyond the plain one.
+        let squashed: Vec<Vec<Vec3>> = (0..CLIP_POSES)
+            .map(|k| {
+                let s = Vec3::ONE + 0.5 * Vec3::AXES[k % 3] * (1.0 + k as f32);
+                pos.iter().map(|&p| p * s).collect()
+            })
+            .collect();
+        let views: Vec<&[Vec3]> = squashed.iter().map(Vec::as_slice).collect();
+        let mut clip = crate::bvh::build::clip::ClipPoses::default();
+        let clip_ms = median_cpu_ms(passes, || {
+            bvh.rebuild_clip_aware(pos, idx, &views, &build, &mut ws, &mut clip);
+            wide.collapse_from(&bvh);
+        });
+        let k2 = (CLIP_POSES * CLIP_POSES) as f64;
+        let clip_share = ((clip_ms - rebuild) / (k2 * rebuild)).max(1e-3);
+        bvh.rebuild_indexed(pos, idx, &build, &mut ws);
         let mut fresh = super::estimate::FreshSah::new(n, build.max_leaf_size);
         let estimate = median_cpu_ms(passes, || {
             std::hint::black_box(fresh.estimate(pos, idx));
@@ -258,9 +295,13 @@ impl Prices {
             restructure_ns_per_tri: restructure_ns,
             optimize_ns_per_visit: visit_ns,
             sample_ns_per_ray: sample_ns,
+            clip_rebuild_share_per_pose2: clip_share,
         }
     }
 }
+
+/// Poses the calibration's clip-aware rebuild is timed with.
+const CLIP_POSES: usize = 4;
 
 /// `side x side` rays from a point outside `bounds` towards it, spread over a 45 degree cone.
 fn view_rays(bounds: &crate::geom::Aabb, side: usize) -> Vec<Ray> {

@@ -202,6 +202,19 @@ impl Timing {
         }
     }
 
+    /// The cost (ms) the policy uses for a clip-aware rebuild over `tris` triangles for
+    /// `poses` sampled poses (a plain rebuild with none) measured at `ms`.
+    #[must_use]
+    pub fn clip_build_ms(self, ms: f64, tris: usize, poses: usize, prices: &Prices) -> f64 {
+        match self {
+            Self::Measured => ms,
+            Self::Priced => prices.clip_rebuild_ms(tris, poses),
+            Self::Modeled {
+                rebuild_ns_per_tri, ..
+            } => rebuild_ns_per_tri * tris as f64 * (1 + poses * poses) as f64 * 1e-6,
+        }
+    }
+
     /// The cost (ms) the policy uses for an estimate over a subsample of `tris` triangles
     /// measured at `ms`.
     #[must_use]
@@ -272,6 +285,11 @@ struct MeshEntry {
     /// Its tree's node storage (and the spare's) holds any tree over its triangles: set at its
     /// first update as a deforming mesh, so that no rebuild after it grows the storage.
     any_shape: bool,
+    /// The sampled poses of its clip still ahead, which its rebuilds are built for
+    /// ([`Engine::set_clip_ahead`]).
+    clip: clip::ClipAhead,
+    /// Poses its last (re)build was made for (0: a plain build of one pose).
+    build_poses: usize,
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -587,6 +605,8 @@ impl Engine {
             cut,
             removed: false,
             any_shape: false,
+            clip: clip::ClipAhead::default(),
+            build_poses: 0,
         }
     }
 

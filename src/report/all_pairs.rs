@@ -58,12 +58,17 @@ pub fn measure(
     let mut sah = vec![vec![Vec::new(); frames + 1]; ids.len()];
     let mut trace = vec![vec![Vec::new(); frames + 1]; ids.len()];
     let mut tris = vec![0; ids.len()];
+    // What a rebuild at each frame costs: plain, or clip-aware for the poses still ahead.
+    let mut rebuild_ms = vec![Vec::with_capacity(frames + 1); ids.len()];
     for b in 0..=frames {
         let mut e = src.build(b, config);
         if b == 0 {
             for (t, m) in tris.iter_mut().zip(&ids) {
                 *t = e.indices(*m).len();
             }
+        }
+        for ((r, m), &t) in rebuild_ms.iter_mut().zip(&ids).zip(&tris) {
+            r.push(prices.clip_rebuild_ms(t, e.mesh_build_poses(*m)));
         }
         for (f, frame) in sampled.iter().enumerate().take(frames + 1).skip(b) {
             if f > b {
@@ -84,9 +89,10 @@ pub fn measure(
     let work = tris
         .iter()
         .zip(trace)
-        .map(|(&tris, trace_ms)| WorkCosts {
+        .zip(rebuild_ms)
+        .map(|((&tris, trace_ms), rebuild_ms)| WorkCosts {
             refit_ms: vec![prices.refit_ms(tris); frames + 1],
-            rebuild_ms: vec![prices.rebuild_ms(tris); frames + 1],
+            rebuild_ms,
             trace_ms,
         })
         .collect();

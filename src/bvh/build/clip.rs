@@ -72,6 +72,14 @@ pub(crate) struct ClipAware<'a> {
 
 /// Per-task scratch: bins for every (pose binned in, axis, bin) with a box in every pose.
 pub(crate) struct ClipScratch {
+    b: ClipBufs,
+    /// Cost of the right side from each bin on.
+    right: [f64; BINS],
+}
+
+/// The buffers of a [`ClipScratch`], kept per thread from one task to the next.
+#[derive(Default)]
+struct ClipBufs {
     counts: Vec<u32>,
     boxes: Vec<Box3>,
     /// The node's box in every pose, and a running box per pose for the sweep.
@@ -79,8 +87,38 @@ pub(crate) struct ClipScratch {
     acc: Vec<Box3>,
     /// Centroid bounds (doubled centroids) of the node in every pose.
     cbounds: Vec<Box3>,
-    /// Cost of the right side from each bin on.
-    right: [f64; BINS],
+}
+
+thread_local! {
+    /// Buffers of this thread's finished clip-aware build tasks, for its next ones: the
+    /// engine's clip-aware rebuilds allocate nothing once each thread has as many as its
+    /// tasks nest.
+    static SPARE: std::cell::RefCell<Vec<ClipBufs>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Buffers a thread gets at its first clip-aware build task (more are made when tasks nest
+/// deeper on it).
+const SPARES: usize = 8;
+
+impl ClipBufs {
+    /// Buffers with room for `k` poses.
+    fn for_poses(k: usize) -> Self {
+        Self {
+            counts: Vec::with_capacity(k * 3 * BINS),
+            boxes: Vec::with_capacity(k * 3 * BINS * k),
+            node: Vec::with_capacity(k),
+            acc: Vec::with_capacity(k),
+            cbounds: Vec::with_capacity(k),
+        }
+    }
+}
+
+impl Drop for ClipScratch {
+    fn drop(&mut self) {
+        let b = std::mem::take(&mut self.b);
+        // Ignored while the thread is being torn down.
+        let _ = SPARE.try_with(|p| p.borrow_mut().push(b));
+    }
 }
 
 impl ClipAware<'_> {
@@ -109,12 +147,23 @@ impl Splitter for ClipAware<'_> {
 
     fn scratch(&self) -> ClipScratch {
         let k = self.k();
+        let mut b = SPARE.with_borrow_mut(|spare| {
+            if spare.capacity() == 0 {
+                // The thread's first clip-aware task: room for as many as nest on a thread
+                // in practice, for the most poses, at once.
+                spare.reserve_exact(SPARES);
+                spare.extend((0..SPARES - 1).map(|_| ClipBufs::for_poses(MAX_POSES)));
+                return ClipBufs::for_poses(MAX_POSES);
+            }
+            spare.pop().unwrap_or_else(|| ClipBufs::for_poses(k))
+        });
+        b.counts.resize(k * 3 * BINS, 0);
+        b.boxes.resize(k * 3 * BINS * k, Box3::EMPTY);
+        for v in [&mut b.node, &mut b.acc, &mut b.cbounds] {
+            v.resize(k, Box3::EMPTY);
+        }
         ClipScratch {
-            counts: vec![0; k * 3 * BINS],
-            boxes: vec![Box3::EMPTY; k * 3 * BINS * k],
-            node: vec![Box3::EMPTY; k],
-            acc: vec![Box3::EMPTY; k],
-            cbounds: vec![Box3::EMPTY; k],
+            b,
             right: [0.0; BINS],
         }
     }
@@ -130,16 +179,16 @@ impl Splitter for ClipAware<'_> {
                 b = b.union(t);
                 c.grow_point(t.min + t.max);
             }
-            s.node[j] = b;
-            s.cbounds[j] = c;
+            s.b.node[j] = b;
+            s.b.cbounds[j] = c;
         }
         // Bin the centroids as they lie in each pose `f`, with boxes in every pose `j`.
-        s.counts.fill(0);
-        s.boxes.fill(Box3::EMPTY);
+        s.b.counts.fill(0);
+        s.b.boxes.fill(Box3::EMPTY);
         let mut scales = [[0.0f32; 3]; MAX_POSES];
         let scales = &mut scales[..k];
         for (f, sc) in scales.iter_mut().enumerate() {
-            let ext = s.cbounds[f].max - s.cbounds[f].min;
+            let ext = s.b.cbounds[f].max - s.b.cbounds[f].min;
             for a in 0..3 {
                 sc[a] = if ext[a] > 0.0 && ext[a].is_finite() {
                     BINS as f32 * (1.0 - 1e-6) / ext[a]
@@ -153,16 +202,16 @@ impl Splitter for ClipAware<'_> {
             for (f, sc) in scales.iter().enumerate() {
                 let t = self.poses.boxes[f][id];
                 let c = t.min + t.max;
-                let lo = s.cbounds[f].min;
+                let lo = s.b.cbounds[f].min;
                 for a in 0..3 {
                     if sc[a] == 0.0 {
                         continue;
                     }
                     let bin = (f * 3 + a) * BINS + bin_of(c[a], lo[a], sc[a]);
-                    s.counts[bin] += 1;
+                    s.b.counts[bin] += 1;
                     let at = bin * k;
                     for j in 0..k {
-                        let b = &mut s.boxes[at + j];
+                        let b = &mut s.b.boxes[at + j];
                         let tj = self.poses.boxes[j][id];
                         b.grow(tj.min, tj.max);
                     }
@@ -177,26 +226,26 @@ impl Splitter for ClipAware<'_> {
                     continue;
                 }
                 let base = (f * 3 + a) * BINS;
-                s.acc.fill(Box3::EMPTY);
+                s.b.acc.fill(Box3::EMPTY);
                 let mut count = 0u32;
                 for b in (1..BINS).rev() {
-                    count += s.counts[base + b];
+                    count += s.b.counts[base + b];
                     for j in 0..k {
-                        s.acc[j] = s.acc[j].union(s.boxes[(base + b) * k + j]);
+                        s.b.acc[j] = s.b.acc[j].union(s.b.boxes[(base + b) * k + j]);
                     }
-                    s.right[b] = f64::from(count) * self.weighted_area(&s.acc);
+                    s.right[b] = f64::from(count) * self.weighted_area(&s.b.acc);
                 }
-                s.acc.fill(Box3::EMPTY);
+                s.b.acc.fill(Box3::EMPTY);
                 let mut left = 0u32;
                 for b in 0..BINS - 1 {
-                    left += s.counts[base + b];
+                    left += s.b.counts[base + b];
                     for j in 0..k {
-                        s.acc[j] = s.acc[j].union(s.boxes[(base + b) * k + j]);
+                        s.b.acc[j] = s.b.acc[j].union(s.b.boxes[(base + b) * k + j]);
                     }
                     if left == 0 || left as usize == n {
                         continue;
                     }
-                    let cost = f64::from(left) * self.weighted_area(&s.acc) + s.right[b + 1];
+                    let cost = f64::from(left) * self.weighted_area(&s.b.acc) + s.right[b + 1];
                     if best.is_none_or(|(c, ..)| cost < c) {
                         best = Some((cost, f, a, b + 1));
                     }
@@ -204,13 +253,13 @@ impl Splitter for ClipAware<'_> {
             }
         }
         let (cost, f, a, at) = best?;
-        let node = self.weighted_area(&s.node);
+        let node = self.weighted_area(&s.b.node);
         let split_cost = self.traversal_cost * node + self.intersection_cost * cost;
         if n <= self.max_leaf && self.intersection_cost * n as f64 * node <= split_cost {
             return None;
         }
         // Partition by the chosen bin of pose `f`'s centroids.
-        let (lo, sc) = (s.cbounds[f].min[a], scales[f][a]);
+        let (lo, sc) = (s.b.cbounds[f].min[a], scales[f][a]);
         let boxes = &self.poses.boxes[f];
         let goes_left = |r: &PrimRef| {
             let t = boxes[r.id() as usize];

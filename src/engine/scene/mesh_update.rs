@@ -214,6 +214,7 @@ impl MeshEntry {
             std::mem::swap(w, jw);
         }
         self.sah = super::tree_sah(self.bvh.bvh());
+        self.build_poses = 0;
         let cost = match cx.timing {
             Timing::Measured => job.build_ms,
             t => t.build_ms(job.build_ms, tris, &cx.prices),
@@ -415,8 +416,7 @@ impl MeshEntry {
         if let (true, Some(w), Some(spare)) = (trial, &mut self.wide, &mut self.prev_wide) {
             std::mem::swap(w, spare);
         }
-        self.bvh
-            .rebuild_indexed(&self.positions, &self.indices, &cx.build, cx.workspace);
+        let poses = self.build_tree(cx.frame, &cx.build, cx.workspace);
         if let Some(w) = &mut self.wide {
             w.collapse_from(&self.bvh);
         }
@@ -428,7 +428,7 @@ impl MeshEntry {
         };
         self.last_estimate = est;
         self.estimate_budget = 0.0;
-        self.stats.model_ms += cx.prices.rebuild_ms(tris);
+        self.stats.model_ms += cx.prices.clip_rebuild_ms(tris, poses);
         if cx.estimate {
             self.stats.model_ms += cx.prices.estimate_ms(self.fresh.sample_len());
         }
@@ -463,7 +463,7 @@ impl MeshEntry {
         // them already); the statistics keep the measured time.
         let rebuild_cost = match cx.timing {
             Timing::Measured => rebuild_ms,
-            t => t.build_ms(rebuild_ms, tris, &cx.prices) + replay_ms,
+            t => t.clip_build_ms(rebuild_ms, tris, poses, &cx.prices) + replay_ms,
         };
         let level = self.state.frame_extra_ms;
         self.state.rebuilt(self.sah, est, rebuild_cost);
@@ -515,7 +515,7 @@ impl MeshEntry {
             .calibrate_rays(raw_work_ratio, self.stats.measured_work_ratio);
         let cost = match cx.timing {
             Timing::Measured => ms,
-            t => t.build_ms(ms, self.indices.len(), &cx.prices) + replay_ms,
+            t => t.clip_build_ms(ms, self.indices.len(), self.build_poses, &cx.prices) + replay_ms,
         };
         self.state.rebuild_rejected(cost);
         self.state.replay_ms = replay_ms;
