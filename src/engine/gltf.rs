@@ -254,8 +254,8 @@ impl<'s> GltfSource<'s> {
 impl GltfSource<'_> {
     /// Poses the deforming meshes `posed` (mesh, instance) at the clip's sampled frames after
     /// `frame`, builds their trees for `frame` and those poses, and with clip-aware rebuilds
-    /// gives the engine the poses for them; leaves the poser at `frame`. The engine has not been updated
-    /// yet (its first update takes in `frame`).
+    /// gives the engine the poses for them; leaves the poser at `frame`. The engine has not
+    /// been updated yet (its first update takes in `frame`).
     fn build_for_clip(&mut self, engine: &mut Engine, posed: &[(MeshId, usize)], frame: usize) {
         let last = self.times.len() - 1;
         let k = self

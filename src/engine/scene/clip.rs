@@ -2,8 +2,9 @@
 //! & Meister 2015): the topology chosen for sampled poses, the boxes those of the mesh's
 //! current positions. A mesh given the sampled poses still ahead of it
 //! ([`Engine::set_clip_ahead`]) has every policy rebuild built so, for the pose it is made at
-//! and the sampled poses after it, and priced as such ([`crate::engine::Prices::clip_rebuild_ms`]): a tree
-//! that stays good for the rest of the clip costs several plain builds.
+//! and the sampled poses after it, and priced as such
+//! ([`crate::engine::Prices::clip_rebuild_ms`]): a tree that stays good for the rest of the
+//! clip costs several plain builds.
 
 use super::{Engine, MeshEntry, MeshId, tree_sah};
 use crate::bvh::build::clip::{ClipPoses, MAX_POSES};
@@ -139,7 +140,8 @@ impl Engine {
     /// Gives `mesh` the sampled poses of its clip still ahead, so that each later rebuild of
     /// its tree is built for the pose it is made at and the poses of `poses` after it
     /// ([`MeshBvh::rebuild_clip_aware`]; at most [`MAX_POSES`] in all, evenly chosen), and
-    /// priced so ([`crate::engine::Prices::clip_rebuild_ms`]); once none is ahead, rebuilds are plain again.
+    /// priced so ([`crate::engine::Prices::clip_rebuild_ms`]); once none is ahead, rebuilds
+    /// are plain again. The policy's expected rebuild cost is scaled to the new price.
     /// `poses[i] = (updates, positions)`: the positions the mesh is to have at the `updates`-th
     /// [`Engine::update`] from now (1: the next). Replaces the clip given before; an empty one
     /// makes rebuilds plain. The background rebuilds of [`crate::engine::Policy::Async`] stay
