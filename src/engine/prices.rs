@@ -228,7 +228,6 @@ impl Prices {
         });
         let k2 = (CLIP_POSES * CLIP_POSES) as f64;
         let clip_share = ((clip_ms - rebuild) / (k2 * rebuild)).max(1e-3);
-        bvh.rebuild_indexed(pos, idx, &build, &mut ws);
         let mut fresh = super::estimate::FreshSah::new(n, build.max_leaf_size);
         let estimate = median_cpu_ms(passes, || {
             std::hint::black_box(fresh.estimate(pos, idx));

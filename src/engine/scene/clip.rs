@@ -53,14 +53,14 @@ impl MeshEntry {
             scratch,
         } = &mut self.clip;
         let ahead = &poses[ahead_from(frames, frame)..];
-        self.build_poses = if ahead.is_empty() {
+        let k = poses_at(frames, frame);
+        if k == 0 {
             self.bvh
                 .rebuild_indexed(&self.positions, &self.indices, build, ws);
-            0
         } else {
-            let mut views: [&[Vec3]; MAX_POSES + 1] = [&[]; MAX_POSES + 1];
+            // This pose and those after it, as many as `poses_at` counts.
+            let mut views: [&[Vec3]; MAX_POSES] = [&[]; MAX_POSES];
             views[0] = &self.positions;
-            let k = 1 + ahead.len().min(MAX_POSES);
             for (v, p) in views[1..k].iter_mut().zip(ahead) {
                 *v = p;
             }
@@ -72,8 +72,8 @@ impl MeshEntry {
                 ws,
                 scratch,
             );
-            k.min(MAX_POSES)
-        };
+        }
+        self.build_poses = k;
         self.build_poses
     }
 }
@@ -139,7 +139,7 @@ impl Engine {
 impl Engine {
     /// Gives `mesh` the sampled poses of its clip still ahead, so that each later rebuild of
     /// its tree is built for the pose it is made at and the poses of `poses` after it
-    /// ([`MeshBvh::rebuild_clip_aware`]; at most [`MAX_POSES`] in all, evenly chosen), and
+    /// ([`MeshBvh::rebuild_clip_aware`]; at most [`MAX_POSES`] in all: the nearest), and
     /// priced so ([`crate::engine::Prices::clip_rebuild_ms`]); once none is ahead, rebuilds
     /// are plain again. The policy's expected rebuild cost is scaled to the new price.
     /// `poses[i] = (updates, positions)`: the positions the mesh is to have at the `updates`-th
