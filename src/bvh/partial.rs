@@ -10,9 +10,10 @@
 //! the cut subtrees by their SAH now over that reference, rebuilds the worst ones up to a share
 //! of the triangles, then builds the top over the cut subtrees' boxes with the binned SAH.
 
-use super::topology::{NONE, RestructureWorkspace};
-use super::{BuildParams, BuildWorkspace, Bvh, MeshBvh, SahCost};
+use super::topology::RestructureWorkspace;
+use super::{BuildParams, BuildWorkspace, Bvh, MAX_DEPTH, MeshBvh, Node, SahCost};
 use crate::geom::Aabb;
+use std::sync::{Mutex, PoisonError};
 
 /// Cut subtrees a mesh is split into (about; fewer for small meshes).
 pub const CUT_TARGET: usize = 256;
@@ -24,6 +25,8 @@ pub struct PartialCut {
     roots: Vec<u32>,
     /// Each one's SAH normalised by its root's area when it was last built.
     reference: Vec<f32>,
+    /// Each one's height (0 for a leaf).
+    height: Vec<u32>,
 }
 
 /// What a partial rebuild did.
@@ -40,19 +43,48 @@ pub struct PartialStats {
 }
 
 /// Scratch of partial rebuilds, kept between calls.
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 pub struct PartialScratch {
     counts: Vec<u32>,
+    heights: Vec<u32>,
     costs: Vec<f32>,
     ranked: Vec<(f32, u32)>,
     stack: Vec<u32>,
     boxes: Vec<Aabb>,
-    sub: Bvh,
     top: Bvh,
     build: BuildWorkspace,
-    slot_prims: Vec<u32>,
-    slot_tris: Vec<[glam::Vec3; 3]>,
-    slot_indices: Vec<[u32; 3]>,
+    /// Each cut subtree's part.
+    work: Vec<CutWork>,
+    /// The rebuilt subtrees' nodes, the one at slot `f` from `2 f`.
+    built: Vec<Node>,
+    /// The cut subtrees in the new tree's order.
+    order: Vec<u32>,
+    /// The layout's stack: (top node, position, depth).
+    emit: Vec<(u32, u32, u32)>,
+    /// One per thread of the pool (and one for a caller outside it).
+    tasks: Vec<Mutex<TaskScratch>>,
+}
+
+impl Clone for PartialScratch {
+    fn clone(&self) -> Self {
+        let lock =
+            |t: &Mutex<TaskScratch>| t.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        Self {
+            counts: self.counts.clone(),
+            heights: self.heights.clone(),
+            costs: self.costs.clone(),
+            ranked: self.ranked.clone(),
+            stack: self.stack.clone(),
+            boxes: self.boxes.clone(),
+            top: self.top.clone(),
+            build: self.build.clone(),
+            work: self.work.clone(),
+            built: self.built.clone(),
+            order: self.order.clone(),
+            emit: self.emit.clone(),
+            tasks: self.tasks.iter().map(|t| Mutex::new(lock(t))).collect(),
+        }
+    }
 }
 
 impl PartialCut {
@@ -73,6 +105,7 @@ impl PartialCut {
     pub fn clear(&mut self) {
         self.roots.clear();
         self.reference.clear();
+        self.height.clear();
     }
 
     /// Marks every cut subtree as degraded, so that the next partial rebuild of share 1
@@ -83,8 +116,7 @@ impl PartialCut {
 
     /// Takes the cut of a freshly built tree. Allocates only to grow.
     pub fn reset(&mut self, tree: &MeshBvh, s: &mut PartialScratch) {
-        self.roots.clear();
-        self.reference.clear();
+        self.clear();
         let bvh = tree.bvh();
         if bvh.nodes().is_empty() {
             return;
@@ -97,7 +129,11 @@ impl PartialCut {
         if s.costs.capacity() < nodes {
             s.costs.reserve_exact(nodes - s.costs.len());
         }
+        if s.heights.capacity() < nodes {
+            s.heights.reserve_exact(nodes - s.heights.len());
+        }
         prim_counts(bvh, &mut s.counts);
+        heights(bvh, &mut s.heights);
         let limit = (bvh.prim_count() / CUT_TARGET).max(2 * bvh.max_leaf_size() as usize) as u32;
         // Every cut subtree's parent holds more than `limit` primitives, and fewer than
         // `2 n / limit` nodes do: room for the largest cut any tree over these primitives has,
@@ -106,6 +142,25 @@ impl PartialCut {
         if self.roots.capacity() < most {
             self.roots.reserve_exact(most);
             self.reference.reserve_exact(most);
+            self.height.reserve_exact(most);
+        }
+        if s.work.capacity() < most {
+            s.work.reserve_exact(most);
+            s.order.reserve_exact(most);
+            s.ranked.reserve_exact(most);
+            s.emit.reserve_exact(2 * super::MAX_DEPTH + 2);
+        }
+        // Each thread's scratch grown to the largest cut subtree, so that rebuilding cut
+        // subtrees allocates nothing whichever thread gets which.
+        let threads = rayon::current_num_threads() + 1;
+        if s.tasks.len() < threads {
+            s.tasks.resize_with(threads, Default::default);
+        }
+        for t in &mut s.tasks {
+            let t = t.get_mut().unwrap_or_else(PoisonError::into_inner);
+            if t.boxes.capacity() < limit as usize {
+                t.grow(limit as usize, &BuildParams::BINNED);
+            }
         }
         if s.boxes.capacity() < most {
             // The top's build over that many subtrees, once, so that its tree and scratch have
@@ -138,6 +193,8 @@ impl PartialCut {
         bvh.subtree_sah(SahCost::default(), &mut s.costs);
         self.reference
             .extend(self.roots.iter().map(|&r| s.costs[r as usize]));
+        self.height
+            .extend(self.roots.iter().map(|&r| s.heights[r as usize]));
     }
 }
 
@@ -157,7 +214,9 @@ impl PartialCut {
             }
             next += count;
         }
-        next as usize == bvh.prim_count() && self.roots.len() == self.reference.len()
+        next as usize == bvh.prim_count()
+            && self.roots.len() == self.reference.len()
+            && self.roots.len() == self.height.len()
     }
 }
 
@@ -165,7 +224,9 @@ impl MeshBvh {
     /// Rebuilds the top of the tree over `cut` and the worst cut subtrees holding at most
     /// `share` of the triangles (see the module docs); `cut` must have been taken from this
     /// tree's last full build ([`PartialCut::reset`]) and kept through every partial rebuild
-    /// since. Allocates nothing once the scratch has grown to the mesh.
+    /// since. The chosen subtrees are rebuilt in parallel, each on one thread; the result is
+    /// written straight into the builders' layout (each kept subtree's nodes moved as one
+    /// block). Allocates nothing once the scratch has grown to the mesh.
     pub fn partial_rebuild(
         &mut self,
         cut: &mut PartialCut,
@@ -191,9 +252,15 @@ impl MeshBvh {
         }
         // Rank the cut subtrees by how far they degraded.
         self.bvh.subtree_sah(SahCost::default(), &mut s.costs);
-        prim_counts(&self.bvh, &mut s.counts);
+        s.work.clear();
         s.ranked.clear();
         for (j, (&r, &reference)) in cut.roots.iter().zip(&cut.reference).enumerate() {
+            let (first, count) = slot_range(&self.bvh, r);
+            s.work.push(CutWork {
+                first,
+                count,
+                ..CutWork::default()
+            });
             let now = s.costs[r as usize];
             if reference > 0.0 && now > reference * MIN_DEGRADATION {
                 s.ranked.push((now / reference, j as u32));
@@ -202,135 +269,385 @@ impl MeshBvh {
         s.ranked
             .sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         let allowed = (f64::from(share.clamp(0.0, 1.0)) * self.bvh.prim_count() as f64) as u64;
-
-        ws.topo.load(&self.bvh);
         let mut spent = 0u64;
-        for i in 0..s.ranked.len() {
-            let j = s.ranked[i].1 as usize;
-            let root = cut.roots[j];
-            let k = u64::from(s.counts[root as usize]);
+        for &(_, j) in &s.ranked {
+            let w = &mut s.work[j as usize];
+            let k = u64::from(w.count);
             if spent + k > allowed {
                 continue;
             }
             spent += k;
-            self.rebuild_subtree(root, params, ws, s);
-            // Marked rebuilt: it gets a new reference below.
-            s.ranked[i].0 = -s.ranked[i].0;
+            w.rebuild = true;
             stats.rebuilt += 1;
             stats.rebuilt_tris += k as u32;
         }
 
+        // The chosen subtrees rebuilt, their slots written into the scratch at their places
+        // in their new order.
+        let n = self.tris.len();
+        ws.old_tris.resize(n, [glam::Vec3::ZERO; 3]);
+        ws.old_prims.resize(n, 0);
+        ws.old_leaf_indices.resize(n, [0; 3]);
+        s.built.resize(2 * n, Node::default());
+        let threads = rayon::current_num_threads() + 1;
+        if s.tasks.len() < threads {
+            s.tasks.resize_with(threads, Default::default);
+        }
+        let sub_params = BuildParams {
+            parallel_threshold: usize::MAX,
+            ..*params
+        };
+        rebuild_chosen(
+            &mut s.work,
+            Slots {
+                tris: &self.tris,
+                prims: &self.bvh.prim_indices,
+                indices: &self.leaf_indices,
+            },
+            SlotsMut {
+                tris: &mut ws.old_tris,
+                prims: &mut ws.old_prims,
+                indices: &mut ws.old_leaf_indices,
+            },
+            &mut s.built,
+            &sub_params,
+            &s.tasks,
+        );
+
         // The top over the cut subtrees' boxes, one subtree per leaf.
         s.boxes.clear();
-        s.boxes
-            .extend(cut.roots.iter().map(|&r| ws.topo.bounds[r as usize]));
+        for (w, &r) in s.work.iter().zip(&cut.roots) {
+            s.boxes.push(if w.rebuild {
+                s.built[2 * w.first as usize].bounds()
+            } else {
+                self.bvh.nodes[r as usize].bounds()
+            });
+        }
         let top_params = BuildParams {
             max_leaf_size: 1,
             ..*params
         };
         s.top.rebuild(&s.boxes, &top_params, &mut s.build);
-        if s.top.nodes().iter().any(|n| n.is_leaf() && n.count != 1) {
-            // Not one subtree per leaf: nothing is changed.
+        if s.top.nodes().iter().any(|n| n.is_leaf() && n.count != 1) || !self.lay_out(cut, ws, s) {
+            // Not one subtree per leaf, or deeper than a tree may be: nothing is changed.
             stats.sah_after = stats.sah_before;
             stats.rebuilt = 0;
             stats.rebuilt_tris = 0;
             return stats;
         }
-        let base = ws.topo.len() as u32;
-        let topo = &mut ws.topo;
-        for n in s.top.nodes() {
-            if n.is_leaf() {
-                // A placeholder id: leaves are replaced by their cut subtree below.
-                topo.push(n.bounds(), [NONE; 2], [0, 0]);
-            } else {
-                topo.push(n.bounds(), [base + n.first, base + n.first + 1], [0, 0]);
-            }
-        }
-        let id = |t: &Bvh, n: u32| -> u32 {
-            let node = &t.nodes()[n as usize];
-            if node.is_leaf() {
-                cut.roots[t.prim_indices()[node.first as usize] as usize]
-            } else {
-                base + n
-            }
-        };
-        for (i, n) in s.top.nodes().iter().enumerate() {
-            if !n.is_leaf() {
-                let (l, r) = (id(&s.top, n.first), id(&s.top, n.first + 1));
-                topo.link(base + i as u32, 0, l);
-                topo.link(base + i as u32, 1, r);
-            }
-        }
-        topo.root = id(&s.top, 0);
-        topo.parent[topo.root as usize] = NONE;
 
-        if self.apply_topology(ws) {
-            // The cut subtrees' new roots; the rebuilt ones get a new reference.
-            for r in &mut cut.roots {
-                *r = ws.topo.position(*r);
-            }
-            self.bvh.subtree_sah(SahCost::default(), &mut s.costs);
-            for i in 0..s.ranked.len() {
-                let j = s.ranked[i].1 as usize;
-                if s.ranked[i].0 < 0.0 {
-                    cut.reference[j] = s.costs[cut.roots[j] as usize];
-                }
+        // The nodes and the slots in their new order; the cut subtrees' new roots, and the
+        // rebuilt ones' new references.
+        self.bvh.nodes.clear();
+        self.bvh.nodes.extend_from_slice(&ws.nodes);
+        // Only the rebuilt subtrees' slots and those the top moved are copied: the moved
+        // kept ones into the scratch first (beside the rebuilt ones), then all of them to
+        // their new places, which only they overlap.
+        let range = |first: u32, count: u32| first as usize..(first + count) as usize;
+        for w in s.work.iter().filter(|w| !w.rebuild && w.slot != w.first) {
+            let from = range(w.first, w.count);
+            ws.old_tris[from.clone()].copy_from_slice(&self.tris[from.clone()]);
+            ws.old_prims[from.clone()].copy_from_slice(&self.bvh.prim_indices[from.clone()]);
+            ws.old_leaf_indices[from.clone()].copy_from_slice(&self.leaf_indices[from]);
+        }
+        for w in s.work.iter().filter(|w| w.rebuild || w.slot != w.first) {
+            let (from, to) = (range(w.first, w.count), range(w.slot, w.count));
+            self.tris[to.clone()].copy_from_slice(&ws.old_tris[from.clone()]);
+            self.bvh.prim_indices[to.clone()].copy_from_slice(&ws.old_prims[from.clone()]);
+            self.leaf_indices[to].copy_from_slice(&ws.old_leaf_indices[from]);
+        }
+        for (j, w) in s.work.iter().enumerate() {
+            cut.roots[j] = w.root;
+            if w.rebuild {
+                cut.reference[j] = w.sah;
+                cut.height[j] = w.height;
             }
         }
         stats.sah_after = self.bvh.sah_cost();
         stats
     }
 
-    /// Rebuilds the subtree at `root` (a node of the tree `ws.topo` was loaded from) from its
-    /// triangles, reordering its primitive slots and grafting the new nodes into `ws.topo` in
-    /// place of the old ones.
-    fn rebuild_subtree(
-        &mut self,
-        root: u32,
-        params: &BuildParams,
+    /// Writes the new tree into `ws.nodes` in the builders' layout: the top's interior nodes
+    /// and, at each of its leaves, the cut subtree's nodes (the rebuilt tree from the scratch,
+    /// or the kept one from this tree) as one block; records the cut subtrees in their new
+    /// order (`s.order`) and each one's new root. Returns false (the tree then unchanged)
+    /// when the result would be deeper than [`MAX_DEPTH`].
+    fn lay_out(
+        &self,
+        cut: &PartialCut,
         ws: &mut RestructureWorkspace,
         s: &mut PartialScratch,
-    ) {
-        let (first, count) = slot_range(&self.bvh, root);
-        let range = first as usize..(first + count) as usize;
-        s.boxes.clear();
-        s.boxes
-            .extend(self.tris[range.clone()].iter().map(Aabb::of_triangle));
-        s.sub.rebuild(&s.boxes, params, &mut s.build);
-        // The slots in the new subtree's order.
-        s.slot_prims.clear();
-        s.slot_prims
-            .extend_from_slice(&self.bvh.prim_indices[range.clone()]);
-        s.slot_tris.clear();
-        s.slot_tris.extend_from_slice(&self.tris[range.clone()]);
-        s.slot_indices.clear();
-        s.slot_indices
-            .extend_from_slice(&self.leaf_indices[range.clone()]);
-        for (i, &p) in s.sub.prim_indices().iter().enumerate() {
-            let (dst, src) = (range.start + i, p as usize);
-            self.bvh.prim_indices[dst] = s.slot_prims[src];
-            self.tris[dst] = s.slot_tris[src];
-            self.leaf_indices[dst] = s.slot_indices[src];
-        }
-        // Graft: the old root's id takes the new root; the other new nodes get new ids.
-        let topo = &mut ws.topo;
-        let base = topo.len() as u32;
-        let nodes = s.sub.nodes();
-        let id = |n: u32| if n == 0 { root } else { base + n - 1 };
-        for n in &nodes[1..] {
-            topo.push(n.bounds(), [NONE; 2], [0, 0]);
-        }
-        for (i, n) in nodes.iter().enumerate() {
-            let me = id(i as u32);
-            topo.bounds[me as usize] = n.bounds();
-            if n.is_leaf() {
-                topo.child[me as usize] = [NONE; 2];
-                topo.leaf[me as usize] = [first + n.first, n.count];
-            } else {
-                topo.leaf[me as usize] = [0, 0];
-                topo.link(me, 0, id(n.first));
-                topo.link(me, 1, id(n.first + 1));
+    ) -> bool {
+        let nodes = &mut ws.nodes;
+        nodes.clear();
+        nodes.push(Node::default());
+        s.order.clear();
+        s.emit.clear();
+        s.emit.push((0, 0, 0));
+        let old = self.bvh.nodes();
+        let mut slot = 0u32;
+        while let Some((t, pos, depth)) = s.emit.pop() {
+            let tn = s.top.nodes()[t as usize];
+            if !tn.is_leaf() {
+                if depth as usize >= MAX_DEPTH {
+                    return false;
+                }
+                let q = nodes.len() as u32;
+                nodes.push(Node::default());
+                nodes.push(Node::default());
+                nodes[pos as usize] = Node::interior(tn.bounds(), q);
+                s.emit.push((tn.first + 1, q + 1, depth + 1));
+                s.emit.push((tn.first, q, depth + 1));
+                continue;
             }
+            let j = s.top.prim_indices()[tn.first as usize] as usize;
+            let w = &mut s.work[j];
+            let height = if w.rebuild { w.height } else { cut.height[j] };
+            if depth as usize + height as usize > MAX_DEPTH {
+                return false;
+            }
+            s.order.push(j as u32);
+            w.root = pos;
+            w.slot = slot;
+            let base = nodes.len() as u32;
+            // The block: its root and its descendants, which follow one another in the
+            // builders' layout; (root, first descendant, end) in the source array.
+            let (src, root, d0, d1) = if w.rebuild {
+                let at = 2 * w.first as usize;
+                (&s.built[..], at, at + 1, at + w.len as usize)
+            } else {
+                let r = cut.roots[j] as usize;
+                let d0 = old[r].first as usize;
+                (
+                    old,
+                    r,
+                    d0,
+                    if old[r].is_leaf() {
+                        d0
+                    } else {
+                        descendants_end(old, r)
+                    },
+                )
+            };
+            // The rebuilt tree numbers its nodes and slots from 0 (its first descendant is
+            // node 1); the kept one is numbered in this tree.
+            let (first_slot, first_child) = if w.rebuild {
+                (0, 1)
+            } else {
+                (w.first, d0 as u32)
+            };
+            let shift = |n: Node| -> Node {
+                let mut n = n;
+                if n.is_leaf() {
+                    n.first = n.first - first_slot + slot;
+                } else {
+                    // The first descendant goes to `base`, the others after it in order.
+                    n.first = n.first - first_child + base;
+                }
+                n
+            };
+            nodes[pos as usize] = shift(src[root]);
+            nodes.extend(src[d0..d1].iter().map(|&n| shift(n)));
+            slot += w.count;
+        }
+        true
+    }
+}
+
+/// A cut subtree's part in a partial rebuild.
+#[derive(Clone, Copy, Debug, Default)]
+struct CutWork {
+    /// Its primitive slots in the tree before.
+    first: u32,
+    count: u32,
+    /// Chosen to be rebuilt.
+    rebuild: bool,
+    /// The rebuilt tree's node count, SAH (normalised by its root's area) and height.
+    len: u32,
+    sah: f32,
+    height: u32,
+    /// Its root and its first slot in the new tree.
+    root: u32,
+    slot: u32,
+}
+
+/// One thread's scratch for rebuilding cut subtrees.
+#[derive(Clone, Debug, Default)]
+struct TaskScratch {
+    boxes: Vec<Aabb>,
+    sub: Bvh,
+    build: BuildWorkspace,
+    costs: Vec<f32>,
+    heights: Vec<u32>,
+}
+
+impl TaskScratch {
+    /// Grows every buffer to a subtree of `n` primitives, by building one.
+    fn grow(&mut self, n: usize, params: &BuildParams) {
+        self.boxes.clear();
+        self.boxes.extend((0..n).map(|i| {
+            let p = glam::Vec3::new(i as f32, (i % 7) as f32, (i % 3) as f32);
+            Aabb::new(p, p + glam::Vec3::ONE)
+        }));
+        let serial = BuildParams {
+            parallel_threshold: usize::MAX,
+            ..*params
+        };
+        self.sub.rebuild(&self.boxes, &serial, &mut self.build);
+        let nodes = 2 * n.max(1);
+        if self.costs.capacity() < nodes {
+            self.costs.reserve_exact(nodes - self.costs.len());
+        }
+        if self.heights.capacity() < nodes {
+            self.heights.reserve_exact(nodes - self.heights.len());
+        }
+    }
+
+    /// Rebuilds the subtree over `src`'s slots: writes them into `dst` in the new tree's
+    /// order and its nodes (leaves numbering the slots from 0) into `built`; returns its node
+    /// count, SAH and height.
+    fn rebuild(
+        &mut self,
+        src: Slots<'_>,
+        dst: SlotsMut<'_>,
+        built: &mut [Node],
+        params: &BuildParams,
+    ) -> (u32, f32, u32) {
+        self.boxes.clear();
+        self.boxes.extend(src.tris.iter().map(Aabb::of_triangle));
+        self.sub.rebuild(&self.boxes, params, &mut self.build);
+        for (i, &p) in self.sub.prim_indices().iter().enumerate() {
+            let p = p as usize;
+            dst.tris[i] = src.tris[p];
+            dst.prims[i] = src.prims[p];
+            dst.indices[i] = src.indices[p];
+        }
+        let nodes = self.sub.nodes();
+        built[..nodes.len()].copy_from_slice(nodes);
+        self.sub.subtree_sah(SahCost::default(), &mut self.costs);
+        heights(&self.sub, &mut self.heights);
+        (nodes.len() as u32, self.costs[0], self.heights[0])
+    }
+}
+
+/// A range of a mesh tree's slots: triangles, primitive ids, vertex indices.
+#[derive(Clone, Copy)]
+struct Slots<'a> {
+    tris: &'a [[glam::Vec3; 3]],
+    prims: &'a [u32],
+    indices: &'a [[u32; 3]],
+}
+
+struct SlotsMut<'a> {
+    tris: &'a mut [[glam::Vec3; 3]],
+    prims: &'a mut [u32],
+    indices: &'a mut [[u32; 3]],
+}
+
+impl<'a> Slots<'a> {
+    fn split_at(self, k: usize) -> (Self, Self) {
+        let (ta, tb) = self.tris.split_at(k);
+        let (pa, pb) = self.prims.split_at(k);
+        let (ia, ib) = self.indices.split_at(k);
+        (
+            Self {
+                tris: ta,
+                prims: pa,
+                indices: ia,
+            },
+            Self {
+                tris: tb,
+                prims: pb,
+                indices: ib,
+            },
+        )
+    }
+}
+
+impl<'a> SlotsMut<'a> {
+    fn split_at(self, k: usize) -> (Self, Self) {
+        let (ta, tb) = self.tris.split_at_mut(k);
+        let (pa, pb) = self.prims.split_at_mut(k);
+        let (ia, ib) = self.indices.split_at_mut(k);
+        (
+            Self {
+                tris: ta,
+                prims: pa,
+                indices: ia,
+            },
+            Self {
+                tris: tb,
+                prims: pb,
+                indices: ib,
+            },
+        )
+    }
+}
+
+/// Slots below which a part of the cut is done on one thread.
+const SERIAL_SLOTS: usize = 4096;
+
+/// Rebuilds the chosen cut subtrees of `work` (which tile `src`'s slots in order), in
+/// parallel: `dst` gets their slots, at the same places in their new order, and `built` their
+/// nodes (the subtree at slot `f` of `src` from `2 f`).
+fn rebuild_chosen(
+    work: &mut [CutWork],
+    src: Slots<'_>,
+    dst: SlotsMut<'_>,
+    built: &mut [Node],
+    params: &BuildParams,
+    tasks: &[Mutex<TaskScratch>],
+) {
+    if let [w] = work {
+        if w.rebuild {
+            let i = rayon::current_thread_index().unwrap_or(tasks.len() - 1);
+            let mut t = tasks[i.min(tasks.len() - 1)]
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            (w.len, w.sah, w.height) = t.rebuild(src, dst, built, params);
+        }
+        return;
+    }
+    let mid = work.len() / 2;
+    let k = (work[mid].first - work[0].first) as usize;
+    let (wa, wb) = work.split_at_mut(mid);
+    let (sa, sb) = src.split_at(k);
+    let (da, db) = dst.split_at(k);
+    let (ba, bb) = built.split_at_mut(2 * k);
+    if src.tris.len() < SERIAL_SLOTS {
+        rebuild_chosen(wa, sa, da, ba, params, tasks);
+        rebuild_chosen(wb, sb, db, bb, params, tasks);
+    } else {
+        rayon::join(
+            || rebuild_chosen(wa, sa, da, ba, params, tasks),
+            || rebuild_chosen(wb, sb, db, bb, params, tasks),
+        );
+    }
+}
+
+/// One past the last descendant of interior node `n` (in the builders' layout a node's
+/// descendants follow one another: its children, the left one's descendants, the right's).
+fn descendants_end(nodes: &[Node], mut n: usize) -> usize {
+    loop {
+        let c = nodes[n].first as usize;
+        if !nodes[c + 1].is_leaf() {
+            n = c + 1;
+        } else if !nodes[c].is_leaf() {
+            n = c;
+        } else {
+            return c + 2;
+        }
+    }
+}
+
+/// The height of every subtree (0 for a leaf), into `out`.
+fn heights(bvh: &Bvh, out: &mut Vec<u32>) {
+    let nodes = bvh.nodes();
+    out.clear();
+    out.resize(nodes.len(), 0);
+    for (i, n) in nodes.iter().enumerate().rev() {
+        if !n.is_leaf() {
+            out[i] = 1 + out[n.first as usize].max(out[n.first as usize + 1]);
         }
     }
 }

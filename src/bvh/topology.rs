@@ -78,16 +78,6 @@ impl Topology {
         self.bounds[n as usize].half_area()
     }
 
-    /// Adds a node (returns its id).
-    pub(crate) fn push(&mut self, bounds: Aabb, child: [u32; 2], leaf: [u32; 2]) -> u32 {
-        let id = self.bounds.len() as u32;
-        self.bounds.push(bounds);
-        self.child.push(child);
-        self.leaf.push(leaf);
-        self.parent.push(NONE);
-        id
-    }
-
     /// Makes `c` the `side` child of `p`.
     #[inline]
     pub(crate) fn link(&mut self, p: u32, side: usize, c: u32) {
@@ -172,9 +162,9 @@ pub struct RestructureWorkspace {
     pub(crate) topo: Topology,
     pub(crate) nodes: Vec<Node>,
     pub(crate) perm: Vec<u32>,
-    old_prims: Vec<u32>,
-    old_tris: Vec<[Vec3; 3]>,
-    old_leaf_indices: Vec<[u32; 3]>,
+    pub(crate) old_prims: Vec<u32>,
+    pub(crate) old_tris: Vec<[Vec3; 3]>,
+    pub(crate) old_leaf_indices: Vec<[u32; 3]>,
 }
 
 impl RestructureWorkspace {
