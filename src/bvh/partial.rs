@@ -259,6 +259,8 @@ impl MeshBvh {
             s.work.push(CutWork {
                 first,
                 count,
+                reference,
+                height: cut.height[j],
                 ..CutWork::default()
             });
             let now = s.costs[r as usize];
@@ -356,12 +358,14 @@ impl MeshBvh {
             self.bvh.prim_indices[to.clone()].copy_from_slice(&ws.old_prims[from.clone()]);
             self.leaf_indices[to].copy_from_slice(&ws.old_leaf_indices[from]);
         }
-        for (j, w) in s.work.iter().enumerate() {
-            cut.roots[j] = w.root;
-            if w.rebuild {
-                cut.reference[j] = w.sah;
-                cut.height[j] = w.height;
-            }
+        // The cut in the new tree's order, so that its slots still tile the tree in order
+        // and the next partial rebuild keeps it (with the kept subtrees' references).
+        cut.clear();
+        for &j in &s.order {
+            let w = &s.work[j as usize];
+            cut.roots.push(w.root);
+            cut.reference.push(w.reference);
+            cut.height.push(w.height);
         }
         stats.sah_after = self.bvh.sah_cost();
         stats
@@ -402,8 +406,7 @@ impl MeshBvh {
             }
             let j = s.top.prim_indices()[tn.first as usize] as usize;
             let w = &mut s.work[j];
-            let height = if w.rebuild { w.height } else { cut.height[j] };
-            if depth as usize + height as usize > MAX_DEPTH {
+            if depth as usize + w.height as usize > MAX_DEPTH {
                 return false;
             }
             s.order.push(j as u32);
@@ -462,10 +465,11 @@ struct CutWork {
     count: u32,
     /// Chosen to be rebuilt.
     rebuild: bool,
-    /// The rebuilt tree's node count, SAH (normalised by its root's area) and height.
-    len: u32,
-    sah: f32,
+    /// Its reference SAH (normalised by its root's area) and height: the cut's, or the
+    /// rebuilt tree's; and the rebuilt tree's node count.
+    reference: f32,
     height: u32,
+    len: u32,
     /// Its root and its first slot in the new tree.
     root: u32,
     slot: u32,
@@ -604,7 +608,7 @@ fn rebuild_chosen(
             let mut t = tasks[i.min(tasks.len() - 1)]
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner);
-            (w.len, w.sah, w.height) = t.rebuild(src, dst, built, params);
+            (w.len, w.reference, w.height) = t.rebuild(src, dst, built, params);
         }
         return;
     }
@@ -683,4 +687,71 @@ fn slot_range(bvh: &Bvh, mut n: u32) -> (u32, u32) {
     let first = nodes[lo as usize].first;
     let last = &nodes[n as usize];
     (first, last.first + last.count - first)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anim::generate::{Kind, generate};
+    use glam::Vec3;
+
+    /// The soup of the generated explosion at `w` of its target, and its triangles.
+    fn explosion(w: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let g = generate(Kind::Explode, 6000, 1);
+        let (a, b) = (&g.checks[0].1, &g.checks[1].1);
+        let pos = a.iter().zip(b).map(|(a, b)| *a + w * (*b - *a)).collect();
+        let tris = (0..a.len() as u32 / 3)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        (pos, tris)
+    }
+
+    /// Each cut subtree's reference, keyed by the least primitive id it holds.
+    fn references(t: &MeshBvh, cut: &PartialCut) -> Vec<(u32, f32)> {
+        let mut v: Vec<(u32, f32)> = cut
+            .roots
+            .iter()
+            .zip(&cut.reference)
+            .map(|(&r, &reference)| {
+                let (first, count) = slot_range(t.bvh(), r);
+                let prims = &t.bvh().prim_indices()[first as usize..(first + count) as usize];
+                (*prims.iter().min().unwrap(), reference)
+            })
+            .collect();
+        v.sort_by_key(|e| e.0);
+        v
+    }
+
+    #[test]
+    fn the_cut_outlives_a_partial_rebuild_with_the_kept_subtrees_references() {
+        let params = BuildParams::BINNED;
+        let (p0, tris) = explosion(0.0);
+        let mut t = MeshBvh::build_indexed(&p0, &tris, &params);
+        let (mut ws, mut s) = (RestructureWorkspace::default(), PartialScratch::default());
+        let mut cut = PartialCut::default();
+        cut.reset(&t, &mut s);
+        assert!(cut.len() > 16, "{} cut subtrees", cut.len());
+        for (f, share) in [(0.2, 0.25), (0.4, 0.1), (0.7, 0.5)] {
+            let (p, _) = explosion(f);
+            t.refit_indexed(&p, &tris);
+            let before = references(&t, &cut);
+            let st = t.partial_rebuild(&mut cut, share, &params, &mut ws, &mut s);
+            assert!(st.rebuilt > 0 && st.sah_after < st.sah_before, "{st:?}");
+            t.validate(&crate::geom::TriMesh::new(p.clone(), tris.clone()))
+                .unwrap();
+            // The cut still tiles the tree in order: the next partial rebuild keeps it.
+            assert!(cut.fits(t.bvh()), "weight {f}");
+            assert_eq!(cut.len(), before.len());
+            let after = references(&t, &cut);
+            let kept = before
+                .iter()
+                .zip(&after)
+                .filter(|(b, a)| {
+                    assert_eq!(a.0, b.0, "the same subtrees");
+                    a.1 == b.1
+                })
+                .count();
+            assert_eq!(kept, cut.len() - st.rebuilt as usize, "weight {f}: {st:?}");
+        }
+    }
 }

@@ -1,6 +1,7 @@
-//! A tree's topology in linked form (children and parent per node), for the operations that
-//! change it without a full rebuild ([`super::optimize`], [`super::partial`]); written back in
-//! the builders' layout, so that refit and traversal work on the result unchanged.
+//! A tree's topology in linked form (children and parent per node), for the optimisation
+//! ([`super::optimize`]), which moves single nodes; written back in the builders' layout, so
+//! that refit and traversal work on the result unchanged. (The partial rebuild, which moves
+//! whole subtrees, writes its tree directly; it shares [`RestructureWorkspace`]'s buffers.)
 //!
 //! Write-back lays the reachable nodes out depth first: a node's two children are allocated
 //! together, then the left child's descendants, then the right's, so every node's children are
@@ -169,8 +170,7 @@ pub struct RestructureWorkspace {
 
 impl RestructureWorkspace {
     /// Reserves what a tree over `tris` primitives can need whatever its shape: a binary tree
-    /// has fewer than `2 tris` nodes, and a partial rebuild's linked form holds the old nodes
-    /// and the new ones side by side.
+    /// has fewer than `2 tris` nodes.
     pub fn reserve(&mut self, tris: usize) {
         fn to<T>(v: &mut Vec<T>, cap: usize) {
             if v.capacity() < cap {
@@ -179,11 +179,11 @@ impl RestructureWorkspace {
         }
         let nodes = 2 * tris.max(1);
         let t = &mut self.topo;
-        to(&mut t.bounds, 2 * nodes);
-        to(&mut t.child, 2 * nodes);
-        to(&mut t.parent, 2 * nodes);
-        to(&mut t.leaf, 2 * nodes);
-        to(&mut t.pos, 2 * nodes);
+        to(&mut t.bounds, nodes);
+        to(&mut t.child, nodes);
+        to(&mut t.parent, nodes);
+        to(&mut t.leaf, nodes);
+        to(&mut t.pos, nodes);
         to(&mut t.stack, 2 * MAX_DEPTH + 2);
         to(&mut self.nodes, nodes);
         to(&mut self.perm, tris);
