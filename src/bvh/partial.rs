@@ -420,17 +420,12 @@ impl MeshBvh {
                 (&s.built[..], at, at + 1, at + w.len as usize)
             } else {
                 let r = cut.roots[j] as usize;
-                let d0 = old[r].first as usize;
-                (
-                    old,
-                    r,
-                    d0,
-                    if old[r].is_leaf() {
-                        d0
-                    } else {
-                        descendants_end(old, r)
-                    },
-                )
+                if old[r].is_leaf() {
+                    // No descendant (a leaf's `first` is a slot, not a node).
+                    (old, r, 0, 0)
+                } else {
+                    (old, r, old[r].first as usize, descendants_end(old, r))
+                }
             };
             // The rebuilt tree numbers its nodes and slots from 0 (its first descendant is
             // node 1); the kept one is numbered in this tree.
@@ -753,5 +748,57 @@ mod tests {
                 .count();
             assert_eq!(kept, cut.len() - st.rebuilt as usize, "weight {f}: {st:?}");
         }
+    }
+
+    /// `n` small triangles in a row swaying by `w`, eight at each place, and one far from them:
+    /// the top split puts that one in a leaf beside everything else, at the last slot.
+    fn lopsided(n: usize, w: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut pos = Vec::new();
+        for i in 0..=n {
+            let c = if i < n {
+                // Eight at each place: leaves of several triangles, fewer nodes than slots.
+                let x = (i / 8) as f32 * 0.1;
+                Vec3::new(x, w * (x + w).sin(), (i % 3) as f32 * 0.05)
+            } else {
+                Vec3::new(100.0 + i as f32, 50.0, 0.0)
+            };
+            pos.extend([c, c + Vec3::X * 0.05, c + Vec3::Y * 0.05]);
+        }
+        let tris = (0..pos.len() as u32 / 3)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        (pos, tris)
+    }
+
+    /// Meshes whose cuts hold leaves (a leaf whose parent is above the cut's limit): every
+    /// share, on a chain of frames, gives a valid tree of the same triangles.
+    #[test]
+    fn cuts_holding_leaves() {
+        let params = BuildParams::BINNED;
+        let (mut ws, mut s) = (RestructureWorkspace::default(), PartialScratch::default());
+        let mut leaf_roots = 0;
+        for n in [16, 20, 33, 64, 130, 300, 700, 5000] {
+            for share in [0.0, 0.25, 1.0] {
+                let (p0, tris) = lopsided(n, 0.0);
+                let mut t = MeshBvh::build_indexed(&p0, &tris, &params);
+                let mut cut = PartialCut::default();
+                cut.reset(&t, &mut s);
+                leaf_roots += cut
+                    .roots
+                    .iter()
+                    .filter(|&&r| t.bvh().nodes()[r as usize].is_leaf())
+                    .count();
+                for f in 1..=6 {
+                    let (p, _) = lopsided(n, f as f32 / 6.0);
+                    t.refit_indexed(&p, &tris);
+                    t.partial_rebuild(&mut cut, share, &params, &mut ws, &mut s);
+                    let mesh = crate::geom::TriMesh::new(p.clone(), tris.clone());
+                    t.validate(&mesh)
+                        .unwrap_or_else(|e| panic!("{n} triangles, share {share}, frame {f}: {e}"));
+                    assert!(cut.len() < 2 || cut.fits(t.bvh()));
+                }
+            }
+        }
+        assert!(leaf_roots > 0, "no cut held a leaf");
     }
 }
