@@ -18,6 +18,7 @@
 
 mod all_hits;
 mod closest_point;
+mod fill;
 pub(crate) use closest_point::Placed;
 mod lanes;
 mod packet;
@@ -315,11 +316,11 @@ impl<const K: usize> WideBvh<K> {
         );
         let caps = (self.nodes.capacity(), self.blocks.capacity());
         self.nodes.clear();
-        self.blocks.clear();
-        self.block_indices.clear();
         self.prim_count = bvh.prim_count();
         self.stack_need = 0;
         if bvh.nodes().is_empty() {
+            self.blocks.clear();
+            self.block_indices.clear();
             return;
         }
         // Rays walk the nodes and blocks in random order: give new storage huge pages (for
@@ -362,43 +363,28 @@ impl<const K: usize> WideBvh<K> {
         }
         self.ranges = ranges;
         // Leaves refer to triangle slots so far: give each its blocks, in node order (so every
-        // subtree's blocks are contiguous too).
-        let prims = bvh.prim_indices();
-        let need: usize = (self.nodes.iter())
-            .flat_map(|n| (0..K).map(|k| n.child(k)))
-            .map(|c| match c {
-                Child::Leaf { count, .. } => count.div_ceil(4) as usize,
-                _ => 0,
-            })
-            .sum();
-        crate::simd::reserve_huge(&mut self.blocks, need, need / 4);
-        crate::simd::reserve_huge(&mut self.block_indices, need, need / 4);
-        for n in &mut self.nodes {
-            for k in 0..K {
-                if let Child::Leaf { first, count } = n.child(k) {
-                    let start = self.blocks.len() as u32;
-                    let end = first + count;
-                    let mut s = first;
-                    while s < end {
-                        let mut b = TriBlock::EMPTY;
-                        let mut idx = [[UNUSED; 3]; 4];
-                        for (l, slot) in (s..end.min(s + 4)).enumerate() {
-                            b.set(l, &m.tris[slot as usize]);
-                            b.prims[l] = prims[slot as usize];
-                            idx[l] = m.leaf_indices[slot as usize];
-                        }
-                        self.blocks.push(b);
-                        self.block_indices.push(idx);
-                        s += 4;
-                    }
-                    n.child[k] = encode_leaf(start, self.blocks.len() as u32 - start);
-                }
-            }
+        // subtree's blocks are contiguous too), and its box.
+        // The old blocks stay until the fill overwrites them (it writes every block), so that
+        // a rebuild's collapse writes its blocks once.
+        let need = fill::blocks_needed(&self.nodes);
+        if self.blocks.capacity() < need {
+            self.blocks.clear();
+            self.block_indices.clear();
+            crate::simd::reserve_huge(&mut self.blocks, need, need / 4);
+            crate::simd::reserve_huge(&mut self.block_indices, need, need / 4);
         }
+        self.blocks.resize(need, TriBlock::EMPTY);
+        self.block_indices.resize(need, [[UNUSED; 3]; 4]);
+        fill::fill_leaves(
+            &mut self.nodes,
+            &mut self.blocks,
+            &mut self.block_indices,
+            m,
+        );
         headroom(&mut self.nodes, caps.0);
         headroom(&mut self.blocks, caps.1);
         headroom(&mut self.block_indices, caps.1);
-        self.refit_boxes();
+        refit::interior_pass(&mut self.nodes);
         self.update_coord_max();
         let mut need = std::mem::take(&mut self.need);
         self.stack_need = self.stack_need_with(&mut need);

@@ -61,35 +61,12 @@ impl<const K: usize> WideBvh<K> {
         interior_pass(&mut self.nodes);
         self.update_coord_max();
     }
-
-    /// Recomputes every box from the triangle blocks as they are.
-    pub(super) fn refit_boxes(&mut self) {
-        leaf_pass(
-            &mut self.nodes,
-            &mut Boxes {
-                blocks: &self.blocks,
-            },
-        );
-        interior_pass(&mut self.nodes);
-    }
 }
 
 /// How a leaf lane's box is found.
 trait LeafBox {
     /// The box of the triangles in blocks `first .. first + count`.
     fn leaf(&mut self, first: u32, count: u32) -> Aabb;
-}
-
-/// Reads the triangle blocks.
-struct Boxes<'a> {
-    blocks: &'a [TriBlock],
-}
-
-impl LeafBox for Boxes<'_> {
-    #[inline]
-    fn leaf(&mut self, first: u32, count: u32) -> Aabb {
-        bound(&self.blocks[first as usize..(first + count) as usize])
-    }
 }
 
 /// Gathers the moved vertices into the triangle blocks and bounds them in the same pass.
@@ -149,7 +126,7 @@ impl LeafBox for Gather<'_> {
 /// The box of the triangles in some blocks: a NaN coordinate (unused lanes are all NaN) is
 /// skipped; when an infinite or all-NaN axis remains, the binary tree's sanitized boxes.
 #[inline(always)]
-fn bound(blocks: &[TriBlock]) -> Aabb {
+pub(super) fn bound(blocks: &[TriBlock]) -> Aabb {
     let b = bound_lanes(blocks);
     if b.is_finite() {
         b
@@ -215,7 +192,7 @@ fn leaf_pass<const K: usize>(nodes: &mut [WideNode<K>], leaf: &mut impl LeafBox)
 }
 
 /// Sets every interior lane's box to the union of its node's lanes, in one reverse sweep.
-fn interior_pass<const K: usize>(nodes: &mut [WideNode<K>]) {
+pub(super) fn interior_pass<const K: usize>(nodes: &mut [WideNode<K>]) {
     for i in (0..nodes.len()).rev() {
         let (head, tail) = nodes.split_at_mut(i + 1);
         let node = &mut head[i];
