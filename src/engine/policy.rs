@@ -665,9 +665,13 @@ impl PolicyState {
     /// weight `max(1 / (n + 1), 0.3)` (so it follows a change within a few rebuilds).
     pub fn calibrate_rays(&mut self, estimated: f32, measured: f32) {
         // A small estimated degradation says nothing about the gain (the replay's ratio is
-        // then mostly the sample's noise): learn only from clear ones.
-        if estimated > 1.0 + MIN_RAY_SIGNAL && measured.is_finite() {
-            let seen = ((measured - 1.0) / (estimated - 1.0)).clamp(MIN_RAY_GAIN, MAX_RAY_GAIN);
+        // then mostly the sample's noise): learn only from clear ones, or from a replay that
+        // itself shows a clear degradation the estimate missed (a small mesh's few entries,
+        // whose ratio was held near the SAH's), taking the estimate's as at least the signal.
+        let clear = estimated > 1.0 + MIN_RAY_SIGNAL || measured > 1.0 + MIN_RAY_SHOWN;
+        if clear && measured.is_finite() {
+            let seen = ((measured - 1.0) / (estimated - 1.0).max(MIN_RAY_SIGNAL))
+                .clamp(MIN_RAY_GAIN, MAX_RAY_GAIN);
             let w = (1.0 / (self.ray_calibrations as f32 + 1.0)).max(0.3);
             self.estimate_gain += w * (seen - self.estimate_gain);
             self.ray_calibrations += 1;
@@ -723,8 +727,10 @@ const MAX_RAY_GAIN: f32 = 8.0;
 /// Lower bound of that gain: the sampled ratio is the rays' own measure, so it is never
 /// believed to be mostly noise.
 const MIN_RAY_GAIN: f32 = 0.25;
-/// Estimated degradation below which a replay teaches nothing.
+/// Estimated degradation below which a replay teaches nothing...
 const MIN_RAY_SIGNAL: f32 = 0.05;
+/// ...unless the replay itself shows at least this much.
+const MIN_RAY_SHOWN: f32 = 0.2;
 
 /// Frames a rebuild is judged before it can be found to have failed (the first frames'
 /// samples are the noisiest part of the smoothed ratio).
@@ -1148,5 +1154,29 @@ mod tests {
             s.calibrate(1.01, 9.0);
         }
         assert!(s.estimate_gain <= 2.0);
+    }
+
+    #[test]
+    fn a_replay_teaches_the_rays_gain_when_it_or_the_estimate_is_clear() {
+        // Estimated 1.1, the replay showed 1.2: the rays felt twice the estimate.
+        let mut s = PolicyState::default();
+        s.calibrate_rays(1.1, 1.2);
+        assert!((s.estimate_gain - 2.0).abs() < 1e-5, "{}", s.estimate_gain);
+        // An estimate within the noise and a replay within it too: nothing learnt.
+        let mut s = PolicyState::default();
+        s.calibrate_rays(1.02, 1.1);
+        assert_eq!(s.estimate_gain, 1.0);
+        // An estimate within the noise, but a replay showing a clear degradation (a small
+        // mesh's few entries read near 1 while its rays did 40% more work): learnt, the
+        // estimate's degradation taken as the signal's floor (0.4 / 0.05 = 8, the bound).
+        s.calibrate_rays(1.0, 1.4);
+        assert!(
+            (s.estimate_gain - MAX_RAY_GAIN).abs() < 1e-5,
+            "{}",
+            s.estimate_gain
+        );
+        // A later clear estimate pulls it back by its weight.
+        s.calibrate_rays(1.2, 1.2);
+        assert!(s.estimate_gain < MAX_RAY_GAIN && s.estimate_gain > 1.0);
     }
 }
