@@ -543,23 +543,15 @@ struct SlotsMut<'a> {
     indices: &'a mut [[u32; 3]],
 }
 
-impl<'a> Slots<'a> {
-    fn split_at(self, k: usize) -> (Self, Self) {
-        let (ta, tb) = self.tris.split_at(k);
-        let (pa, pb) = self.prims.split_at(k);
-        let (ia, ib) = self.indices.split_at(k);
-        (
-            Self {
-                tris: ta,
-                prims: pa,
-                indices: ia,
-            },
-            Self {
-                tris: tb,
-                prims: pb,
-                indices: ib,
-            },
-        )
+impl Slots<'_> {
+    /// Slots `first .. first + count`.
+    fn range(self, first: u32, count: u32) -> Self {
+        let r = first as usize..(first + count) as usize;
+        Self {
+            tris: &self.tris[r.clone()],
+            prims: &self.prims[r.clone()],
+            indices: &self.indices[r],
+        }
     }
 }
 
@@ -586,9 +578,9 @@ impl<'a> SlotsMut<'a> {
 /// Slots below which a part of the cut is done on one thread.
 const SERIAL_SLOTS: usize = 4096;
 
-/// Rebuilds the chosen cut subtrees of `work` (which tile `src`'s slots in order), in
-/// parallel: `dst` gets their slots, at the same places in their new order, and `built` their
-/// nodes (the subtree at slot `f` of `src` from `2 f`).
+/// Rebuilds the chosen cut subtrees of `work` (which tile `dst`'s slots in order; `src` is
+/// every slot of the tree), in parallel: `dst` gets their slots, at the same places in their
+/// new order, and `built` their nodes (the subtree at `dst`'s slot `f` from `2 f`).
 fn rebuild_chosen(
     work: &mut [CutWork],
     src: Slots<'_>,
@@ -603,23 +595,24 @@ fn rebuild_chosen(
             let mut t = tasks[i.min(tasks.len() - 1)]
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner);
+            let src = src.range(w.first, w.count);
             (w.len, w.reference, w.height) = t.rebuild(src, dst, built, params);
         }
         return;
     }
     let mid = work.len() / 2;
     let k = (work[mid].first - work[0].first) as usize;
+    let serial = dst.tris.len() < SERIAL_SLOTS;
     let (wa, wb) = work.split_at_mut(mid);
-    let (sa, sb) = src.split_at(k);
     let (da, db) = dst.split_at(k);
     let (ba, bb) = built.split_at_mut(2 * k);
-    if src.tris.len() < SERIAL_SLOTS {
-        rebuild_chosen(wa, sa, da, ba, params, tasks);
-        rebuild_chosen(wb, sb, db, bb, params, tasks);
+    if serial {
+        rebuild_chosen(wa, src, da, ba, params, tasks);
+        rebuild_chosen(wb, src, db, bb, params, tasks);
     } else {
         rayon::join(
-            || rebuild_chosen(wa, sa, da, ba, params, tasks),
-            || rebuild_chosen(wb, sb, db, bb, params, tasks),
+            || rebuild_chosen(wa, src, da, ba, params, tasks),
+            || rebuild_chosen(wb, src, db, bb, params, tasks),
         );
     }
 }
