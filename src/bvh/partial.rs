@@ -65,6 +65,17 @@ pub struct PartialScratch {
     tasks: Vec<Mutex<TaskScratch>>,
 }
 
+impl PartialScratch {
+    /// A task scratch for each thread of the current pool and one for a caller outside it
+    /// (allocates only when the pool has more threads than before).
+    fn task_per_thread(&mut self) {
+        let threads = rayon::current_num_threads() + 1;
+        if self.tasks.len() < threads {
+            self.tasks.resize_with(threads, Default::default);
+        }
+    }
+}
+
 impl Clone for PartialScratch {
     fn clone(&self) -> Self {
         let lock =
@@ -152,10 +163,7 @@ impl PartialCut {
         }
         // Each thread's scratch grown to the largest cut subtree, so that rebuilding cut
         // subtrees allocates nothing whichever thread gets which.
-        let threads = rayon::current_num_threads() + 1;
-        if s.tasks.len() < threads {
-            s.tasks.resize_with(threads, Default::default);
-        }
+        s.task_per_thread();
         for t in &mut s.tasks {
             let t = t.get_mut().unwrap_or_else(PoisonError::into_inner);
             if t.boxes.capacity() < limit as usize {
@@ -291,10 +299,7 @@ impl MeshBvh {
         ws.old_prims.resize(n, 0);
         ws.old_leaf_indices.resize(n, [0; 3]);
         s.built.resize(2 * n, Node::default());
-        let threads = rayon::current_num_threads() + 1;
-        if s.tasks.len() < threads {
-            s.tasks.resize_with(threads, Default::default);
-        }
+        s.task_per_thread();
         let sub_params = BuildParams {
             parallel_threshold: usize::MAX,
             ..*params

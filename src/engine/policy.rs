@@ -1166,9 +1166,9 @@ mod tests {
         let mut s = PolicyState::default();
         s.calibrate_rays(1.02, 1.1);
         assert_eq!(s.estimate_gain, 1.0);
-        // An estimate within the noise, but a replay showing a clear degradation (a small
-        // mesh's few entries read near 1 while its rays did 40% more work): learnt, the
-        // estimate's degradation taken as the signal's floor (0.4 / 0.05 = 8, the bound).
+        // An estimate within the noise (a small mesh's few entries reading 1), but a replay
+        // of 1.4, a clear degradation: learnt, the estimate's degradation taken as the
+        // signal's floor (0.4 / 0.05 = 8, the bound).
         s.calibrate_rays(1.0, 1.4);
         assert!(
             (s.estimate_gain - MAX_RAY_GAIN).abs() < 1e-5,
