@@ -2,13 +2,13 @@
 //! buffers, page faults included) and warm (`Bvh::rebuild` into a grown tree and workspace, as
 //! the engine rebuilds), and prints the medians of CPU and wall time with the SAH cost; then the
 //! same for the whole `MeshBvh` (triangle boxes, tree, triangles copied in leaf order: what
-//! `dynbvh build-bench` times, cold):
+//! `dynbvh build-bench` times, cold); then the 8-wide tree, built and collapsed:
 //!
 //! `cargo run --release --example prof_build FILE.tri [bins] [runs]`
 //!
 //! `WIDEST=1` bins only the widest axis; `METHOD=sweep` or `METHOD=median` times that builder
 //! instead; `RAYON_NUM_THREADS` sets the thread count.
-use dynbvh::bvh::{BuildParams, BuildWorkspace, Bvh, MeshBvh};
+use dynbvh::bvh::{BuildParams, BuildWorkspace, Bvh, MeshBvh, MeshBvh8};
 use dynbvh::geom::Aabb;
 use std::time::Instant;
 
@@ -82,4 +82,22 @@ fn main() {
         warm.1.push(t.elapsed().as_secs_f64() * 1e3);
     }
     report("mesh", cold, warm, m.bvh().sah_cost());
+
+    // The 8-wide tree: the binary build and its collapse, cold (as the peers bench times it)
+    // and warm (a rebuild collapsed into the grown wide tree, as the engine does).
+    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
+    let mut w = MeshBvh8::from_mesh_bvh(&m);
+    for _ in 0..runs {
+        let (c, t) = (cpu_s(), Instant::now());
+        let fresh = MeshBvh8::build(&mesh, &p);
+        cold.0.push((cpu_s() - c) * 1e3);
+        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
+        drop(fresh);
+        let (c, t) = (cpu_s(), Instant::now());
+        m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+        w.collapse_from(&m);
+        warm.0.push((cpu_s() - c) * 1e3);
+        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    report("bvh8", cold, warm, m.bvh().sah_cost());
 }

@@ -405,7 +405,12 @@ impl Bvh {
             fill(refs, 0)
         };
         let slots = &mut ws.slots;
-        grow_zeroed(slots, 2 * n - 1);
+        if grow_zeroed(slots, 2 * n - 1) {
+            // Fresh slots: a cold build touches them sparsely, a few nodes per page, so a
+            // fault per 2 MiB rather than per 4 KiB saves more than zeroing the untouched
+            // rest costs (`docs/build_speed.md`).
+            crate::simd::advise_huge_vec(slots);
+        }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         let (count, packed);
         (root[0], count, packed) = match (splitter, params.method) {
@@ -476,12 +481,16 @@ pub(crate) fn refs_from_corners(
 /// Makes `v` at least `len` long. New storage is allocated zeroed (by the system, page by page
 /// on first touch, for large sizes) rather than filled: a cold 1M build would otherwise write
 /// 64 MB of node slots, most of which it never uses, and 32 MB of references it overwrites.
-pub(crate) fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) {
+/// Returns true when the storage is new (nothing of it touched yet).
+pub(crate) fn grow_zeroed<T: bytemuck::Zeroable + Clone>(v: &mut Vec<T>, len: usize) -> bool {
     if v.capacity() < len {
         *v = bytemuck::zeroed_vec(len);
-    } else if v.len() < len {
+        return true;
+    }
+    if v.len() < len {
         v.resize(len, T::zeroed());
     }
+    false
 }
 
 /// Builds the whole tree over `refs` with one splitter: writes the root's descendants into
