@@ -37,7 +37,7 @@ fn cpu_timing() -> bool {
 /// whole file). Camera rays are subsampled as a lower-resolution image of the same view.
 const DEFAULT_RAYS: usize = 1 << 18;
 /// Builds per variant (3 when a build takes more than a second).
-const BUILD_RUNS: usize = 5;
+const BUILD_RUNS: usize = 7;
 /// Timed passes over each ray set.
 const TRACE_RUNS: usize = 3;
 /// Timed refits per variant.
@@ -1035,16 +1035,33 @@ fn measure_all(input: &Input, variants: &[&Variant]) -> Vec<Row> {
     };
 
     let t = Instant::now();
+    // One untimed build of each variant first: the first builds of a process touch memory
+    // it has never used, which these VMs back slowly (up to twice a build's time in the first
+    // round, more than the later rounds' spread).
+    for m in &mut ms {
+        m.build();
+    }
     let mut builds = vec![Vec::new(); n];
     for run in 0..BUILD_RUNS {
-        for (m, times) in ms.iter_mut().zip(&mut builds) {
+        // Each round starts one variant later, so that no variant always builds right after
+        // the same other one: a build's time depends on what the build before it left in
+        // memory (on these VMs the first collapse after the binary build ran up to twice as
+        // long in some rounds, `docs/build_speed.md`).
+        for k in 0..n {
+            let i = (run + k) % n;
+            let times = &mut builds[i];
             // Three builds are enough for multi-second builders.
             if run < 3 || median(times.clone()) < 1000.0 {
-                times.push(m.build());
+                times.push(ms[i].build());
             }
         }
     }
     progress("builds", t);
+    if std::env::var_os("DYNBVH_PEERS_BUILDS").is_some() {
+        for (v, b) in variants.iter().zip(&builds) {
+            eprintln!("  {}: builds {b:.1?} ms", v.name);
+        }
+    }
 
     let t = Instant::now();
     let mut traces = vec![vec![Vec::new(); input.sets.len()]; n];
