@@ -38,22 +38,7 @@ fn main() {
         _ => {}
     }
     let boxes: Vec<Aabb> = (0..mesh.len()).map(|i| mesh.triangle_bounds(i)).collect();
-    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
-    let mut ws = BuildWorkspace::default();
-    let mut tree = Bvh::build(&boxes, &p);
-    tree.rebuild(&boxes, &p, &mut ws);
-    for _ in 0..runs {
-        let (c, t) = (cpu_s(), Instant::now());
-        let bvh = Bvh::build(&boxes, &p);
-        cold.0.push((cpu_s() - c) * 1e3);
-        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
-        drop(bvh);
-        let (c, t) = (cpu_s(), Instant::now());
-        tree.rebuild(&boxes, &p, &mut ws);
-        warm.0.push((cpu_s() - c) * 1e3);
-        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
-    }
-    let report = |what: &str, cold: (Vec<f64>, Vec<f64>), warm: (Vec<f64>, Vec<f64>), sah: f32| {
+    let report = |what: &str, (cold, warm): (Times, Times), sah: f32| {
         println!(
             "{what} {} {} threads: cold {:.1} ms cpu ({:.1} wall), warm {:.1} ms cpu ({:.1} wall), sah {sah:.3}",
             p.name(),
@@ -64,40 +49,58 @@ fn main() {
             median(warm.1),
         );
     };
-    report("bvh", cold, warm, tree.sah_cost());
 
-    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
+    let mut ws = BuildWorkspace::default();
+    let mut tree = Bvh::build(&boxes, &p);
+    tree.rebuild(&boxes, &p, &mut ws);
+    let times = cold_and_warm(
+        runs,
+        || drop(Bvh::build(&boxes, &p)),
+        || tree.rebuild(&boxes, &p, &mut ws),
+    );
+    report("bvh", times, tree.sah_cost());
+
     let mut ws = BuildWorkspace::default();
     let mut m = MeshBvh::build(&mesh, &p);
     m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
-    for _ in 0..runs {
-        let (c, t) = (cpu_s(), Instant::now());
-        let fresh = MeshBvh::build(&mesh, &p);
-        cold.0.push((cpu_s() - c) * 1e3);
-        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
-        drop(fresh);
-        let (c, t) = (cpu_s(), Instant::now());
-        m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
-        warm.0.push((cpu_s() - c) * 1e3);
-        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
-    }
-    report("mesh", cold, warm, m.bvh().sah_cost());
+    let times = cold_and_warm(
+        runs,
+        || drop(MeshBvh::build(&mesh, &p)),
+        || m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws),
+    );
+    report("mesh", times, m.bvh().sah_cost());
 
     // The 8-wide tree: the binary build and its collapse, cold (as the peers bench times it)
     // and warm (a rebuild collapsed into the grown wide tree, as the engine does).
-    let (mut cold, mut warm) = ((vec![], vec![]), (vec![], vec![]));
     let mut w = MeshBvh8::from_mesh_bvh(&m);
+    let times = cold_and_warm(
+        runs,
+        || drop(MeshBvh8::build(&mesh, &p)),
+        || {
+            m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
+            w.collapse_from(&m);
+        },
+    );
+    report("bvh8", times, m.bvh().sah_cost());
+}
+
+/// CPU and wall-clock milliseconds of each run.
+type Times = (Vec<f64>, Vec<f64>);
+
+/// Times `runs` alternations of a cold build (`cold`, its result dropped inside) and a warm
+/// one (`warm`).
+fn cold_and_warm(runs: usize, mut cold: impl FnMut(), mut warm: impl FnMut()) -> (Times, Times) {
+    let (mut c_t, mut w_t) = ((vec![], vec![]), (vec![], vec![]));
     for _ in 0..runs {
-        let (c, t) = (cpu_s(), Instant::now());
-        let fresh = MeshBvh8::build(&mesh, &p);
-        cold.0.push((cpu_s() - c) * 1e3);
-        cold.1.push(t.elapsed().as_secs_f64() * 1e3);
-        drop(fresh);
-        let (c, t) = (cpu_s(), Instant::now());
-        m.rebuild_indexed(&mesh.positions, &mesh.indices, &p, &mut ws);
-        w.collapse_from(&m);
-        warm.0.push((cpu_s() - c) * 1e3);
-        warm.1.push(t.elapsed().as_secs_f64() * 1e3);
+        for (f, t) in [
+            (&mut cold as &mut dyn FnMut(), &mut c_t),
+            (&mut warm, &mut w_t),
+        ] {
+            let (c, w) = (cpu_s(), Instant::now());
+            f();
+            t.0.push((cpu_s() - c) * 1e3);
+            t.1.push(w.elapsed().as_secs_f64() * 1e3);
+        }
     }
-    report("bvh8", cold, warm, m.bvh().sah_cost());
+    (c_t, w_t)
 }
