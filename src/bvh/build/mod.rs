@@ -405,10 +405,16 @@ impl Bvh {
             fill(refs, 0)
         };
         let slots = &mut ws.slots;
-        if grow_zeroed(slots, 2 * n - 1) {
-            // Fresh slots: a cold build touches them sparsely, a few nodes per page, so a
-            // fault per 2 MiB rather than per 4 KiB saves more than zeroing the untouched
-            // rest costs (`docs/build_speed.md`).
+        if grow_zeroed(slots, 2 * n - 1)
+            && splitter.is_none()
+            && matches!(params.method, Method::Binned)
+            && rayon::current_num_threads() == 1
+        {
+            // A binned build on one thread writes its nodes in order from the first slot:
+            // on huge pages that takes a fault per 2 MiB of them instead of per 4 KiB, and the
+            // rest is never touched. A parallel build spreads its subtrees over the whole
+            // reservation, where huge pages would back and zero the gaps too
+            // (`docs/build_speed.md`).
             crate::simd::advise_huge_vec(slots);
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
