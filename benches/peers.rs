@@ -1044,9 +1044,7 @@ fn measure_all(input: &Input, variants: &[&Variant]) -> Vec<Row> {
     let mut builds = vec![Vec::new(); n];
     for run in 0..BUILD_RUNS {
         // Each round starts one variant later, so that no variant always builds right after
-        // the same other one: a build's time depends on what the build before it left in
-        // memory (on these VMs the first collapse after the binary build ran up to twice as
-        // long in some rounds, `docs/build_speed.md`).
+        // the same other one (what a build leaves in memory can change the next one's time).
         for k in 0..n {
             let i = (run + k) % n;
             let times = &mut builds[i];
