@@ -8,10 +8,13 @@
 //!   (first-active-ray traversal); when popped, its box is tested against the rays from that
 //!   one on (16 rays per SIMD test) with their current `tmax`.
 //! - A leaf's triangle blocks are tested against the rays whose slab test touches its box,
-//!   with the watertight 16-ray kernel (bit for bit the single-ray test's distances).
+//!   with the watertight 16-ray kernel (bit for bit the single-ray test's distances), or by
+//!   each of those rays alone with the 4-triangle kernel when they are few (on fine meshes,
+//!   most leaves: a triangle covers a few rays of a packet at most).
 //! - A subtree that at most [`SINGLE_BELOW`] rays still need is walked by each of them alone;
 //!   packets that are not coherent are traced ray by ray.
 
+use super::lanes::TriLanes;
 use super::traverse::{BIG_STACK, SMALL_STACK};
 use super::{EMPTY_CHILD, LEAF_BIT, NO_PRIM, WideBvh, leaf_range};
 use crate::bvh::packet::{
@@ -21,7 +24,8 @@ use crate::geom::{Hit, Ray};
 use crate::simd::packet::LANES;
 use wide::f32x8;
 
-/// A subtree that at most this many rays of a packet still need is walked ray by ray.
+/// A subtree, or a leaf, that at most this many rays of a packet still need is walked ray by
+/// ray.
 const SINGLE_BELOW: u32 = 4;
 
 /// A pending child: its reference, its parent node, its lane there, and the first ray that may
@@ -187,6 +191,23 @@ impl<const K: usize> WideBvh<K> {
                 }
                 let (fb, count) = leaf_range(c);
                 let mut changed = false;
+                if rays.count_ones() <= SINGLE_BELOW {
+                    // Too few rays for the packet kernel to pay: each tests the blocks alone.
+                    let mut bits = rays;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        changed |= self.leaf_single::<ANY>(p, i, c);
+                    }
+                    if ANY {
+                        if p.active() == 0 {
+                            return;
+                        }
+                    } else if changed {
+                        p.update_tmax_hi();
+                    }
+                    continue;
+                }
                 let run = fb as usize..(fb + count) as usize;
                 'blocks: for (b, block) in run.clone().zip(&blocks[run]) {
                     for l in 0..4 {
@@ -233,6 +254,22 @@ impl<const K: usize> WideBvh<K> {
                 self.expand(p, c, f, &mut stack, &mut sp);
             }
         }
+    }
+
+    /// Tests the leaf `c`'s triangles against ray `i` of the packet alone, a block at a time,
+    /// and records what it finds. Returns true when the ray found a (closer) hit.
+    fn leaf_single<const ANY: bool>(&self, p: &mut RayPacket, i: usize, c: u32) -> bool {
+        let ray = *p.ray(i);
+        let tri = TriLanes::new(&ray);
+        let Some((slot, t, u, v)) = self.leaf::<ANY, ()>(c, &ray, &tri, p.tmax(i), &mut ()) else {
+            return false;
+        };
+        if ANY {
+            p.retire((1 as Mask) << i);
+        } else {
+            p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
+        }
+        true
     }
 
     /// Walks the subtree of node `c` with ray `i` of the packet alone (the single-ray wide

@@ -137,6 +137,63 @@ impl<const K: usize> WideBvh<K> {
         }
     }
 
+    /// The closest hit (`ANY`: the first) closer than `tmax` among the triangles of the leaf
+    /// `leaf`, a block of four at a time.
+    #[inline(always)]
+    pub(super) fn leaf<const ANY: bool, C: Counters>(
+        &self,
+        leaf: u32,
+        ray: &Ray,
+        tri_lanes: &TriLanes,
+        mut tmax: f32,
+        counters: &mut C,
+    ) -> Best {
+        let (first, count) = leaf_range(leaf);
+        let first = first as usize;
+        let mut best: Best = None;
+        for (b, block) in (first..).zip(&self.blocks[first..first + count as usize]) {
+            for l in 0..4 {
+                if block.prims[l] != NO_PRIM {
+                    counters.prim();
+                    if C::TRIANGLES {
+                        counters.triangle(block.get(l), tmax);
+                    }
+                }
+            }
+            let hit = match intersect4(block, tri_lanes, tmax) {
+                BlockHit::None => continue,
+                BlockHit::Hit(l, t, u, v) => Some((b * 4 + l, t, u, v)),
+                BlockHit::Scalar => {
+                    // Lane by lane, nearest first hit kept, as the scalar loop does.
+                    let pre = tri_lanes.precomp();
+                    let mut found = None;
+                    for l in 0..4 {
+                        let [p, q, r] = block.get(l);
+                        if let Some((t, u, v)) = intersect_triangle(
+                            ray,
+                            &pre,
+                            p,
+                            q,
+                            r,
+                            found.map_or(tmax, |f: (usize, f32, f32, f32)| f.1),
+                        ) {
+                            found = Some((b * 4 + l, t, u, v));
+                        }
+                    }
+                    found
+                }
+            };
+            if let Some(h) = hit {
+                if ANY {
+                    return Some(h);
+                }
+                tmax = h.1;
+                best = Some(h);
+            }
+        }
+        best
+    }
+
     /// [`WideBvh::traverse`] with the node test [`slab_fma`] (`FMA`) or [`slab`].
     #[inline(always)]
     fn walk<const ANY: bool, const N: usize, const FMA: bool, const X: u32, C: Counters>(
@@ -151,7 +208,6 @@ impl<const K: usize> WideBvh<K> {
         if nodes.is_empty() {
             return None;
         }
-        let blocks = self.blocks.as_slice();
         let lanes = *lanes;
         let tri_lanes = TriLanes::new(ray);
         let mut best: Best = None;
@@ -164,47 +220,12 @@ impl<const K: usize> WideBvh<K> {
         loop {
             counters.node();
             if cur & LEAF_BIT != 0 {
-                let (first, count) = leaf_range(cur);
-                let first = first as usize;
-                for (b, block) in (first..).zip(&blocks[first..first + count as usize]) {
-                    for l in 0..4 {
-                        if block.prims[l] != NO_PRIM {
-                            counters.prim();
-                            if C::TRIANGLES {
-                                counters.triangle(block.get(l), tmax);
-                            }
-                        }
+                if let Some(h) = self.leaf::<ANY, C>(cur, ray, &tri_lanes, tmax, counters) {
+                    if ANY {
+                        return Some(h);
                     }
-                    let hit = match intersect4(block, &tri_lanes, tmax) {
-                        BlockHit::None => continue,
-                        BlockHit::Hit(l, t, u, v) => Some((b * 4 + l, t, u, v)),
-                        BlockHit::Scalar => {
-                            // Lane by lane, nearest first hit kept, as the scalar loop does.
-                            let pre = tri_lanes.precomp();
-                            let mut found = None;
-                            for l in 0..4 {
-                                let [p, q, r] = block.get(l);
-                                if let Some((t, u, v)) = intersect_triangle(
-                                    ray,
-                                    &pre,
-                                    p,
-                                    q,
-                                    r,
-                                    found.map_or(tmax, |f: (usize, f32, f32, f32)| f.1),
-                                ) {
-                                    found = Some((b * 4 + l, t, u, v));
-                                }
-                            }
-                            found
-                        }
-                    };
-                    if let Some(h) = hit {
-                        if ANY {
-                            return Some(h);
-                        }
-                        tmax = h.1;
-                        best = Some(h);
-                    }
+                    tmax = h.1;
+                    best = Some(h);
                 }
             } else {
                 let node = &nodes[cur as usize];
