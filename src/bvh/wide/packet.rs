@@ -170,6 +170,9 @@ impl<const K: usize> WideBvh<K> {
         let blocks = self.blocks.as_slice();
         let mut stack: [Entry; N] = [(0, 0, 0, 0); N];
         let mut sp = 0;
+        // Hits lower the packet's largest `tmax`, which only the interval tests of interior
+        // nodes read: it is brought up to date there, not after every leaf.
+        let mut stale = false;
         self.expand(p, 0, 0, &mut stack, &mut sp);
         while sp > 0 {
             sp -= 1;
@@ -203,8 +206,8 @@ impl<const K: usize> WideBvh<K> {
                         if p.active() == 0 {
                             return;
                         }
-                    } else if changed {
-                        p.update_tmax_hi();
+                    } else {
+                        stale |= changed;
                     }
                     continue;
                 }
@@ -226,10 +229,14 @@ impl<const K: usize> WideBvh<K> {
                     if p.active() == 0 {
                         return;
                     }
-                } else if changed {
-                    p.update_tmax_hi();
+                } else {
+                    stale |= changed;
                 }
             } else {
+                if stale {
+                    p.update_tmax_hi();
+                    stale = false;
+                }
                 if live.count_ones() <= SINGLE_BELOW {
                     // Too few rays left for the packet to pay: each goes on alone.
                     let mut changed = false;
@@ -243,8 +250,8 @@ impl<const K: usize> WideBvh<K> {
                         if p.active() == 0 {
                             return;
                         }
-                    } else if changed {
-                        p.update_tmax_hi();
+                    } else {
+                        stale |= changed;
                     }
                     continue;
                 }
