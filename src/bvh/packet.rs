@@ -256,31 +256,38 @@ impl RayPacket {
                 .try_into()
                 .expect("a group");
             let col = |f: &dyn Fn(&Ray) -> f32| F::from(std::array::from_fn(|l| f(&rays[l])));
-            // Rows: origin, direction, reciprocal, slab_lo, slab_hi (3 each), tmin, tmax.
-            let rows: [F; 17] = [
+            let on = F::from(on);
+            let o = [
                 col(&|r| r.origin.x),
                 col(&|r| r.origin.y),
                 col(&|r| r.origin.z),
-                col(&|r| r.dir.x),
-                col(&|r| r.dir.y),
-                col(&|r| r.dir.z),
-                col(&|r| r.inv_dir.x),
-                col(&|r| r.inv_dir.y),
-                col(&|r| r.inv_dir.z),
-                col(&|r| r.slab_lo.x),
-                col(&|r| r.slab_lo.y),
-                col(&|r| r.slab_lo.z),
-                col(&|r| r.slab_hi.x),
-                col(&|r| r.slab_hi.y),
-                col(&|r| r.slab_hi.z),
-                col(&|r| r.tmin),
-                col(&|r| r.tmax),
             ];
-            let row = |j: usize| rows[j];
-            let o = [row(0), row(1), row(2)];
-            let d = [row(3), row(4), row(5)];
-            let inv = [row(6), row(7), row(8)];
-            let on = F::from(on);
+            let d = [col(&|r| r.dir.x), col(&|r| r.dir.y), col(&|r| r.dir.z)];
+            // The slab test's origins are the origin's own except on an axis the ray does not
+            // move along (`Ray::derive`), and the reciprocal is `1 / d` (`+inf` for a zero `d`),
+            // the same bits as the rays hold, computed here rather than gathered; an idle lane
+            // keeps `IDLE`'s.
+            let still = (d[0].simd_eq(zero) | d[1].simd_eq(zero) | d[2].simd_eq(zero)) & on;
+            let (slab_lo, slab_hi) = if still.any() {
+                (
+                    [
+                        col(&|r| r.slab_lo.x),
+                        col(&|r| r.slab_lo.y),
+                        col(&|r| r.slab_lo.z),
+                    ],
+                    [
+                        col(&|r| r.slab_hi.x),
+                        col(&|r| r.slab_hi.y),
+                        col(&|r| r.slab_hi.z),
+                    ],
+                )
+            } else {
+                (o, o)
+            };
+            let one = F::splat(1.0);
+            let inv = d.map(|c| on.select(c.simd_eq(zero).select(inf, one / c), one));
+            let tmin_row = col(&|r| r.tmin);
+            let tmax_row = col(&|r| r.tmax);
             // The watertight test's axes (`RayTriPrecomp::new`): kz the largest |d| (the first
             // on ties), kx and ky the next ones, swapped when d[kz] is negative.
             let (ax, ay, az) = (d[0].abs(), d[1].abs(), d[2].abs());
@@ -296,11 +303,11 @@ impl RayPacket {
             let ky1 = (kz2 & !neg) | (kz0 & neg);
             let sz = F::splat(1.0) / dkz;
             let lanes = &mut self.lanes[g];
-            lanes.slab_lo = [row(9), row(10), row(11)];
-            lanes.slab_hi = [row(12), row(13), row(14)];
+            lanes.slab_lo = slab_lo;
+            lanes.slab_hi = slab_hi;
             lanes.inv = inv;
-            lanes.tmin = row(15);
-            lanes.tmax = row(16);
+            lanes.tmin = tmin_row;
+            lanes.tmax = tmax_row;
             lanes.ok = [pick(kx0, kx1, &o), pick(ky0, ky1, &o), pick(kz0, kz1, &o)];
             lanes.s = [pick(kx0, kx1, &d) * sz, pick(ky0, ky1, &d) * sz, sz];
             lanes.k = [kx0, kx1, ky0, ky1, kz0, kz1];
@@ -1007,5 +1014,66 @@ impl MeshBvh {
         self.bvh.traverse_packet::<true>(p, pf, |p, slot, rays| {
             p.test_triangle::<true>(&tris[slot], slot as u32, rays)
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rows a packet computes from its rays' directions (the reciprocal, the slab test's
+    /// origins) are bit for bit the fields each ray holds, for every kind of component, and an
+    /// idle lane of a loaded group holds `IDLE`'s.
+    #[test]
+    fn loaded_rows_are_the_rays_fields() {
+        let comps = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            3.0e-39,
+            -1.0e-45,
+            1.0e30,
+            -7.5,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.3,
+        ];
+        let origins = [-2.5, 0.0, 1.0e-40, 17.0, f32::NAN];
+        let mut rays = Vec::new();
+        for (i, &x) in comps.iter().enumerate() {
+            for (j, &y) in comps.iter().enumerate() {
+                let z = comps[(i + 2 * j) % comps.len()];
+                let o = Vec3::new(origins[i % 5], origins[j % 5], origins[(i + j) % 5]);
+                rays.push(Ray::with_range(o, Vec3::new(x, y, z), 0.25, 9.0));
+            }
+        }
+        let mut p = RayPacket::new();
+        for chunk in rays.chunks(100) {
+            p.load(chunk);
+            // Groups past the last loaded ray are not touched.
+            for i in 0..chunk.len().div_ceil(LANES) * LANES {
+                let want = chunk.get(i).unwrap_or(&IDLE);
+                let lanes = &p.lanes[i / LANES];
+                let l = i % LANES;
+                let bits = |v: &F| v.as_array()[l].to_bits();
+                for a in 0..3 {
+                    assert_eq!(bits(&lanes.inv[a]), want.inv_dir[a].to_bits(), "{want:?}");
+                    assert_eq!(
+                        bits(&lanes.slab_lo[a]),
+                        want.slab_lo[a].to_bits(),
+                        "{want:?}"
+                    );
+                    assert_eq!(
+                        bits(&lanes.slab_hi[a]),
+                        want.slab_hi[a].to_bits(),
+                        "{want:?}"
+                    );
+                }
+                assert_eq!(bits(&lanes.tmin), want.tmin.to_bits());
+                assert_eq!(bits(&lanes.tmax), want.tmax.to_bits());
+            }
+        }
     }
 }
