@@ -6,7 +6,6 @@
 mod cli_util;
 use cli_util::{animation, dynbvh};
 use serde_json::Value;
-use std::path::PathBuf;
 
 /// Runs `bench` on an animation with `extra` arguments, `--out` a fresh folder and `--json`;
 /// returns the printed report and the folder.
@@ -22,7 +21,7 @@ const FRAME_FIELDS: [&str; 8] = [
     "mrays",
 ];
 
-fn bench(file: &str, tag: &str, extra: &[&str]) -> (Value, PathBuf) {
+fn bench(file: &str, tag: &str, extra: &[&str]) -> (Value, cli_util::TmpDir) {
     let out = cli_util::tmp_dir("bench", tag);
     let path = animation(file);
     let out_s = out.to_string_lossy().into_owned();
