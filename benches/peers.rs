@@ -2,7 +2,7 @@
 //! benchmark inputs: build time, refit time, SAH of the binary tree (computed the same way for
 //! every library, from its own node boxes), closest-hit Mrays/s on the primary and random ray
 //! sets, and agreement of every library's hits with brute force. Everything runs on one thread
-//! (inside a one-thread rayon pool). See `benches/README.md`.
+//! (inside a one-thread rayon pool), or on `DYNBVH_PEERS_THREADS`. See `benches/README.md`.
 //!
 //! Build with the `peers` feature (and a separate target dir, so that the shared one is not
 //! rebuilt):
@@ -26,8 +26,23 @@ mod cpu;
 /// instead of wall-clock time (for a machine shared with other work), each pass repeated for at
 /// least 0.3 s of CPU time.
 fn cpu_timing() -> bool {
-    std::env::var_os("DYNBVH_PEERS_CPU").is_some()
+    std::env::var_os("DYNBVH_PEERS_CPU").is_some() && threads() == 1
 }
+
+/// Threads every variant builds, refits and traces on: `DYNBVH_PEERS_THREADS`, default 1.
+/// With more than one, traces split the rays into runs of [`PAR_CHUNK`] across the threads
+/// and are timed by the wall clock (the CPU clock would add the threads' times up), each pass
+/// repeated for at least 0.3 s; Embree's device gets as many threads.
+fn threads() -> usize {
+    std::env::var("DYNBVH_PEERS_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n| n >= 1)
+        .unwrap_or(1)
+}
+
+/// Rays a thread traces at a time when several do (whole 16x8 packets).
+const PAR_CHUNK: usize = 4096;
 
 // ---------------------------------------------------------------------------------------------
 // Settings
@@ -52,9 +67,9 @@ const CHECK_RAYS: usize = 200;
 /// What the harness needs of a library. `Input` is the library's own form of the mesh, made
 /// before the clock starts (conversions at the boundary are not the library's cost); `R` is
 /// its own form of a ray, also made beforehand.
-trait Accel: Sized {
+trait Accel: Sized + Sync {
     type Input;
-    type R;
+    type R: Sync;
     fn prepare(mesh: &TriMesh) -> Self::Input;
     fn ray(r: &Ray) -> Self::R;
     /// Closest hit: distance and the triangle's index in the input mesh.
@@ -980,6 +995,17 @@ impl<A: Accel, F: Fn(A::Input) -> A> Measure for Gen<'_, A, F> {
             }
             return (passes * rays.len()) as f64 / (cpu::cpu_s() - c) / 1e6;
         }
+        if threads() > 1 {
+            use rayon::prelude::*;
+            let t = Instant::now();
+            let mut passes = 0;
+            while passes == 0 || t.elapsed().as_secs_f64() < 0.3 {
+                let sum: f32 = rays.par_chunks(PAR_CHUNK).map(|c| accel.trace_all(c)).sum();
+                black_box(sum);
+                passes += 1;
+            }
+            return (passes * rays.len()) as f64 / t.elapsed().as_secs_f64() / 1e6;
+        }
         let t = Instant::now();
         black_box(accel.trace_all(rays));
         rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6
@@ -1251,12 +1277,18 @@ fn ratio(x: f64, base: f64) -> String {
 fn print_table(input: &Input, rows: &[(&str, Row)]) {
     let base = &rows[0].1;
     println!(
-        "\n## {} ({} triangles), 1 thread; ratios are to {}{}\n",
+        "\n## {} ({} triangles), {}; ratios are to {}{}\n",
         input.name,
         input.rest.len(),
+        match threads() {
+            1 => "1 thread".to_string(),
+            n => format!("{n} threads"),
+        },
         rows[0].0,
         if cpu_timing() {
             "; Mrays/s in CPU time"
+        } else if threads() > 1 {
+            "; Mrays/s in wall-clock time"
         } else {
             ""
         }
@@ -1363,9 +1395,9 @@ fn main() {
         .any(|f| variants.iter().any(|v| v.name.contains(f.as_str())));
 
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
+        .num_threads(threads())
         .build()
-        .expect("a one-thread pool");
+        .expect("the bench's thread pool");
     let threads_before = threads_in_process();
     println!(
         "# dynbvh side by side, {} UTC; {}; load average {}",
@@ -1402,6 +1434,7 @@ fn main() {
     let threads_after = threads_in_process();
     println!(
         "\nThreads in the process: {threads_before:?} before and {threads_after:?} after the run \
-         (main + the one-thread pool; the global rayon pool was never started)."
+         (main, the bench's pool of {} thread(s), with more than one Embree's own worker threads; the global rayon pool was never started).",
+        threads()
     );
 }

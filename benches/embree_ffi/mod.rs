@@ -145,7 +145,7 @@ fn device() -> RTCDevice {
     static DEVICE: OnceLock<Device> = OnceLock::new();
     DEVICE
         .get_or_init(|| {
-            let config = CString::new("threads=1").expect("no NUL");
+            let config = CString::new(format!("threads={}", super::threads())).expect("no NUL");
             // SAFETY: `config` is a NUL-terminated string that outlives the call.
             let d = unsafe { rtcNewDevice(config.as_ptr()) };
             assert!(!d.is_null(), "Embree: rtcNewDevice failed");
@@ -174,6 +174,11 @@ pub struct Embree {
     vertex_count: usize,
     mode: Mode,
 }
+
+// SAFETY: through a shared reference an `Embree` only traces (`rtcIntersect1`,
+// `rtcIntersect16` on its committed scene), which Embree allows from any number of threads at
+// once; what changes the scene or its vertex buffer (refit, drop) takes `&mut self`.
+unsafe impl Sync for Embree {}
 
 impl Drop for Embree {
     fn drop(&mut self) {
