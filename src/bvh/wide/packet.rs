@@ -167,7 +167,6 @@ impl<const K: usize> WideBvh<K> {
         if nodes.is_empty() || p.active() == 0 {
             return;
         }
-        let blocks = self.blocks.as_slice();
         let mut stack: [Entry; N] = [(0, 0, 0, 0); N];
         let mut sp = 0;
         // Hits lower the packet's largest `tmax`, which only the interval tests of interior
@@ -192,45 +191,15 @@ impl<const K: usize> WideBvh<K> {
                 if rays == 0 {
                     continue;
                 }
-                let (fb, count) = leaf_range(c);
-                let mut changed = false;
-                if rays.count_ones() <= SINGLE_BELOW {
-                    // Too few rays for the packet kernel to pay: each tests the blocks alone.
-                    let mut bits = rays;
-                    while bits != 0 {
-                        let i = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        changed |= self.leaf_single::<ANY>(p, i, c);
-                    }
-                    if ANY {
-                        if p.active() == 0 {
-                            return;
-                        }
-                    } else {
-                        stale |= changed;
-                    }
-                    continue;
-                }
-                let run = fb as usize..(fb + count) as usize;
-                'blocks: for (b, block) in run.clone().zip(&blocks[run]) {
-                    for l in 0..4 {
-                        // Unused lanes come last in a block.
-                        if block.prims[l] == NO_PRIM {
-                            break;
-                        }
-                        let rays = rays & p.active();
-                        if rays == 0 {
-                            break 'blocks;
-                        }
-                        changed |= p.test_triangle::<ANY>(&block.get(l), (b * 4 + l) as u32, rays);
-                    }
-                }
-                if ANY {
-                    if p.active() == 0 {
-                        return;
-                    }
+                // Few rays: each tests the blocks alone, which costs less than the packet
+                // kernel's lanes left idle.
+                let changed = if rays.count_ones() <= SINGLE_BELOW {
+                    self.each_alone::<ANY, N>(p, rays, c)
                 } else {
-                    stale |= changed;
+                    self.leaf_packet::<ANY>(p, rays, c)
+                };
+                if settle::<ANY>(p, changed, &mut stale) {
+                    return;
                 }
             } else {
                 if stale {
@@ -239,19 +208,9 @@ impl<const K: usize> WideBvh<K> {
                 }
                 if live.count_ones() <= SINGLE_BELOW {
                     // Too few rays left for the packet to pay: each goes on alone.
-                    let mut changed = false;
-                    let mut bits = live;
-                    while bits != 0 {
-                        let i = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        changed |= self.walk_single::<ANY, N>(p, i, c);
-                    }
-                    if ANY {
-                        if p.active() == 0 {
-                            return;
-                        }
-                    } else {
-                        stale |= changed;
+                    let changed = self.each_alone::<ANY, N>(p, live, c);
+                    if settle::<ANY>(p, changed, &mut stale) {
+                        return;
                     }
                     continue;
                 }
@@ -261,6 +220,50 @@ impl<const K: usize> WideBvh<K> {
                 self.expand(p, c, f, &mut stack, &mut sp);
             }
         }
+    }
+
+    /// Tests the triangles of leaf `c` against the packet's rays of `rays` (the 16-ray kernel,
+    /// one triangle at a time). Returns true when some ray found a (closer) hit.
+    fn leaf_packet<const ANY: bool>(&self, p: &mut RayPacket, rays: Mask, c: u32) -> bool {
+        let (fb, count) = leaf_range(c);
+        let run = fb as usize..(fb + count) as usize;
+        let mut changed = false;
+        for (b, block) in run.clone().zip(&self.blocks[run]) {
+            for l in 0..4 {
+                // Unused lanes come last in a block.
+                if block.prims[l] == NO_PRIM {
+                    break;
+                }
+                let rays = rays & p.active();
+                if rays == 0 {
+                    return changed;
+                }
+                changed |= p.test_triangle::<ANY>(&block.get(l), (b * 4 + l) as u32, rays);
+            }
+        }
+        changed
+    }
+
+    /// Each ray of `rays` alone from the child reference `c`: a leaf's blocks, or a subtree's
+    /// single-ray walk. Returns true when some ray found a (closer) hit.
+    fn each_alone<const ANY: bool, const N: usize>(
+        &self,
+        p: &mut RayPacket,
+        rays: Mask,
+        c: u32,
+    ) -> bool {
+        let mut changed = false;
+        let mut bits = rays;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            changed |= if c & LEAF_BIT != 0 {
+                self.leaf_single::<ANY>(p, i, c)
+            } else {
+                self.walk_single::<ANY, N>(p, i, c)
+            };
+        }
+        changed
     }
 
     /// Tests the leaf `c`'s triangles against ray `i` of the packet alone, a block at a time,
@@ -300,5 +303,17 @@ impl<const K: usize> WideBvh<K> {
             p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
         }
         true
+    }
+}
+
+/// After rays found hits: any hit answers whether every ray is done (the walk may stop);
+/// closest hit marks the packet's largest `tmax` stale when some ray was shortened.
+#[inline(always)]
+fn settle<const ANY: bool>(p: &RayPacket, changed: bool, stale: &mut bool) -> bool {
+    if ANY {
+        p.active() == 0
+    } else {
+        *stale |= changed;
+        false
     }
 }
