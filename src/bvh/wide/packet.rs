@@ -244,8 +244,9 @@ impl<const K: usize> WideBvh<K> {
         changed
     }
 
-    /// Each ray of `rays` alone from the child reference `c`: a leaf's blocks, or a subtree's
-    /// single-ray walk. Returns true when some ray found a (closer) hit.
+    /// Each ray of `rays` alone from the child reference `c`: a leaf's blocks (the single-ray
+    /// walk's leaf test), or a subtree's single-ray walk, from the ray's current `tmax`; what
+    /// a ray finds is recorded in the packet. Returns true when some ray found a (closer) hit.
     fn each_alone<const ANY: bool, const N: usize>(
         &self,
         p: &mut RayPacket,
@@ -257,52 +258,23 @@ impl<const K: usize> WideBvh<K> {
         while bits != 0 {
             let i = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            changed |= if c & LEAF_BIT != 0 {
-                self.leaf_single::<ANY>(p, i, c)
+            let ray = *p.ray(i);
+            let found = if c & LEAF_BIT != 0 {
+                self.leaf::<ANY, ()>(c, &ray, &TriLanes::new(&ray), p.tmax(i), &mut ())
             } else {
-                self.walk_single::<ANY, N>(p, i, c)
+                self.traverse::<ANY, N, { super::traverse::X_DEFAULT }>(c, &ray, p.tmax(i), &mut ())
             };
+            let Some((slot, t, u, v)) = found else {
+                continue;
+            };
+            changed = true;
+            if ANY {
+                p.retire((1 as Mask) << i);
+            } else {
+                p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
+            }
         }
         changed
-    }
-
-    /// Tests the leaf `c`'s triangles against ray `i` of the packet alone, a block at a time,
-    /// and records what it finds. Returns true when the ray found a (closer) hit.
-    fn leaf_single<const ANY: bool>(&self, p: &mut RayPacket, i: usize, c: u32) -> bool {
-        let ray = *p.ray(i);
-        let tri = TriLanes::new(&ray);
-        let Some((slot, t, u, v)) = self.leaf::<ANY, ()>(c, &ray, &tri, p.tmax(i), &mut ()) else {
-            return false;
-        };
-        if ANY {
-            p.retire((1 as Mask) << i);
-        } else {
-            p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
-        }
-        true
-    }
-
-    /// Walks the subtree of node `c` with ray `i` of the packet alone (the single-ray wide
-    /// traversal, from the ray's current `tmax`) and records what it finds. Returns true when
-    /// the ray found a (closer) hit.
-    fn walk_single<const ANY: bool, const N: usize>(
-        &self,
-        p: &mut RayPacket,
-        i: usize,
-        c: u32,
-    ) -> bool {
-        let ray = *p.ray(i);
-        let Some((slot, t, u, v)) =
-            self.traverse::<ANY, N, { super::traverse::X_DEFAULT }>(c, &ray, p.tmax(i), &mut ())
-        else {
-            return false;
-        };
-        if ANY {
-            p.retire((1 as Mask) << i);
-        } else {
-            p.record(i / LANES, i % LANES, slot as u32, (t, u, v));
-        }
-        true
     }
 }
 
