@@ -64,7 +64,8 @@ pub struct BenchArgs {
     #[arg(long, conflicts_with = "size")]
     lidar: bool,
     /// Policy to run (repeatable): refit, rebuild, periodic:N, threshold:R, amortized,
-    /// amortized-plain.
+    /// amortized-plain, the rungs optimize:B and partial:F (shares in (0, 1]), ladder, or async
+    /// (rebuilds on a worker thread while the old tree serves).
     /// Default: all of refit, rebuild, periodic:8, threshold:1.3, amortized, amortized-plain.
     #[arg(long = "policy", short)]
     policies: Vec<Policy>,

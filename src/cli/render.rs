@@ -42,7 +42,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "WxH", default_value = "640x480")]
     pub size: Size,
     /// Refit-or-rebuild policy: refit, rebuild, periodic:N, threshold:R, amortized,
-    /// amortized-plain.
+    /// amortized-plain, optimize:B, partial:F, ladder or async.
     #[arg(long, short, default_value_t = Policy::DEFAULT)]
     pub policy: Policy,
     /// Output directory.

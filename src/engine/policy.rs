@@ -72,9 +72,11 @@ pub enum Policy {
     /// cost once one of them has paid; each rung's cost and share of the degradation it
     /// recovers are learnt per mesh from what it did (see [`RungModel`]).
     Ladder,
-    /// [`Policy::Amortized`]'s rule with every rebuild run in the background
+    /// [`Policy::Amortized`]'s rule with its rebuilds run in the background
     /// ([`Decision::Background`]): the old tree is refitted until the new one is built, then
-    /// the new one is refitted to the current pose and swapped in.
+    /// the new one is refitted to the current pose and swapped in. A rebuild is made in the
+    /// frame instead when waiting for the build would cost more trace time than the rebuild
+    /// ([`PolicyState::expect_background`]).
     Async,
 }
 
@@ -368,6 +370,9 @@ pub struct PolicyState {
     pub watch: Watch,
     /// Frames traced without a sample since the last sampled one.
     pub unsampled: u32,
+    /// Under [`Policy::Async`]: what waiting for a background build would cost
+    /// ([`PolicyState::expect_background`]).
+    pub background: Outlook,
 }
 
 /// A rebuild being judged by what it saved: each frame the new tree's extra trace time is
@@ -385,6 +390,19 @@ pub struct Payback {
     pub saved_ms: f64,
     /// Frames judged.
     pub frames: u32,
+}
+
+/// Under [`Policy::Async`], this frame: how many frames a background build started now would
+/// take to arrive, whether one is already on its way, and the frame's extra trace time by the
+/// SAH's ratio to the last build (ms), beside the chosen measure's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Outlook {
+    /// Frames until a build started now is swapped in.
+    pub lag: f64,
+    /// A build of this mesh is running.
+    pub running: bool,
+    /// The frame's extra trace time by the SAH's ratio to the last build, ms.
+    pub sah_extra_ms: f64,
 }
 
 impl Default for PolicyState {
@@ -419,6 +437,7 @@ impl Default for PolicyState {
             replay_ms: 0.0,
             watch: Watch::default(),
             unsampled: 0,
+            background: Outlook::default(),
         }
     }
 }
@@ -515,9 +534,32 @@ impl PolicyState {
             }
         }
         match (policy, best.0) {
-            (Policy::Async, Decision::Rebuild) => Decision::Background,
+            (Policy::Async, Decision::Rebuild) if self.background.running => Decision::Refit,
+            (Policy::Async, Decision::Rebuild) if self.waiting_pays() => Decision::Background,
             (_, d) => d,
         }
+    }
+
+    /// A background rebuild keeps the degraded tree for [`Outlook::lag`] more frames: worth
+    /// it unless those frames' extra trace time, at the present degradation by the lesser of
+    /// the two measures, passes a synchronous rebuild's cost. Both must agree, so that one
+    /// measure's overestimate does not bring the spike back; what they agree on is the
+    /// evident case, a tree whose trace grows tenfold in the frames a one-thread build takes
+    /// (an explosion's first tree).
+    fn waiting_pays(&self) -> bool {
+        let per_frame = self.frame_extra_ms.min(self.background.sah_extra_ms);
+        self.background.lag * per_frame <= self.rebuild_ms
+    }
+
+    /// Before deciding under [`Policy::Async`]: a build started now arrives `lag` frames
+    /// later, one is `running` already, and the tree's SAH ratio to its build is `sah_ratio`.
+    pub fn expect_background(&mut self, lag: f64, running: bool, sah_ratio: f32) {
+        let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
+        self.background = Outlook {
+            lag,
+            running,
+            sah_extra_ms: fresh_ms * f64::from(sah_ratio - 1.0).max(0.0),
+        };
     }
 
     /// The actions the amortized rule weighs under `policy`, each with its recovery and cost
@@ -1178,5 +1220,39 @@ mod tests {
         // A later clear estimate pulls it back by its weight.
         s.calibrate_rays(1.2, 1.2);
         assert!(s.estimate_gain < MAX_RAY_GAIN && s.estimate_gain > 1.0);
+    }
+
+    #[test]
+    fn a_background_rebuild_gives_way_when_both_measures_say_waiting_costs_more() {
+        // Due: 200 ms of extra trace time against a 100 ms rebuild; 10 ms a frame of fresh
+        // trace, a build arriving 10 frames later.
+        let decide = |fresh: f32, sah: f32, running: bool| {
+            let mut s = PolicyState {
+                rebuild_ms: 100.0,
+                trace_share_ms: 10.0,
+                extra_ms: 200.0,
+                ..PolicyState::default()
+            };
+            s.expect_background(10.0, running, sah);
+            s.after_refit(Policy::Async, sah, fresh)
+        };
+        // Slow degradation: 5-10 ms a frame for 10 frames is at most the rebuild's cost.
+        assert_eq!(decide(2.0, 1.5, false), Decision::Background);
+        // Both measures read the tree 29 times worse: waiting would cost 29 rebuilds.
+        assert_eq!(decide(30.0, 30.0, false), Decision::Rebuild);
+        // One measure alone reading it so does not bring the spike back.
+        assert_eq!(decide(2.0, 30.0, false), Decision::Background);
+        assert_eq!(decide(30.0, 1.5, false), Decision::Background);
+        // A build already on its way is waited for, not doubled by a synchronous one.
+        assert_eq!(decide(30.0, 30.0, true), Decision::Refit);
+        assert_eq!(decide(2.0, 1.5, true), Decision::Refit);
+        // The amortized rule itself is unchanged: not due, no action.
+        let mut s = PolicyState {
+            rebuild_ms: 100.0,
+            trace_share_ms: 10.0,
+            ..PolicyState::default()
+        };
+        s.expect_background(10.0, false, 30.0);
+        assert_eq!(s.after_refit(Policy::Async, 30.0, 1.01), Decision::Refit);
     }
 }

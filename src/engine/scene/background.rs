@@ -132,6 +132,11 @@ impl Background {
         true
     }
 
+    /// A build of `mesh` runs or waits to be swapped in.
+    pub fn running(&self, mesh: MeshId) -> bool {
+        self.busy == Some(mesh)
+    }
+
     /// The build of `mesh` when it is due at `frame` (waiting for it if it is late); its
     /// buffers come back with the next [`Background::recycle`].
     pub fn take_due(&mut self, mesh: MeshId, frame: u64) -> Option<Job> {

@@ -137,7 +137,7 @@ impl MeshEntry {
             _ => {
                 let t = Instant::now();
                 out.reverted = self.refit(cx);
-                let (decision, raw) = self.observe_and_decide(cx, early, gap, ms_since(t));
+                let (decision, raw) = self.observe_and_decide(id, cx, early, gap, ms_since(t));
                 self.stats.refit_ms = ms_since(t);
                 (decision, raw)
             }
@@ -151,19 +151,7 @@ impl MeshEntry {
             Decision::Background => {
                 self.follow_wide(out.reverted, cx);
                 let wide = self.wide.is_some();
-                // The frame the new tree is due: as many frames as the build (on one thread)
-                // takes of tracing, at the prices or the measured times.
-                let tris = self.indices.len();
-                let build_ms = cx.timing.build_ms(self.state.rebuild_ms, tris, &cx.prices)
-                    * rayon::current_num_threads() as f64;
-                let lag = if cx.frame_trace_ms > 0.0 {
-                    (build_ms / cx.frame_trace_ms)
-                        .ceil()
-                        .clamp(1.0, MAX_BACKGROUND_LAG)
-                } else {
-                    1.0
-                };
-                let due = cx.frame + lag as u64;
+                let due = cx.frame + self.background_lag(cx) as u64;
                 if cx
                     .background
                     .start(id, &self.positions, &self.indices, &cx.build, wide, due)
@@ -183,6 +171,21 @@ impl MeshEntry {
         self.stats.action = action;
         self.stats.sah = self.sah;
         out
+    }
+
+    /// Frames a background build of this mesh started now takes to arrive: as many as the
+    /// build (on one thread) takes of tracing, at the prices or the measured times.
+    fn background_lag(&self, cx: &FrameContext<'_>) -> f64 {
+        let tris = self.indices.len();
+        let build_ms = cx.timing.build_ms(self.state.rebuild_ms, tris, &cx.prices)
+            * rayon::current_num_threads() as f64;
+        if cx.frame_trace_ms > 0.0 {
+            (build_ms / cx.frame_trace_ms)
+                .ceil()
+                .clamp(1.0, MAX_BACKGROUND_LAG)
+        } else {
+            1.0
+        }
     }
 
     /// Plans the frames the mesh's rays go unsampled after a fresh sample, or counts one of
@@ -245,6 +248,7 @@ impl MeshEntry {
     /// (what a rebuild's replay checks).
     fn observe_and_decide(
         &mut self,
+        id: MeshId,
         cx: &FrameContext<'_>,
         early: Option<Decision>,
         gap: bool,
@@ -295,6 +299,11 @@ impl MeshEntry {
             return (d, raw);
         }
         self.set_rung_priors(cx);
+        if cx.policy == Policy::Async {
+            let lag = self.background_lag(cx);
+            let running = cx.background.running(id);
+            self.state.expect_background(lag, running, ratio);
+        }
         let d = if cx.ray_judged {
             if gap {
                 self.state.after_refit_unsampled()
