@@ -779,20 +779,40 @@ impl<'a> Collapse<'a> {
     /// its index. Opens the largest-area openable item until there are `K` items.
     fn node<const K: usize>(&self, start: &[Item], out: &mut Vec<WideNode<K>>) -> u32 {
         let mut items = [Item::Range(0, 0); K];
+        // Each item's area if it can be opened, computed once when it joins; a binary node's
+        // children are asked for then (the walk down a tree larger than the caches waits on
+        // each node it opens otherwise).
+        let mut keys = [None; K];
+        let key = |it: Item| {
+            if let Item::Node(i) = it {
+                let n = self.binary(i);
+                if !n.is_leaf() {
+                    let c = n.first as usize;
+                    crate::simd::prefetch_slice(&self.bvh.nodes()[c..c + 2]);
+                    crate::simd::prefetch(&self.ranges[c]);
+                }
+            }
+            self.can_open(it).then(|| self.area(it))
+        };
         items[..start.len()].copy_from_slice(start);
+        for (k, &it) in start.iter().enumerate() {
+            keys[k] = key(it);
+        }
         let mut len = start.len();
         while len < K {
-            let best = items[..len]
+            let best = keys[..len]
                 .iter()
                 .enumerate()
-                .filter(|(_, it)| self.can_open(**it))
-                .map(|(k, it)| (k, self.area(*it)))
+                .filter_map(|(k, a)| a.map(|a| (k, a)))
                 .max_by(|a, b| a.1.total_cmp(&b.1));
             let Some((k, _)) = best else { break };
             let [a, b] = self.open(items[k]);
             items.copy_within(k + 1..len, k + 2);
+            keys.copy_within(k + 1..len, k + 2);
             items[k] = a;
             items[k + 1] = b;
+            keys[k] = key(a);
+            keys[k + 1] = key(b);
             len += 1;
         }
         let idx = out.len();
