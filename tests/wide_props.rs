@@ -6,8 +6,8 @@ mod common;
 
 use common::strategies::{mesh, rays, vec3};
 use dynbvh::bvh::{
-    BuildParams, CollapseMethod, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh, brute_force_any,
-    brute_force_closest,
+    BuildParams, Child, CollapseMethod, MAX_DEPTH, MeshBvh, TraversalStats, WideBvh,
+    brute_force_any, brute_force_closest,
 };
 use dynbvh::geom::{Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
@@ -300,25 +300,49 @@ fn large_trees_refit_in_parallel_and_on_one_thread() {
 
 #[test]
 fn large_collapses_on_several_threads_are_the_one_thread_collapse() {
-    // Large enough for the blocks to be filled in parallel (runs of nodes as tasks).
-    let mesh = dynbvh::geom::shapes::bumpy_sphere(60_000);
-    let bin = MeshBvh::build(&mesh, &BuildParams::BINNED);
-    let on = |threads: usize, method: CollapseMethod| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| WideBvh::<8>::from_mesh_bvh_with(&bin, method))
-    };
-    for method in METHODS {
-        let one = on(1, method);
-        assert!(one.nodes().len() > 2048, "{} nodes", one.nodes().len());
-        for threads in [2, 3] {
-            let w = on(threads, method);
-            assert_eq!(w.nodes(), one.nodes(), "{threads} threads");
-            assert_eq!(format!("{:?}", w.blocks()), format!("{:?}", one.blocks()));
+    // Large enough for the root's subtrees to be collapsed in parallel and the blocks to be
+    // filled in parallel (runs of nodes as tasks); the second mesh adds a far triangle, which
+    // the root keeps as a leaf lane among the subtrees.
+    let sphere = dynbvh::geom::shapes::bumpy_sphere(60_000);
+    let mut far = sphere.clone();
+    let v = far.positions.len() as u32;
+    far.positions.extend([
+        Vec3::new(90.0, 0.0, 0.0),
+        Vec3::new(90.5, 0.0, 0.0),
+        Vec3::new(90.0, 0.5, 0.0),
+    ]);
+    far.indices.push([v, v + 1, v + 2]);
+    for (mesh, far_leaf) in [(sphere, false), (far, true)] {
+        let bin = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let on = |threads: usize, method: CollapseMethod| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| WideBvh::<8>::from_mesh_bvh_with(&bin, method))
+        };
+        for method in METHODS {
+            let one = on(1, method);
+            assert!(one.nodes().len() > 2048, "{} nodes", one.nodes().len());
+            let root = one.nodes()[0];
+            let kinds = (0..8)
+                .map(|k| root.child(k))
+                .fold([0; 2], |[l, n], c| match c {
+                    Child::Leaf { .. } => [l + 1, n],
+                    Child::Node(_) => [l, n + 1],
+                    Child::Empty => [l, n],
+                });
+            assert!(kinds[1] >= 2, "root lanes (leaves, nodes): {kinds:?}");
+            if far_leaf && method == CollapseMethod::Greedy {
+                assert!(kinds[0] >= 1, "the far triangle is no root leaf: {kinds:?}");
+            }
+            for threads in [2, 3] {
+                let w = on(threads, method);
+                assert_eq!(w.nodes(), one.nodes(), "{threads} threads");
+                assert_eq!(format!("{:?}", w.blocks()), format!("{:?}", one.blocks()));
+            }
+            one.validate(&mesh).unwrap();
         }
-        one.validate(&mesh).unwrap();
     }
 }
 

@@ -40,6 +40,8 @@ pub type MeshBvh8 = WideBvh<8>;
 
 /// Child value of an empty lane (the root is never anyone's child).
 const EMPTY_CHILD: u32 = 0;
+/// Trees of at least this many triangles are collapsed on several threads when there are.
+const PARALLEL_PRIMS: usize = 1 << 15;
 /// Set on leaf children.
 const LEAF_BIT: u32 = 1 << 31;
 /// Bits of a leaf child holding its first triangle slot.
@@ -202,6 +204,8 @@ pub struct WideBvh<const K: usize> {
     method: CollapseMethod,
     /// Scratch of the SAH collapse: its choices per binary node.
     choice: Vec<u64>,
+    /// Scratch of the greedy collapse on several threads: the root's subtrees, one each.
+    parts: Vec<Vec<WideNode<K>>>,
 }
 
 /// After a collapse into a vector that had `before` capacity: when it was empty storage or the
@@ -356,6 +360,9 @@ impl<const K: usize> WideBvh<K> {
             }
             _ if c.fits_leaf(root) => {
                 c.node(&[root], &mut self.nodes);
+            }
+            _ if rayon::current_num_threads() > 1 && bvh.prim_count() >= PARALLEL_PRIMS => {
+                c.node_parallel(&c.open(root), &mut self.nodes, &mut self.parts);
             }
             _ => {
                 c.node(&c.open(root), &mut self.nodes);
@@ -775,9 +782,9 @@ impl<'a> Collapse<'a> {
         }
     }
 
-    /// Writes a wide node over `start` (1 ..= K items) and its subtree, depth first; returns
-    /// its index. Opens the largest-area openable item until there are `K` items.
-    fn node<const K: usize>(&self, start: &[Item], out: &mut Vec<WideNode<K>>) -> u32 {
+    /// The items of a wide node over `start` (1 ..= K items): opens the largest-area openable
+    /// item until there are `K`.
+    fn items<const K: usize>(&self, start: &[Item]) -> ([Item; K], usize) {
         let mut items = [Item::Range(0, 0); K];
         // Each item's area if it can be opened, computed once when it joins; a binary node's
         // children are asked for then (the walk down a tree larger than the caches waits on
@@ -815,6 +822,13 @@ impl<'a> Collapse<'a> {
             keys[k + 1] = key(b);
             len += 1;
         }
+        (items, len)
+    }
+
+    /// Writes a wide node over `start` (1 ..= K items) and its subtree, depth first; returns
+    /// its index.
+    fn node<const K: usize>(&self, start: &[Item], out: &mut Vec<WideNode<K>>) -> u32 {
+        let (items, len) = self.items::<K>(start);
         let idx = out.len();
         out.push(WideNode::EMPTY);
         for (k, &it) in items[..len].iter().enumerate() {
@@ -825,6 +839,56 @@ impl<'a> Collapse<'a> {
                 self.node(&self.open(it), out)
             };
             out[idx].child[k] = child;
+        }
+        idx as u32
+    }
+
+    /// [`Collapse::node`] with the subtrees of the node's lanes collapsed in parallel, each
+    /// into one of `parts`, then appended in lane order with their child references moved by
+    /// where they land: the nodes and their order are those of [`Collapse::node`].
+    fn node_parallel<const K: usize>(
+        &self,
+        start: &[Item],
+        out: &mut Vec<WideNode<K>>,
+        parts: &mut Vec<Vec<WideNode<K>>>,
+    ) -> u32 {
+        use rayon::prelude::*;
+        let (items, len) = self.items::<K>(start);
+        if parts.len() < K {
+            parts.resize_with(K, Vec::new);
+        }
+        parts[..len]
+            .par_iter_mut()
+            .zip(items[..len].par_iter())
+            .for_each(|(part, &it)| {
+                part.clear();
+                if !self.fits_leaf(it) {
+                    let before = part.capacity();
+                    self.node(&self.open(it), part);
+                    headroom(part, before);
+                }
+            });
+        let idx = out.len();
+        out.push(WideNode::EMPTY);
+        for (k, &it) in items[..len].iter().enumerate() {
+            out[idx].child[k] = if self.fits_leaf(it) {
+                let (first, count) = self.slots(it);
+                encode_leaf(first, count)
+            } else {
+                // The part's nodes refer to each other from 0, its root; no node refers to
+                // the root, so an interior reference is never the empty lane's 0.
+                let base = out.len() as u32;
+                out.extend(parts[k].iter().map(|n| {
+                    let mut n = *n;
+                    for c in &mut n.child {
+                        if *c != EMPTY_CHILD && *c & LEAF_BIT == 0 {
+                            *c += base;
+                        }
+                    }
+                    n
+                }));
+                base
+            };
         }
         idx as u32
     }
