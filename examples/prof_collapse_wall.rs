@@ -24,7 +24,11 @@ fn main() {
         f();
         t.elapsed().as_secs_f64() * 1e3
     };
-    let warm = stats((0..15).map(|_| time(&mut || w.collapse_from(&bin))).collect());
+    let warm = stats(
+        (0..15)
+            .map(|_| time(&mut || w.collapse_from(&bin)))
+            .collect(),
+    );
     let cold = stats(
         (0..5)
             .map(|_| time(&mut || w = MeshBvh8::from_mesh_bvh(&bin)))
