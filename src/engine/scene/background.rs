@@ -5,9 +5,10 @@
 //! the build's price and the frame's trace cost), and the engine waits there if the build is
 //! late, so that the schedule is the same on every run whatever the machine's load.
 //!
-//! One worker per engine, one build at a time. The worker builds sequentially
-//! (`parallel_threshold` off): it runs beside the frame's rayon pool instead of queueing its
-//! tasks among the frame's tracing tasks, and the system shares the cores between them.
+//! One worker per engine, one build at a time. The worker builds sequentially (in a rayon pool
+//! of one thread, `parallel_threshold` off): it runs beside the frame's rayon pool instead of
+//! queueing its tasks among the frame's tracing tasks, and the system shares the cores between
+//! them.
 
 use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
 use crate::engine::MeshId;
@@ -199,8 +200,11 @@ impl Drop for Background {
     }
 }
 
-/// The worker: waits for a queued job, builds it, hands it back.
+/// The worker: waits for a queued job, builds it, hands it back. Its builds and collapses run
+/// in a pool of one thread of its own, so that their parallel steps (the collapse's subtrees,
+/// its block fill) stay off the pool the frame traces on.
 fn work(shared: &Shared) {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
     loop {
         let mut slot = shared.slot.lock().unwrap_or_else(PoisonError::into_inner);
         while !slot.queued && !slot.quit {
@@ -228,9 +232,15 @@ fn work(shared: &Shared) {
             collapse,
             ..
         } = &mut job;
-        tree.rebuild_indexed(positions, indices, &params, ws);
-        if let (true, Some(w)) = (*collapse, wide) {
-            w.collapse_from(tree);
+        let build = || {
+            tree.rebuild_indexed(positions, indices, &params, ws);
+            if let (true, Some(w)) = (*collapse, wide) {
+                w.collapse_from(tree);
+            }
+        };
+        match &pool {
+            Some(p) => p.install(build),
+            None => build(),
         }
         job.build_ms = t.elapsed().as_secs_f64() * 1e3;
         let mut slot = shared.slot.lock().unwrap_or_else(PoisonError::into_inner);
