@@ -68,6 +68,18 @@ fn background_rebuilds_swap_at_fixed_frames_on_every_run() {
         actions.contains(&"async-start") && actions.contains(&"async-swap"),
         "{actions:?}"
     );
+    // Beside other engines its frame times are not an application's: the table says so, and
+    // not when it ran alone.
+    let note = "async: the engines run in lockstep";
+    assert!(frame_bench::summary_table(&a).contains(note));
+    let alone = Options {
+        policies: vec![Policy::Async],
+        oracle: false,
+        ..options.clone()
+    };
+    let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(30)).unwrap();
+    let r = frame_bench::run(&mut src, &alone, |_| {});
+    assert!(!frame_bench::summary_table(&r).contains(note));
 }
 
 /// A grid of `n` x `n` quads in the z = 0 plane, scattered by `scatter` (0: flat).

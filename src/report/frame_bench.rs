@@ -1500,6 +1500,14 @@ pub fn summary_table(r: &Report) -> String {
         "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
          rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
+    let others = r.policies.len() > 1 || r.oracle.total_ms > 0.0;
+    if others && r.policies.iter().any(|p| p.policy == "async") {
+        s.push_str(
+            "async: the engines run in lockstep, so its background builds also run during the \
+             other engines' frames; its frame times as an application sees them come from a \
+             run of `-p async --no-oracle --no-tlas-compare` alone\n",
+        );
+    }
     s.push_str(&format!(
         "update against trace per frame (medians over {} frames; update = pose + mesh trees + \
          top-level tree; mean update includes rebuilds spread over the frames):\n\
