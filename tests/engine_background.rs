@@ -80,6 +80,15 @@ fn background_rebuilds_swap_at_fixed_frames_on_every_run() {
     let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(30)).unwrap();
     let r = frame_bench::run(&mut src, &alone, |_| {});
     assert!(!frame_bench::summary_table(&r).contains(note));
+    // The top-level tree comparison's engines run beside it too.
+    let beside_tlas = Options {
+        tlas_compare: true,
+        ..alone
+    };
+    let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(10)).unwrap();
+    let r = frame_bench::run(&mut src, &beside_tlas, |_| {});
+    assert!(r.lockstep > 1);
+    assert!(frame_bench::summary_table(&r).contains(note));
 }
 
 /// A grid of `n` x `n` quads in the z = 0 plane, scattered by `scatter` (0: flat).

@@ -544,8 +544,8 @@ impl PolicyState {
     /// it unless those frames' extra trace time, at the present degradation by the lesser of
     /// the two measures, passes a synchronous rebuild's cost. Both must agree, so that one
     /// measure's overestimate does not bring the spike back; what they agree on is the
-    /// evident case, a tree whose trace grows tenfold in the frames a one-thread build takes
-    /// (an explosion's first tree).
+    /// evident case, a tree that degrades many times over within the lag (an explosion's
+    /// first tree, `docs/ladder.md`).
     fn waiting_pays(&self) -> bool {
         let per_frame = self.frame_extra_ms.min(self.background.sah_extra_ms);
         self.background.lag * per_frame <= self.rebuild_ms
@@ -1224,8 +1224,8 @@ mod tests {
 
     #[test]
     fn a_background_rebuild_gives_way_when_both_measures_say_waiting_costs_more() {
-        // Due: 200 ms of extra trace time against a 100 ms rebuild; 10 ms a frame of fresh
-        // trace, a build arriving 10 frames later.
+        // The rule has made a rebuild due (the extra trace time twice the rebuild's cost); a
+        // build started now arrives after as many frames as a rebuild costs fresh frames.
         let decide = |fresh: f32, sah: f32, running: bool| {
             let mut s = PolicyState {
                 rebuild_ms: 100.0,
@@ -1236,7 +1236,7 @@ mod tests {
             s.expect_background(10.0, running, sah);
             s.after_refit(Policy::Async, sah, fresh)
         };
-        // Slow degradation: 5-10 ms a frame for 10 frames is at most the rebuild's cost.
+        // Slow degradation: the lag's extra trace time by the lesser measure is half a rebuild.
         assert_eq!(decide(2.0, 1.5, false), Decision::Background);
         // Both measures read the tree 29 times worse: waiting would cost 29 rebuilds.
         assert_eq!(decide(30.0, 30.0, false), Decision::Rebuild);

@@ -422,6 +422,9 @@ pub struct Report {
     pub rays_per_frame: usize,
     /// Worker threads.
     pub threads: usize,
+    /// Engines run in lockstep, a frame of each in turn (the policies asked, the oracle's
+    /// always-refit and always-rebuild, the top-level tree comparison's).
+    pub lockstep: usize,
     /// What the policies decided on.
     pub cost: CostMeasure,
     /// Unit prices of the modelled measure.
@@ -994,6 +997,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         frames,
         rays_per_frame,
         threads: rayon::current_num_threads(),
+        lockstep: configs.len(),
         cost: opts.cost,
         prices: opts.prices,
         policies,
@@ -1500,8 +1504,7 @@ pub fn summary_table(r: &Report) -> String {
         "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
          rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
-    let others = r.policies.len() > 1 || r.oracle.total_ms > 0.0;
-    if others && r.policies.iter().any(|p| p.policy == "async") {
+    if r.lockstep > 1 && r.policies.iter().any(|p| p.policy == "async") {
         s.push_str(
             "async: the engines run in lockstep, so its background builds also run during the \
              other engines' frames; its frame times as an application sees them come from a \

@@ -825,6 +825,14 @@ impl<'a> Collapse<'a> {
         (items, len)
     }
 
+    /// The leaf lane an item becomes when it fits one (else it becomes a wide node).
+    fn leaf_lane(&self, it: Item) -> Option<u32> {
+        self.fits_leaf(it).then(|| {
+            let (first, count) = self.slots(it);
+            encode_leaf(first, count)
+        })
+    }
+
     /// Writes a wide node over `start` (1 ..= K items) and its subtree, depth first; returns
     /// its index.
     fn node<const K: usize>(&self, start: &[Item], out: &mut Vec<WideNode<K>>) -> u32 {
@@ -832,11 +840,9 @@ impl<'a> Collapse<'a> {
         let idx = out.len();
         out.push(WideNode::EMPTY);
         for (k, &it) in items[..len].iter().enumerate() {
-            let child = if self.fits_leaf(it) {
-                let (first, count) = self.slots(it);
-                encode_leaf(first, count)
-            } else {
-                self.node(&self.open(it), out)
+            let child = match self.leaf_lane(it) {
+                Some(leaf) => leaf,
+                None => self.node(&self.open(it), out),
             };
             out[idx].child[k] = child;
         }
@@ -862,7 +868,7 @@ impl<'a> Collapse<'a> {
             .zip(items[..len].par_iter())
             .for_each(|(part, &it)| {
                 part.clear();
-                if !self.fits_leaf(it) {
+                if self.leaf_lane(it).is_none() {
                     let before = part.capacity();
                     self.node(&self.open(it), part);
                     headroom(part, before);
@@ -871,9 +877,8 @@ impl<'a> Collapse<'a> {
         let idx = out.len();
         out.push(WideNode::EMPTY);
         for (k, &it) in items[..len].iter().enumerate() {
-            out[idx].child[k] = if self.fits_leaf(it) {
-                let (first, count) = self.slots(it);
-                encode_leaf(first, count)
+            out[idx].child[k] = if let Some(leaf) = self.leaf_lane(it) {
+                leaf
             } else {
                 // The part's nodes refer to each other from 0, its root; no node refers to
                 // the root, so an interior reference is never the empty lane's 0.

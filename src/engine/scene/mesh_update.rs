@@ -151,7 +151,8 @@ impl MeshEntry {
             Decision::Background => {
                 self.follow_wide(out.reverted, cx);
                 let wide = self.wide.is_some();
-                let due = cx.frame + self.background_lag(cx) as u64;
+                // The lag the policy weighed, computed before it decided.
+                let due = cx.frame + self.state.background.lag as u64;
                 if cx
                     .background
                     .start(id, &self.positions, &self.indices, &cx.build, wide, due)
