@@ -5,9 +5,61 @@
 //! Read from Linux's per-thread scheduler statistics (`/proc/self/task/*/schedstat`: time on a
 //! core, time runnable on a run queue, in ns). Elsewhere both read as unknown.
 
+use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
 
-/// Sum over this process's live threads: `(ns on a core, ns runnable but waiting for one)`.
+/// Threads that wait for a core by design (the background rebuild's worker, which runs only on
+/// cores nothing else wants): their CPU time counts, their wait does not, since it says nothing
+/// about other processes' load.
+static IDLE_CLASS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+/// Marks the calling thread, for the rest of its life, as one whose run-queue wait is its own
+/// choice (on Linux; elsewhere nothing is counted anyway).
+pub fn waits_by_design() {
+    thread_local! {
+        static MARK: std::cell::RefCell<Option<Mark>> = const { std::cell::RefCell::new(None) };
+    }
+    let Some(tid) = std::fs::read_link("/proc/thread-self")
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+    else {
+        return;
+    };
+    MARK.with(|m| {
+        let mut m = m.borrow_mut();
+        if m.is_none() {
+            IDLE_CLASS
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(tid.clone());
+            *m = Some(Mark(tid));
+        }
+    });
+}
+
+/// The threads [`waits_by_design`] has marked and that have not ended (their ids).
+#[must_use]
+pub fn waiting_by_design() -> Vec<String> {
+    IDLE_CLASS
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone()
+}
+
+/// Unmarks its thread when the thread ends.
+struct Mark(String);
+
+impl Drop for Mark {
+    fn drop(&mut self) {
+        IDLE_CLASS
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .retain(|x| *x != self.0);
+    }
+}
+
+/// Sum over this process's live threads: `(ns on a core, ns runnable but waiting for one)`,
+/// the wait of threads marked by [`waits_by_design`] left out.
 ///
 /// The kernel brings a running thread's count up to date only at a scheduler tick or when the
 /// thread leaves its core, so the calling thread yields first: without that, a measurement
@@ -18,14 +70,18 @@ pub fn thread_times_ns() -> Option<(u64, u64)> {
     let dir = std::fs::read_dir("/proc/self/task").ok()?;
     let (mut run, mut wait) = (0u64, 0u64);
     let mut any = false;
+    let by_design = waiting_by_design();
     for entry in dir.flatten() {
+        let waits = !by_design.iter().any(|t| entry.file_name() == t.as_str());
         let Ok(text) = std::fs::read_to_string(entry.path().join("schedstat")) else {
             continue;
         };
         let mut fields = text.split_ascii_whitespace().map(str::parse::<u64>);
         if let (Some(Ok(r)), Some(Ok(w))) = (fields.next(), fields.next()) {
             run += r;
-            wait += w;
+            if waits {
+                wait += w;
+            }
             any = true;
         }
     }

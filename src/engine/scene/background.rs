@@ -7,8 +7,11 @@
 //!
 //! One worker per engine, one build at a time. The worker builds sequentially (in a rayon pool
 //! of one thread, `parallel_threshold` off): it runs beside the frame's rayon pool instead of
-//! queueing its tasks among the frame's tracing tasks, and the system shares the cores between
-//! them.
+//! queueing its tasks among the frame's tracing tasks. It runs in the scheduler's idle class
+//! (Linux `SCHED_IDLE`), on cycles no thread of normal priority wants: the frame loop's serial
+//! steps, its threads' idle spins and the gaps between frames, so that the frames beside a build
+//! are not slowed by a third thread on their cores. The due frame leaves it many frames; if it
+//! is still late there, the engine's wait frees a core for it.
 
 use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
 use crate::engine::MeshId;
@@ -200,11 +203,35 @@ impl Drop for Background {
     }
 }
 
+/// Moves the calling thread into the scheduler's idle class (Linux; kept at normal priority
+/// where that is refused or elsewhere).
+fn run_when_idle() {
+    #[cfg(target_os = "linux")]
+    {
+        use thread_priority::{
+            NormalThreadSchedulePolicy, ThreadPriority, ThreadSchedulePolicy,
+            set_thread_priority_and_policy, thread_native_id,
+        };
+        let _ = set_thread_priority_and_policy(
+            thread_native_id(),
+            ThreadPriority::Min,
+            ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Idle),
+        );
+    }
+}
+
 /// The worker: waits for a queued job, builds it, hands it back. Its builds and collapses run
 /// in a pool of one thread of its own, so that their parallel steps (the collapse's subtrees,
 /// its block fill) stay off the pool the frame traces on.
 fn work(shared: &Shared) {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
+    run_when_idle();
+    crate::cputime::waits_by_design();
+    // The pool's thread inherits the idle class.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .start_handler(|_| crate::cputime::waits_by_design())
+        .build()
+        .ok();
     loop {
         let mut slot = shared.slot.lock().unwrap_or_else(PoisonError::into_inner);
         while !slot.queued && !slot.quit {
@@ -248,5 +275,80 @@ fn work(shared: &Shared) {
         slot.done = true;
         drop(slot);
         shared.wake.notify_all();
+    }
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+
+    /// The scheduling policy of each of this process's threads (`/proc`'s field 41).
+    fn policies() -> Vec<(String, u32)> {
+        let mut out = Vec::new();
+        for e in std::fs::read_dir("/proc/self/task")
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+                continue;
+            };
+            // Fields after the command's closing parenthesis start at field 3.
+            let rest = &stat[stat.rfind(')').map_or(0, |i| i + 1)..];
+            if let Some(Ok(p)) = rest.split_ascii_whitespace().nth(41 - 3).map(str::parse) {
+                out.push((e.file_name().to_string_lossy().into_owned(), p));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_worker_and_its_pool_run_in_the_idle_class_and_their_wait_is_not_load() {
+        const SCHED_IDLE: u32 = 5;
+        let before: Vec<String> = policies().into_iter().map(|(t, _)| t).collect();
+        let mut b = Background::default();
+        b.reserve(3, 1, &MeshBvh::default(), None);
+        // The worker classes itself and starts its pool first thing; give them up to 10 s.
+        let t = Instant::now();
+        let new_idle = || {
+            let mut v: Vec<String> = policies()
+                .into_iter()
+                .filter(|(tid, p)| *p == SCHED_IDLE && !before.contains(tid))
+                .map(|(t, _)| t)
+                .collect();
+            v.sort();
+            v
+        };
+        let settled = || {
+            let new = new_idle();
+            let marked = crate::cputime::waiting_by_design();
+            new.len() == 2 && new.iter().all(|t| marked.contains(t))
+        };
+        while !settled() && t.elapsed().as_secs() < 10 {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let new = new_idle();
+        assert_eq!(
+            new.len(),
+            2,
+            "the worker and its pool's thread: {:?}",
+            policies()
+        );
+        let marked = crate::cputime::waiting_by_design();
+        assert!(
+            new.iter().all(|t| marked.contains(t)),
+            "{new:?} not all in {marked:?}"
+        );
+        // The worker is joined; its pool's thread ends on its own soon after.
+        drop(b);
+        let t = Instant::now();
+        let gone = || {
+            let marked = crate::cputime::waiting_by_design();
+            !new.iter().any(|t| marked.contains(t))
+        };
+        while !gone() && t.elapsed().as_secs() < 10 {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert!(gone(), "still marked after the worker quit");
     }
 }
