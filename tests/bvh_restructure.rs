@@ -96,8 +96,8 @@ fn run_clip(file: &str, frames: usize) -> (f64, f64, f64, f64) {
             let st = p.partial_rebuild(&mut c, 0.25, &params, &mut ws, &mut ps);
             check(mesh, &p, &format!("{what}, partly rebuilt"));
             assert!(
-                (st.sah_after - p.bvh().sah_cost()).abs() <= 1e-3 * st.sah_after,
-                "{what}: partial stats"
+                st.rebuilt_tris <= (0.25 * mesh.len() as f32) as u32,
+                "{what}: {st:?} rebuilt more than its share"
             );
             refit_sah += f64::from(refitted.bvh().sah_cost());
             opt_sah += f64::from(o.bvh().sah_cost());
