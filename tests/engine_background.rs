@@ -6,7 +6,7 @@
 
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
-use dynbvh::engine::{Engine, EngineConfig, Policy, Prices, Timing};
+use dynbvh::engine::{Engine, EngineConfig, Policy, Prices, Timing, WorkerPriority};
 use dynbvh::geom::Ray;
 use dynbvh::report::frame_bench::{self, Options, RaySpec};
 use glam::{Affine3A, Vec3};
@@ -31,20 +31,33 @@ fn background_rebuilds_swap_at_fixed_frames_on_every_run() {
         prices: Prices::default(),
         ..Options::default()
     };
-    let run = || {
+    let run = |worker| {
         let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(30)).unwrap();
-        frame_bench::run(&mut src, &options, |_| {})
+        let o = Options {
+            worker,
+            ..options.clone()
+        };
+        frame_bench::run(&mut src, &o, |_| {})
     };
-    let (a, b) = (run(), run());
-    for (p, q) in a.policies.iter().zip(&b.policies) {
-        assert_eq!(
-            p.modelled_ms.to_bits(),
-            q.modelled_ms.to_bits(),
-            "{}",
-            p.policy
-        );
-        assert_eq!(p.rebuild_frames, q.rebuild_frames, "{}", p.policy);
+    // Twice, and with the worker in the idle class: the due frames are fixed when the builds
+    // start, so neither the machine's load nor the worker's class moves the schedule.
+    let (a, b) = (run(WorkerPriority::Normal), run(WorkerPriority::Normal));
+    let c = run(WorkerPriority::Idle);
+    for other in [&b, &c] {
+        for (p, q) in a.policies.iter().zip(&other.policies) {
+            assert_eq!(
+                p.modelled_ms.to_bits(),
+                q.modelled_ms.to_bits(),
+                "{}",
+                p.policy
+            );
+            assert_eq!(p.rebuild_frames, q.rebuild_frames, "{}", p.policy);
+        }
     }
+    assert!(frame_bench::summary_table(&a).contains("worker ran at normal priority"));
+    assert!(frame_bench::summary_table(&c).contains("worker ran at idle priority"));
+    let json = serde_json::to_value(&c).unwrap();
+    assert_eq!(json["worker_priority"], "idle");
     let asy = a.policies.iter().find(|p| p.policy == "async").unwrap();
     assert!(
         asy.rebuilds > 0,

@@ -6,7 +6,7 @@ use clap::Args;
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::{FrameSource, SineSphere, Window};
-use dynbvh::engine::{CostMeasure, Policy, Prices, Traversal};
+use dynbvh::engine::{CostMeasure, Policy, Prices, Traversal, WorkerPriority};
 use dynbvh::report::frame_bench::{self, Options, RaySpec, Sweep, SweepFailure};
 use std::path::{Path, PathBuf};
 
@@ -107,6 +107,12 @@ pub struct BenchArgs {
     /// the sampled poses after it (priced as such; the oracle's rebuilds likewise).
     #[arg(long, requires = "clip_aware")]
     clip_rebuilds: bool,
+    /// The scheduling class of `async`'s background worker: `normal`, or `idle` (Linux
+    /// `SCHED_IDLE`: it builds on cycles the frame loop leaves, so the frames beside a build
+    /// keep their pace; on a machine busy with other work the build may then arrive late, and
+    /// the engine waits for it).
+    #[arg(long, default_value = "normal")]
+    worker_priority: WorkerPriority,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]
     repeats: u64,
@@ -179,6 +185,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         traversal: a.traversal,
         cost: a.cost,
         prices: prices(&a)?,
+        worker: a.worker_priority,
         ..Options::default()
     };
     if a.no_builders {

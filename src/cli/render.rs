@@ -7,7 +7,7 @@ use clap::Args;
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Action, Engine, EngineConfig, Policy, Traversal};
+use dynbvh::engine::{Action, Engine, EngineConfig, Policy, Traversal, WorkerPriority};
 use dynbvh::render::{
     Camera, EngineShading, FrameCounts, GltfCamera, PacketUse, Renderer, Settings, Stage,
     animation_view, font, gltf_cameras,
@@ -92,6 +92,10 @@ pub struct RenderArgs {
     /// the pictures are the same).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
     pub traversal: Traversal,
+    /// The scheduling class of `async`'s background worker: `normal`, or `idle` (Linux
+    /// `SCHED_IDLE`: it builds on cycles the frame loop leaves).
+    #[arg(long, default_value = "normal")]
+    pub worker_priority: WorkerPriority,
     #[command(flatten)]
     pub limits: Limits,
 }
@@ -169,6 +173,7 @@ struct Pipeline<'s> {
     timings: Vec<FrameTiming>,
     packets: PacketUse,
     traversal: Traversal,
+    worker: WorkerPriority,
 }
 
 impl<'s> Pipeline<'s> {
@@ -189,6 +194,7 @@ impl<'s> Pipeline<'s> {
             timings: Vec::new(),
             packets: PacketUse::DEFAULT,
             traversal: Traversal::DEFAULT,
+            worker: WorkerPriority::Normal,
         })
     }
 
@@ -204,6 +210,7 @@ impl<'s> Pipeline<'s> {
                 let config = EngineConfig {
                     policy: self.policy,
                     traversal: self.traversal,
+                    worker: self.worker,
                     ..EngineConfig::default()
                 };
                 self.engine = Some(self.src.build(f, config));
@@ -403,6 +410,7 @@ pub fn execute(a: &RenderArgs) -> Result<RenderSummary> {
             Pipeline::new(&scene, anim, times, p, settings).map(|mut pl| {
                 pl.packets = a.packets;
                 pl.traversal = a.traversal;
+                pl.worker = a.worker_priority;
                 pl
             })
         })

@@ -20,7 +20,7 @@ pub use prices::Prices;
 pub use ray_work::{CostMeasure, Query, SampleEntry, WorkEstimate};
 pub use scene::{
     Engine, EngineConfig, HitDetail, InstanceId, MeshId, QueryFilter, SceneHit, ScenePoint, Timing,
-    TlasPolicy, Traversal, expected_work, expected_work_wide, tree_sah,
+    TlasPolicy, Traversal, WorkerPriority, expected_work, expected_work_wide, tree_sah,
 };
 pub use source::FrameSource;
 pub use stats::{FrameStats, MeshStats};

@@ -91,6 +91,36 @@ pub struct EngineConfig {
     /// Unit prices of the modelled costs: what [`Timing::Priced`] decides with, and what the
     /// statistics' modelled figures are priced at whatever the timing.
     pub prices: Prices,
+    /// The scheduling class of the background rebuild's worker ([`Policy::Async`]).
+    pub worker: WorkerPriority,
+}
+
+/// The scheduling class of the background rebuild's worker thread.
+///
+/// [`WorkerPriority::Idle`] (Linux `SCHED_IDLE`) runs the build only on cycles no thread of
+/// normal priority wants, so that the frames beside it keep their pace (`docs/ladder.md`);
+/// on a machine whose cores other work keeps busy it may get next to none, and the engine then
+/// waits for the build at its due frame for as long as it takes, so it is opt-in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WorkerPriority {
+    /// The default: the system shares the cores between the worker and the frame loop.
+    #[default]
+    Normal,
+    /// The scheduler's idle class (Linux; elsewhere the same as `Normal`).
+    Idle,
+}
+
+impl std::str::FromStr for WorkerPriority {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "normal" => Ok(Self::Normal),
+            "idle" => Ok(Self::Idle),
+            _ => Err(format!("worker priority {s:?}: expected normal or idle")),
+        }
+    }
 }
 
 /// Which tree of each mesh the engine's rays walk (the top-level tree is binary either way).
@@ -147,6 +177,7 @@ impl Default for EngineConfig {
             traversal: Traversal::DEFAULT,
             cost: CostMeasure::default(),
             prices: Prices::default(),
+            worker: WorkerPriority::Normal,
         }
     }
 }
@@ -417,7 +448,7 @@ impl Engine {
             entries: Vec::new(),
             mesh_samples: Vec::new(),
             restructure: Restructure::default(),
-            background: background::Background::default(),
+            background: background::Background::new(config.worker),
             frame_trace_ms: 0.0,
             horizon: None,
             unsampled_meshes: false,

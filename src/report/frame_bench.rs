@@ -9,7 +9,7 @@ use crate::engine::ray_work::SAMPLE_STRIDE;
 use crate::engine::source::FrameSource;
 use crate::engine::{
     Action, CostMeasure, Decision, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit,
-    Timing, TlasPolicy, Traversal,
+    Timing, TlasPolicy, Traversal, WorkerPriority,
 };
 use crate::geom::{Aabb, Ray};
 use crate::report::all_pairs::{self, SampledFrame};
@@ -110,6 +110,8 @@ pub struct Options {
     /// policies leave out actions that cannot pay for themselves before its end; false: every
     /// run is open-ended.
     pub known_length: bool,
+    /// The background rebuild's worker's scheduling class.
+    pub worker: WorkerPriority,
 }
 
 impl Default for Options {
@@ -138,6 +140,7 @@ impl Default for Options {
             prices: Prices::default(),
             judge_rays: 16384,
             known_length: true,
+            worker: WorkerPriority::Normal,
         }
     }
 }
@@ -425,6 +428,8 @@ pub struct Report {
     /// Engines run in lockstep, a frame of each in turn (the policies asked, the oracle's
     /// always-refit and always-rebuild, the top-level tree comparison's).
     pub lockstep: usize,
+    /// The scheduling class of `async`'s background worker.
+    pub worker_priority: WorkerPriority,
     /// What the policies decided on.
     pub cost: CostMeasure,
     /// Unit prices of the modelled measure.
@@ -801,6 +806,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         cost: opts.cost,
         prices: opts.prices,
         timing: Timing::Priced,
+        worker: opts.worker,
     };
     // The first frame's box, less far outliers: what the camera and the lidar look at.
     let (bounds, _) = src.build(0, config(Policy::Refit)).view_bounds();
@@ -998,6 +1004,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         rays_per_frame,
         threads: rayon::current_num_threads(),
         lockstep: configs.len(),
+        worker_priority: opts.worker,
         cost: opts.cost,
         prices: opts.prices,
         policies,
@@ -1510,6 +1517,20 @@ pub fn summary_table(r: &Report) -> String {
              other engines' frames; its frame times as an application sees them come from a \
              run of `-p async --no-oracle --no-tlas-compare` alone\n",
         );
+    }
+    if r.policies.iter().any(|p| p.policy == "async") {
+        s.push_str(&format!(
+            "async: the background worker ran at {} priority{}\n",
+            match r.worker_priority {
+                WorkerPriority::Normal => "normal",
+                WorkerPriority::Idle => "idle",
+            },
+            if r.worker_priority == WorkerPriority::Normal {
+                " (`--worker-priority idle` keeps it off the frames' cores)"
+            } else {
+                ""
+            }
+        ));
     }
     s.push_str(&format!(
         "update against trace per frame (medians over {} frames; update = pose + mesh trees + \

@@ -7,14 +7,15 @@
 //!
 //! One worker per engine, one build at a time. The worker builds sequentially (in a rayon pool
 //! of one thread, `parallel_threshold` off): it runs beside the frame's rayon pool instead of
-//! queueing its tasks among the frame's tracing tasks. It runs in the scheduler's idle class
-//! (Linux `SCHED_IDLE`), on cycles no thread of normal priority wants: the frame loop's serial
-//! steps, its threads' idle spins and the gaps between frames, so that the frames beside a build
-//! are not slowed by a third thread on their cores. The due frame leaves it many frames; if it
-//! is still late there, the engine's wait frees a core for it.
+//! queueing its tasks among the frame's tracing tasks. With [`WorkerPriority::Idle`] it runs in
+//! the scheduler's idle class (Linux `SCHED_IDLE`), on cycles no thread of normal priority
+//! wants: the frame loop's serial steps, its threads' idle spins and the gaps between frames,
+//! so that the frames beside a build are not slowed by a third thread on their cores; if it is
+//! late at the due frame, the engine's wait frees a core for it (unless other processes take
+//! it). Either way its run-queue wait is not counted as the machine's load.
 
 use crate::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
-use crate::engine::MeshId;
+use crate::engine::{MeshId, WorkerPriority};
 use glam::Vec3;
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -62,9 +63,18 @@ pub(super) struct Background {
     /// The mesh whose build runs or waits to be swapped in, and the frame it is due.
     busy: Option<MeshId>,
     due: u64,
+    /// The worker's scheduling class.
+    priority: WorkerPriority,
 }
 
 impl Background {
+    /// No worker yet; it will run at `priority`.
+    pub fn new(priority: WorkerPriority) -> Self {
+        let mut b = Self::default();
+        b.priority = priority;
+        b
+    }
+
     /// Starts the worker and sizes the job's buffers for a mesh of `vertices` and `triangles`
     /// (like `tree`, and `wide` when the engine traces wide trees), so that starting a build
     /// allocates nothing. Allocates.
@@ -77,7 +87,8 @@ impl Background {
     ) {
         if self.worker.is_none() {
             let shared = Arc::clone(&self.shared);
-            self.worker = Some(std::thread::spawn(move || work(&shared)));
+            let idle = self.priority == WorkerPriority::Idle;
+            self.worker = Some(std::thread::spawn(move || work(&shared, idle)));
         }
         let job = self.idle.get_or_insert_with(Job::default);
         job.positions
@@ -222,11 +233,13 @@ fn run_when_idle() {
 
 /// The worker: waits for a queued job, builds it, hands it back. Its builds and collapses run
 /// in a pool of one thread of its own, so that their parallel steps (the collapse's subtrees,
-/// its block fill) stay off the pool the frame traces on.
-fn work(shared: &Shared) {
-    run_when_idle();
+/// its block fill) stay off the pool the frame traces on. `idle`: in the idle class.
+fn work(shared: &Shared, idle: bool) {
+    if idle {
+        run_when_idle();
+    }
     crate::cputime::waits_by_design();
-    // The pool's thread inherits the idle class.
+    // The pool's thread inherits the worker's class.
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .start_handler(|_| crate::cputime::waits_by_design())
@@ -306,7 +319,7 @@ mod tests {
     fn the_worker_and_its_pool_run_in_the_idle_class_and_their_wait_is_not_load() {
         const SCHED_IDLE: u32 = 5;
         let before: Vec<String> = policies().into_iter().map(|(t, _)| t).collect();
-        let mut b = Background::default();
+        let mut b = Background::new(WorkerPriority::Idle);
         b.reserve(3, 1, &MeshBvh::default(), None);
         // The worker classes itself and starts its pool first thing; give them up to 10 s.
         let t = Instant::now();
