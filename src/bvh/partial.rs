@@ -339,8 +339,7 @@ impl MeshBvh {
 
         // The nodes and the slots in their new order; the cut subtrees' new roots, and the
         // rebuilt ones' new references.
-        self.bvh.nodes.clear();
-        self.bvh.nodes.extend_from_slice(&ws.nodes);
+        super::topology::take_or_copy(&mut self.bvh.nodes, &mut ws.nodes);
         // Only the rebuilt subtrees' slots and those the top moved are copied: the moved
         // kept ones into the scratch first (beside the rebuilt ones), then all of them to
         // their new places, which only they overlap.

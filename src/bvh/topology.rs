@@ -215,17 +215,26 @@ impl MeshBvh {
             return false;
         }
         debug_assert_eq!(ws.perm.len(), self.tris.len());
-        // Gathered into the scratch and copied back: the scratch is shared by meshes of every
-        // size, so it keeps its own (largest) storage rather than trading it with one tree.
-        self.bvh.nodes.clear();
-        self.bvh.nodes.extend_from_slice(&ws.nodes);
         gather(&mut ws.old_prims, &self.bvh.prim_indices, &ws.perm);
         gather(&mut ws.old_tris, &self.tris, &ws.perm);
         gather(&mut ws.old_leaf_indices, &self.leaf_indices, &ws.perm);
-        self.bvh.prim_indices.copy_from_slice(&ws.old_prims);
-        self.tris.copy_from_slice(&ws.old_tris);
-        self.leaf_indices.copy_from_slice(&ws.old_leaf_indices);
+        take_or_copy(&mut self.bvh.nodes, &mut ws.nodes);
+        take_or_copy(&mut self.bvh.prim_indices, &mut ws.old_prims);
+        take_or_copy(&mut self.tris, &mut ws.old_tris);
+        take_or_copy(&mut self.leaf_indices, &mut ws.old_leaf_indices);
         true
+    }
+}
+
+/// Puts the scratch's contents into `dst`: by trading the two buffers where `dst`'s is at least
+/// as large (so the scratch, shared by meshes of every size, never loses room it has, and
+/// `dst` gets one that holds the contents), else by copying. Allocates nothing.
+pub(crate) fn take_or_copy<T: Copy>(dst: &mut Vec<T>, scratch: &mut Vec<T>) {
+    if dst.capacity() >= scratch.capacity() {
+        std::mem::swap(dst, scratch);
+    } else {
+        dst.clear();
+        dst.extend_from_slice(scratch);
     }
 }
 
