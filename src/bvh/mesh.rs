@@ -11,7 +11,7 @@ use rayon::prelude::*;
 const GATHER_CHUNK: usize = 1 << 14;
 
 /// A BVH over the triangles of a [`TriMesh`], ready for ray queries.
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 pub struct MeshBvh {
     pub(super) bvh: Bvh,
     /// `tris[slot]` is the triangle `bvh.prim_indices()[slot]`.
@@ -19,6 +19,23 @@ pub struct MeshBvh {
     /// `leaf_indices[slot]` are that triangle's vertex indices: refit reads them in order
     /// instead of looking each triangle up through the mesh's index buffer.
     pub(super) leaf_indices: Vec<[u32; 3]>,
+}
+
+/// `clone_from` reuses the target's buffers (allocating only to grow).
+impl Clone for MeshBvh {
+    fn clone(&self) -> Self {
+        Self {
+            bvh: self.bvh.clone(),
+            tris: self.tris.clone(),
+            leaf_indices: self.leaf_indices.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.bvh.clone_from(&source.bvh);
+        self.tris.clone_from(&source.tris);
+        self.leaf_indices.clone_from(&source.leaf_indices);
+    }
 }
 
 impl MeshBvh {

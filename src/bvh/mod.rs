@@ -47,11 +47,28 @@ pub use wide::{Child, CollapseMethod, MeshBvh4, MeshBvh8, WideBvh, WideCost, Wid
 pub const MAX_DEPTH: usize = 128;
 
 /// A binary BVH over primitives known by index.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Bvh {
     nodes: Vec<Node>,
     prim_indices: Vec<u32>,
     max_leaf_size: u32,
+}
+
+/// `clone_from` reuses the target's buffers (allocating only to grow).
+impl Clone for Bvh {
+    fn clone(&self) -> Self {
+        Self {
+            nodes: self.nodes.clone(),
+            prim_indices: self.prim_indices.clone(),
+            max_leaf_size: self.max_leaf_size,
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.nodes.clone_from(&source.nodes);
+        self.prim_indices.clone_from(&source.prim_indices);
+        self.max_leaf_size = source.max_leaf_size;
+    }
 }
 
 impl Bvh {

@@ -176,7 +176,12 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
     let mut cut = PartialCut::default();
     let mut ps = PartialScratch::default();
     cut.reset(&refitted, &mut ps);
+    // The rungs work on a tree and scratch with the room the engine gives a deforming mesh's
+    // (any shape of tree over its triangles), so that they trade buffers as they do there.
     let mut ws = RestructureWorkspace::default();
+    ws.reserve(indices.len());
+    let mut t = refitted.clone();
+    t.reserve_any_shape();
     let mut os = OptimizeScratch::default();
     let mut bws = BuildWorkspace::default();
     let mut wide = MeshBvh8::from_mesh_bvh(&refitted);
@@ -210,7 +215,8 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
             let mut walls_c = Vec::new();
             let mut result = refitted.clone();
             for _ in 0..opts.repeats.max(1) {
-                let mut t = refitted.clone();
+                // Into the same storage each time, as the engine's tree is.
+                t.clone_from(&refitted);
                 let mut c = cut.clone();
                 let clock = CpuClock::now();
                 let start = Instant::now();
@@ -234,7 +240,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options) -> anyhow::Result<Report> 
                 cpu[k] += clock.elapsed_ms().cpu_ms / opts.repeats.max(1) as f64;
                 walls.push(ms);
                 walls_c.push(ms_c);
-                result = t;
+                result.clone_from(&t);
             }
             wide.collapse_from(&result);
             let (s, w) = (f64::from(result.bvh().sah_cost()), work(&wide, &rays));
