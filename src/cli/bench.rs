@@ -111,7 +111,7 @@ pub struct BenchArgs {
     /// `SCHED_IDLE`: it builds on cycles the frame loop leaves, so the frames beside a build
     /// keep their pace; on a machine busy with other work the build may then arrive late, and
     /// the engine waits for it).
-    #[arg(long, default_value = "normal")]
+    #[arg(long, value_name = "normal|idle", default_value_t = WorkerPriority::Normal)]
     worker_priority: WorkerPriority,
     /// Trace passes per frame, the fastest counting.
     #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=args::MAX_REPEATS))]

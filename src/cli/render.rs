@@ -94,7 +94,7 @@ pub struct RenderArgs {
     pub traversal: Traversal,
     /// The scheduling class of `async`'s background worker: `normal`, or `idle` (Linux
     /// `SCHED_IDLE`: it builds on cycles the frame loop leaves).
-    #[arg(long, default_value = "normal")]
+    #[arg(long, value_name = "normal|idle", default_value_t = WorkerPriority::Normal)]
     pub worker_priority: WorkerPriority,
     #[command(flatten)]
     pub limits: Limits,

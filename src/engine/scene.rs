@@ -123,6 +123,15 @@ impl std::str::FromStr for WorkerPriority {
     }
 }
 
+impl std::fmt::Display for WorkerPriority {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Normal => "normal",
+            Self::Idle => "idle",
+        })
+    }
+}
+
 /// Which tree of each mesh the engine's rays walk (the top-level tree is binary either way).
 ///
 /// With [`Traversal::Wide`] every mesh keeps, beside its binary tree, an 8-wide tree

@@ -1511,20 +1511,18 @@ pub fn summary_table(r: &Report) -> String {
         "* default policy; SAH: ratio to the last build; fresh: ratio to a fresh build now; \
          rebuilds (n): n times back to the tree a rebuild replaced\n",
     );
-    if r.lockstep > 1 && r.policies.iter().any(|p| p.policy == "async") {
+    let with_async = r.policies.iter().any(|p| p.policy == "async");
+    if r.lockstep > 1 && with_async {
         s.push_str(
             "async: the engines run in lockstep, so its background builds also run during the \
              other engines' frames; its frame times as an application sees them come from a \
              run of `-p async --no-oracle --no-tlas-compare` alone\n",
         );
     }
-    if r.policies.iter().any(|p| p.policy == "async") {
+    if with_async {
         s.push_str(&format!(
             "async: the background worker ran at {} priority{}\n",
-            match r.worker_priority {
-                WorkerPriority::Normal => "normal",
-                WorkerPriority::Idle => "idle",
-            },
+            r.worker_priority,
             if r.worker_priority == WorkerPriority::Normal {
                 " (`--worker-priority idle` keeps it off the frames' cores)"
             } else {
