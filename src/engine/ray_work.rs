@@ -21,8 +21,19 @@ use crate::geom::Ray;
 use std::fmt;
 use std::str::FromStr;
 
-/// One ray in this many is taken into the sample.
+/// One ray in this many is taken into the sample (at most: see [`SAMPLE_MAX`]).
 pub const SAMPLE_STRIDE: u64 = 128;
+
+/// Most rays a frame's sample takes: past `SAMPLE_STRIDE * SAMPLE_MAX` rays a frame the stride
+/// grows with the last sampled frame's ray count. The estimate's error there is its bias, which
+/// more rays do not lower (`docs/ray_work.md`), while the sample's cost grows with them.
+pub const SAMPLE_MAX: u64 = 1024;
+
+/// The stride of a frame's sample after a sampled frame of `last_rays` rays.
+#[must_use]
+pub fn stride_after(last_rays: u64) -> u64 {
+    last_rays.div_ceil(SAMPLE_MAX).max(SAMPLE_STRIDE)
+}
 
 /// What a policy measures a tree's degradation and a frame's trace cost by.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -309,7 +320,8 @@ pub struct SamplePlan {
     start: u64,
     /// Rays in the batch.
     len: u64,
-    /// The frame's offset and jitter seed ([`RaySample`]).
+    /// The frame's stride, offset and jitter seed ([`RaySample`]).
+    stride: u64,
     offset: u64,
     jitter: u64,
 }
@@ -318,7 +330,13 @@ impl SamplePlan {
     /// The frame's index of the ray the sample takes in block `k`.
     #[inline]
     fn pick(&self, k: u64) -> u64 {
-        k * SAMPLE_STRIDE + (self.offset + splitmix(self.jitter.wrapping_add(k))) % SAMPLE_STRIDE
+        k * self.stride + (self.offset + splitmix(self.jitter.wrapping_add(k))) % self.stride
+    }
+
+    /// One ray in this many is taken.
+    #[must_use]
+    pub fn stride(&self) -> u64 {
+        self.stride
     }
 
     /// The batch's sampled indices in `from..to`, increasing.
@@ -328,7 +346,7 @@ impl SamplePlan {
         let (lo, hi) = (self.start + from as u64, self.start + to);
         Picks {
             plan: *self,
-            block: lo / SAMPLE_STRIDE,
+            block: lo / self.stride,
             lo,
             hi,
         }
@@ -355,7 +373,7 @@ impl Iterator for Picks {
 
     #[inline]
     fn next(&mut self) -> Option<usize> {
-        while self.block * SAMPLE_STRIDE < self.hi {
+        while self.block * self.plan.stride < self.hi {
             let p = self.plan.pick(self.block);
             self.block += 1;
             if p >= self.lo && p < self.hi {
@@ -411,7 +429,7 @@ impl SampleSums {
 }
 
 /// The frame's sample so far: which rays it takes and the work they cost.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct RaySample {
     /// The frame the sample belongs to.
     pub frame: u64,
@@ -426,6 +444,8 @@ pub struct RaySample {
     /// Sum and sum of squares of each sampled ray's work (nodes plus triangles).
     sum: f64,
     sum_sq: f64,
+    /// One ray in this many is taken ([`stride_after`]).
+    stride: u64,
     /// Added to every block's drawn position (mod the stride): over the frames' offsets
     /// every ray is taken equally often, whatever the draws.
     offset: u64,
@@ -451,15 +471,35 @@ pub struct WorkEstimate {
     pub ci95: f64,
 }
 
+impl Default for RaySample {
+    fn default() -> Self {
+        Self::new(u64::MAX)
+    }
+}
+
 impl RaySample {
-    /// An empty sample of `frame`.
+    /// An empty sample of `frame`, one ray in [`SAMPLE_STRIDE`].
     #[must_use]
     pub fn new(frame: u64) -> Self {
+        Self::after(frame, 0)
+    }
+
+    /// An empty sample of `frame` after a sampled frame of `last_rays` rays
+    /// ([`stride_after`]).
+    #[must_use]
+    pub fn after(frame: u64, last_rays: u64) -> Self {
+        let stride = stride_after(last_rays);
         Self {
             frame,
-            offset: splitmix(frame) % SAMPLE_STRIDE,
+            rays: 0,
+            sampled: 0,
+            work: TraversalStats::default(),
+            top: TraversalStats::default(),
+            sum: 0.0,
+            sum_sq: 0.0,
+            stride,
+            offset: splitmix(frame) % stride,
             jitter: splitmix(frame ^ JITTER_SEED),
-            ..Self::default()
         }
     }
 
@@ -471,6 +511,7 @@ impl RaySample {
         SamplePlan {
             start,
             len: n as u64,
+            stride: self.stride,
             offset: self.offset,
             jitter: self.jitter,
         }
@@ -500,7 +541,7 @@ impl RaySample {
     /// Scale from sampled work to the frame's estimated total: the stride.
     #[must_use]
     pub fn scale(&self) -> f64 {
-        SAMPLE_STRIDE as f64
+        self.stride as f64
     }
 
     /// Estimated mean work per ray and its confidence interval.
@@ -679,38 +720,64 @@ mod tests {
     #[test]
     fn the_estimate_is_unbiased_over_offsets_and_its_interval_covers() {
         // Work of ray i: a pattern with a strong trend, so a fixed offset would be biased. With
-        // the blocks' draws fixed, the frames' offsets take every ray once.
+        // the blocks' draws fixed, the frames' offsets take every ray once. The stride of a
+        // frame after a large one ([`stride_after`]) is unbiased alike.
         let work = |i: usize| ((i * 37) % 101 + i / 50) as u64;
-        let n = 5000;
-        let truth = (0..n).map(|i| work(i) as f64).sum::<f64>() / n as f64;
-        let mut mean_of_means = 0.0;
-        let mut covered = 0;
-        for offset in 0..SAMPLE_STRIDE {
-            let mut s = RaySample {
-                offset,
-                jitter: 7,
-                ..RaySample::default()
-            };
-            for i in s.take(n).collect::<Vec<_>>() {
-                let w = TraversalStats {
-                    nodes: work(i),
-                    prims: 0,
+        for (n, stride) in [(5000, SAMPLE_STRIDE), (300_000, stride_after(1_000_000))] {
+            let truth = (0..n).map(|i| work(i) as f64).sum::<f64>() / n as f64;
+            let mut mean_of_means = 0.0;
+            let mut covered = 0;
+            for offset in 0..stride {
+                let mut s = RaySample {
+                    stride,
+                    offset,
+                    jitter: 7,
+                    ..RaySample::default()
                 };
-                s.add(w, TraversalStats::default());
+                for i in s.take(n).collect::<Vec<_>>() {
+                    let w = TraversalStats {
+                        nodes: work(i),
+                        prims: 0,
+                    };
+                    s.add(w, TraversalStats::default());
+                }
+                let e = s.estimate();
+                // Totals: stride times the sample, the estimate of the frame's total.
+                mean_of_means += s.scale() * e.mean * e.sampled as f64 / n as f64;
+                if (e.mean - truth).abs() <= e.ci95 {
+                    covered += 1;
+                }
             }
-            let e = s.estimate();
-            // Totals: stride times the sample, the estimate of the frame's total.
-            mean_of_means += s.scale() * e.mean * e.sampled as f64 / n as f64;
-            if (e.mean - truth).abs() <= e.ci95 {
-                covered += 1;
+            mean_of_means /= stride as f64;
+            assert!(
+                (mean_of_means - truth).abs() < 1e-9 * truth,
+                "stride {stride}: {mean_of_means} vs {truth}"
+            );
+            assert!(
+                covered * 8 >= stride * 7,
+                "stride {stride}: interval covered {covered} offsets"
+            );
+        }
+    }
+
+    #[test]
+    fn past_sample_max_rays_a_frame_the_stride_keeps_the_sample_at_sample_max() {
+        assert_eq!(stride_after(0), SAMPLE_STRIDE);
+        assert_eq!(stride_after(SAMPLE_STRIDE * SAMPLE_MAX), SAMPLE_STRIDE);
+        assert!(stride_after(SAMPLE_STRIDE * SAMPLE_MAX + 1) > SAMPLE_STRIDE);
+        for rays in [10_000, 131_072, 131_073, 1_000_000, 3_000_001] {
+            for frame in 0..5 {
+                let mut s = RaySample::after(frame, rays);
+                let taken = s.take(rays as usize).count() as u64;
+                let want = rays.div_ceil(s.stride);
+                assert!(taken.abs_diff(want) <= 1, "{rays}: {taken} of {want}");
+                assert!(
+                    taken <= SAMPLE_MAX.max(rays / SAMPLE_STRIDE) + 1,
+                    "{rays}: {taken}"
+                );
+                assert_eq!(s.scale(), s.stride as f64);
             }
         }
-        mean_of_means /= SAMPLE_STRIDE as f64;
-        assert!(
-            (mean_of_means - truth).abs() < 1e-9 * truth,
-            "{mean_of_means} vs {truth}"
-        );
-        assert!(covered >= 56, "interval covered {covered} of 64 offsets");
     }
 
     #[test]

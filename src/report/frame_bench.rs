@@ -5,7 +5,7 @@ use crate::bvh::BuildParams;
 use crate::cputime::{CpuClock, Elapsed};
 use crate::engine::oracle::{MeshCosts, SceneCosts};
 use crate::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL};
-use crate::engine::ray_work::SAMPLE_STRIDE;
+use crate::engine::ray_work::{SAMPLE_MAX, SAMPLE_STRIDE};
 use crate::engine::source::FrameSource;
 use crate::engine::{
     Action, CostMeasure, Decision, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit,
@@ -1419,7 +1419,8 @@ fn modelled_table(r: &Report) -> String {
             (k + usize::from(x.model_sample_ms > 0.0), n + 1)
         });
         s.push_str(&format!(
-            "ray sample: 1 ray in {SAMPLE_STRIDE}, taken in the trace's own pass (the default \
+            "ray sample: 1 ray in {SAMPLE_STRIDE}, at most {SAMPLE_MAX} a frame, taken in the \
+             trace's own pass (the default \
              policy's on {sampled} of {all} frames): {:.2}% of its wall-clock time (largest over \
              the policies; {:.2}% modelled); mean work per ray known to +-{:.1}% (95%)\n",
             100.0 * share.iter().copied().fold(0.0, f64::max),

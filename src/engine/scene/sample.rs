@@ -12,8 +12,7 @@ use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{Counters, MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
 use crate::engine::ray_work::{
-    MeshSample, Query, RaySample, SAMPLE_STRIDE, SampleEntry, SamplePlan, SampleSums, WorkEstimate,
-    splitmix,
+    MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate, splitmix,
 };
 use crate::geom::{Hit, Ray};
 use rayon::prelude::*;
@@ -145,7 +144,7 @@ impl Engine {
         };
         let (before, log) = self.open_log();
         // Rays spanned by one task: about `RAY_CHUNK / 16` of them sampled.
-        let span = RAY_CHUNK / 16 * SAMPLE_STRIDE as usize;
+        let span = RAY_CHUNK / 16 * plan.stride() as usize;
         let this = &*self;
         (0..rays.len().div_ceil(span))
             .into_par_iter()
@@ -273,7 +272,7 @@ impl Engine {
                 return None;
             }
             self.unsampled_meshes = false;
-            self.sample = RaySample::new(self.frame);
+            self.sample = RaySample::after(self.frame, self.sample.rays);
             self.entries.clear();
             self.mesh_samples.fill(MeshSample::default());
             self.stats.model_sample_ms = 0.0;
