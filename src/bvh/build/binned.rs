@@ -20,6 +20,7 @@ use super::{
 use bytemuck::Zeroable;
 use glam::{BVec3A, Vec3A};
 use rayon::prelude::*;
+use std::sync::{Mutex, PoisonError};
 use wide::{f32x8, i32x8};
 
 /// Nodes of at most this many primitives are split by pricing every way to cut them
@@ -39,20 +40,31 @@ struct Ctx {
     /// The pool's thread count. With one thread no subtree is made a task of its own: the
     /// whole tree is packed, already in its final order.
     threads: usize,
+    /// Each node split into two tasks: the slot of its children's pair and their descendant
+    /// counts (for [`super::compact_split`]).
+    splits: Mutex<Vec<[u32; 3]>>,
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
 /// the root into `desc` and returns the root, the tree's node count, and whether the nodes are
 /// packed (the tree is then `[root, desc[..count - 1]]` as it stands, in its final order:
-/// a build on one thread runs no task and packs every subtree).
+/// a build on one thread runs no task and packs every subtree). `splits` receives, sorted,
+/// the nodes split into two tasks: the slot of the children's pair and the two children's
+/// descendant counts; every other subtree is packed in its slots.
 /// `rb` bounds `refs`.
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
     rb: RangeBounds,
     desc: &mut [Node],
+    splits: &mut Vec<[u32; 3]>,
 ) -> (Node, usize, bool) {
+    splits.clear();
+    // A node split into tasks holds at least `parallel_threshold` references; room for as
+    // many as a tree whose nodes of that size are all split in two, kept for later builds.
+    splits.reserve(2 * refs.len() / p.parallel_threshold.max(1) + 2);
     let ctx = Ctx {
+        splits: Mutex::new(std::mem::take(splits)),
         bins: p.bins.clamp(2, MAX_BINS),
         all_axes: p.all_axes,
         traversal_cost: p.traversal_cost,
@@ -80,6 +92,11 @@ pub(crate) fn build(
         0,
         0,
     );
+    *splits = ctx
+        .splits
+        .into_inner()
+        .unwrap_or_else(PoisonError::into_inner);
+    splits.sort_unstable_by_key(|s| s[0]);
     (root, desc_count as usize + 1, ctx.threads == 1)
 }
 
@@ -454,7 +471,7 @@ impl Ctx {
                 desc: rdesc,
             };
             let rbins = split.right.map.map(|_| stack.pair(level).1[1]);
-            rayon::join(
+            let (l, r) = rayon::join(
                 || self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
                 || {
                     let mut rs = Stack::take();
@@ -463,7 +480,12 @@ impl Ctx {
                     }
                     self.node(rrefs, split.right, right, depth + 1, &mut rs, 0, 0)
                 },
-            )
+            );
+            self.splits
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push([out.desc_base, l.1, r.1]);
+            (l, r)
         } else {
             let left = Slots {
                 prim_offset: out.prim_offset,

@@ -303,9 +303,12 @@ pub fn prepare_threads() {
 pub struct BuildWorkspace {
     refs: Vec<PrimRef>,
     slots: Vec<Node>,
-    /// Set for a workspace used for one build and dropped: the build then compacts the nodes
-    /// in place and hands the slot storage to a tree that has none, instead of copying them
-    /// into fresh memory.
+    /// The binned build's nodes split into tasks (`binned::build`).
+    splits: Vec<[u32; 3]>,
+    /// Set for a workspace used for one build and dropped: a build whose nodes are not
+    /// compacted in parallel (on one thread, or not binned) then compacts them in place and
+    /// hands the slot storage to a tree that has none, instead of copying them into fresh
+    /// memory.
     pub(crate) one_shot: bool,
 }
 
@@ -325,6 +328,7 @@ impl BuildWorkspace {
     pub fn memory_bytes(&self) -> usize {
         self.refs.capacity() * std::mem::size_of::<PrimRef>()
             + self.slots.capacity() * std::mem::size_of::<Node>()
+            + self.splits.capacity() * std::mem::size_of::<[u32; 3]>()
     }
 }
 
@@ -385,9 +389,9 @@ impl Bvh {
             ..*params
         };
         self.max_leaf_size = params.max_leaf_size;
-        self.nodes.clear();
         self.prim_indices.clear();
         if n == 0 {
+            self.nodes.clear();
             return;
         }
         let refs = &mut ws.refs;
@@ -419,10 +423,13 @@ impl Bvh {
         }
         let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
         let (count, packed);
+        // The binned build's task splits, by which its slots compact in parallel.
+        let mut split_slots = false;
         (root[0], count, packed) = match (splitter, params.method) {
             (Some(s), _) => (build_range(s, params, refs, rb, desc), None, false),
             (None, Method::Binned) => {
-                let (root, count, packed) = binned::build(params, refs, rb, desc);
+                let (root, count, packed) = binned::build(params, refs, rb, desc, &mut ws.splits);
+                split_slots = true;
                 (root, Some(count), packed)
             }
             (None, Method::Median) => {
@@ -438,7 +445,27 @@ impl Bvh {
         } else {
             self.prim_indices.extend(refs.iter().map(PrimRef::id));
         }
-        if ws.one_shot && self.nodes.capacity() == 0 {
+        if let (true, false, Some(count)) = (split_slots, packed, count) {
+            // A parallel binned build: its packed subtrees are copied in blocks, in parallel.
+            if self.nodes.capacity() == 0 {
+                // A cold build: fresh zeroed pages, as huge pages where they are large
+                // (faulted by the threads that write them), with the headroom of `compact`.
+                let cap = (count + count / 8 + 8).min(2 * n - 1).max(count);
+                self.nodes = bytemuck::zeroed_vec(cap);
+                crate::simd::advise_huge_vec(&mut self.nodes);
+                self.nodes.truncate(count);
+            } else {
+                if count > self.nodes.capacity() {
+                    self.nodes.clear();
+                    self.nodes
+                        .reserve_exact((count + count / 8 + 8).min(2 * n - 1).max(count));
+                }
+                // Every node is written below: the old tree's need not be cleared first.
+                self.nodes
+                    .resize(count, <Node as bytemuck::Zeroable>::zeroed());
+            }
+            compact_split(&slots[..2 * n - 1], &ws.splits, &mut self.nodes);
+        } else if ws.one_shot && self.nodes.capacity() == 0 {
             // A cold build: no copy into fresh pages.
             let mut slots = std::mem::take(&mut ws.slots);
             slots.truncate(2 * n - 1);
@@ -460,6 +487,7 @@ impl Bvh {
             }
             self.nodes.extend_from_slice(&slots[..count]);
         } else {
+            self.nodes.clear();
             compact(&slots[..2 * n - 1], count, &mut self.nodes);
         }
     }
@@ -635,6 +663,65 @@ fn compact(slots: &[Node], count: Option<usize>, out: &mut Vec<Node>) {
     }
 }
 
+/// [`compact`] of a parallel binned build's slots into `out` (as long as the tree; every node
+/// is written): `splits` are its nodes split into two tasks, sorted by the slot of their
+/// children's pair, with both children's descendant counts; every other subtree is packed in
+/// its slots ("children pair, left child's descendants, right child's descendants", with no
+/// gap), so it is copied as one block, its interior nodes' child indices moved by where the
+/// block lands. Blocks and the split nodes' two sides are written in parallel; the nodes and
+/// their order are [`compact`]'s.
+fn compact_split(slots: &[Node], splits: &[[u32; 3]], out: &mut [Node]) {
+    out[0] = slots[0];
+    if slots[0].is_leaf() {
+        return;
+    }
+    out[0].first = 1;
+    let rest = &mut out[1..];
+    emit_subtree(slots, splits, 1, rest, 1);
+}
+
+/// Writes into `out` (starting at node index `base`) the descendants of the node whose
+/// children's pair is at slot `c`: its pair, then each child's descendants.
+fn emit_subtree(slots: &[Node], splits: &[[u32; 3]], c: usize, out: &mut [Node], base: u32) {
+    let Ok(k) = splits.binary_search_by_key(&(c as u32), |s| s[0]) else {
+        // Packed: the whole block, children indices moved from slot `c` to `base`.
+        let len = out.len();
+        for (o, s) in out.iter_mut().zip(&slots[c..c + len]) {
+            *o = *s;
+            if !s.is_leaf() {
+                o.first = s.first - c as u32 + base;
+            }
+        }
+        return;
+    };
+    let [_, lcount, rcount] = splits[k];
+    let (pair, rest) = out.split_at_mut(2);
+    let (lout, rout) = rest.split_at_mut(lcount as usize);
+    debug_assert_eq!(rout.len(), rcount as usize);
+    pair[0] = slots[c];
+    pair[1] = slots[c + 1];
+    let (lbase, rbase) = (base + 2, base + 2 + lcount);
+    let (lc, rc) = (pair[0].first as usize, pair[1].first as usize);
+    if !pair[0].is_leaf() {
+        pair[0].first = lbase;
+    }
+    if !pair[1].is_leaf() {
+        pair[1].first = rbase;
+    }
+    rayon::join(
+        || {
+            if !lout.is_empty() {
+                emit_subtree(slots, splits, lc, lout, lbase);
+            }
+        },
+        || {
+            if !rout.is_empty() {
+                emit_subtree(slots, splits, rc, rout, rbase);
+            }
+        },
+    );
+}
+
 /// [`compact`] within the slots themselves (truncated to the tree): the walk emits nodes in
 /// slot order, so each pair is written at or before the slots it is read from, and no slot
 /// still to be read is overwritten.
@@ -692,4 +779,74 @@ fn count_nodes(slots: &[Node], i: usize) -> usize {
 /// The slot index of a not yet emitted interior node's children.
 fn slots_child(n: Node) -> usize {
     n.first as usize
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// Boxes of a bumpy shell with clusters (uneven subtrees) and repeated centroids.
+    fn boxes(n: usize) -> Vec<Aabb> {
+        (0..n)
+            .map(|i| {
+                let t = i as f32 * 0.618_034;
+                let r = 1.0 + 0.3 * (t * 7.0).sin() + if i % 97 < 9 { 5.0 } else { 0.0 };
+                let c = Vec3::new(t.cos() * r, (t * 1.3).sin() * r, (i % 13) as f32 * 0.01);
+                let c = if i % 211 == 0 { Vec3::splat(0.5) } else { c };
+                Aabb::new(c - Vec3::splat(0.01), c + Vec3::splat(0.02))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_parallel_compaction_writes_the_serial_ones_nodes() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("pool");
+        for (n, threshold) in [
+            (1, 2),
+            (7, 2),
+            (300, 2),
+            (5_000, 16),
+            (60_000, 512),
+            (3_000, 4096),
+        ] {
+            let p = BuildParams {
+                parallel_threshold: threshold,
+                ..BuildParams::binned(16)
+            };
+            let b = boxes(n);
+            pool.install(|| {
+                let mut refs: Vec<PrimRef> = b
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| PrimRef::from_corners(b.min.into(), b.max.into(), i as u32))
+                    .collect();
+                let rb = RangeBounds::of(&refs, threshold);
+                let mut slots = vec![<Node as bytemuck::Zeroable>::zeroed(); 2 * n - 1];
+                let mut splits = Vec::new();
+                let (root, count, packed) = {
+                    let (r, desc) = slots.split_at_mut(1);
+                    let out = binned::build(&p, &mut refs, rb, desc, &mut splits);
+                    r[0] = out.0;
+                    out
+                };
+                assert!(!packed || splits.is_empty());
+                let _ = root;
+                let mut serial = Vec::new();
+                compact(&slots, Some(count), &mut serial);
+                let mut parallel = vec![<Node as bytemuck::Zeroable>::zeroed(); count];
+                compact_split(&slots, &splits, &mut parallel);
+                assert_eq!(serial.len(), count, "{n}");
+                for (i, (a, b)) in serial.iter().zip(&parallel).enumerate() {
+                    assert_eq!(a, b, "{n} boxes, threshold {threshold}: node {i}");
+                }
+                if n >= 5_000 {
+                    assert!(splits.len() > 4, "{n}: {} task splits", splits.len());
+                }
+            });
+        }
+    }
 }
