@@ -677,6 +677,50 @@ impl<const K: usize> WideBvh<K> {
     }
 }
 
+/// Levels of the binary tree whose two sides [`subtree_ranges`] fills in parallel.
+const RANGE_SPLITS: u32 = 3;
+
+/// Fills `block` with the triangle slots `(first, count)` of the binary nodes `base ..
+/// base + block.len()`: a node's descendants (`base` its children's pair, then the left child's
+/// descendants, then the right's; or, at `base` 0, the whole tree), in a reverse pass
+/// (children after parents), the two children's blocks on two threads for `splits` more
+/// levels.
+fn subtree_ranges(nodes: &[Node], block: &mut [(u32, u32)], base: usize, splits: u32) {
+    let range = |n: &Node, block: &[(u32, u32)], base: usize| {
+        if n.is_leaf() {
+            (n.first, n.count)
+        } else {
+            let c = n.first as usize - base;
+            (block[c].0, block[c].1 + block[c + 1].1)
+        }
+    };
+    if splits == 0 || base == 0 || block.len() < 4096 {
+        for k in (0..block.len()).rev() {
+            block[k] = range(&nodes[base + k], block, base);
+        }
+        return;
+    }
+    let (a, b) = (&nodes[base], &nodes[base + 1]);
+    let end = base + block.len();
+    // The left child's descendants end where the right child's begin.
+    let a_len = match (a.is_leaf(), b.is_leaf()) {
+        (true, _) => 0,
+        (false, true) => end - a.first as usize,
+        (false, false) => (b.first - a.first) as usize,
+    };
+    let (pair, rest) = block.split_at_mut(2);
+    let (a_block, b_block) = rest.split_at_mut(a_len);
+    let (a_base, b_base) = (base + 2, base + 2 + a_len);
+    debug_assert!(a.is_leaf() || a.first as usize == a_base);
+    debug_assert!(b.is_leaf() || b.first as usize == b_base);
+    rayon::join(
+        || subtree_ranges(nodes, a_block, a_base, splits - 1),
+        || subtree_ranges(nodes, b_block, b_base, splits - 1),
+    );
+    pair[0] = range(a, a_block, a_base);
+    pair[1] = range(b, b_block, b_base);
+}
+
 /// The collapse of a binary tree.
 struct Collapse<'a> {
     bvh: &'a Bvh,
@@ -700,13 +744,13 @@ impl<'a> Collapse<'a> {
         // collapses of its rebuilds fit.
         ranges.reserve((2 * bvh.prim_count()).saturating_sub(1));
         ranges.resize(nodes.len(), (0, 0));
-        for (i, n) in nodes.iter().enumerate().rev() {
-            ranges[i] = if n.is_leaf() {
-                (n.first, n.count)
-            } else {
-                let (l, r) = (ranges[n.first as usize], ranges[n.first as usize + 1]);
-                (l.0, l.1 + r.1)
-            };
+        let parallel = rayon::current_num_threads() > 1 && nodes.len() >= 2 * PARALLEL_PRIMS;
+        if parallel && !nodes[0].is_leaf() && nodes[0].first == 1 {
+            // The root's descendants are the block after it, its pair first.
+            subtree_ranges(nodes, &mut ranges[1..], 1, RANGE_SPLITS);
+            ranges[0] = (ranges[1].0, ranges[1].1 + ranges[2].1);
+        } else {
+            subtree_ranges(nodes, ranges, 0, 0);
         }
         Self {
             bvh,
@@ -896,5 +940,43 @@ impl<'a> Collapse<'a> {
             };
         }
         idx as u32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_slot_ranges_filled_by_subtrees_in_parallel_are_the_reverse_passs() {
+        // Unbalanced subtrees: a fine sphere beside a coarse one, and both children of some
+        // nodes leaves or not.
+        let mut mesh = crate::geom::shapes::icosphere(6);
+        let coarse = crate::geom::shapes::icosphere(1);
+        let base = mesh.positions.len() as u32;
+        mesh.positions
+            .extend(coarse.positions.iter().map(|p| *p * 0.5 + Vec3::splat(3.0)));
+        mesh.indices
+            .extend(coarse.indices.iter().map(|t| t.map(|i| i + base)));
+        for leaf in [1, 4, 8] {
+            let params = BuildParams {
+                max_leaf_size: leaf,
+                ..BuildParams::BINNED
+            };
+            let m = MeshBvh::build(&mesh, &params);
+            let nodes = m.bvh().nodes();
+            assert!(nodes.len() > 4 * 4096, "{} nodes", nodes.len());
+            let mut serial = vec![(0, 0); nodes.len()];
+            subtree_ranges(nodes, &mut serial, 0, 0);
+            let mut split = vec![(0, 0); nodes.len()];
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .expect("pool");
+            pool.install(|| subtree_ranges(nodes, &mut split[1..], 1, RANGE_SPLITS));
+            split[0] = (split[1].0, split[1].1 + split[2].1);
+            assert_eq!(serial, split, "leaves of {leaf}");
+            assert_eq!(serial[0], (0, mesh.len() as u32));
+        }
     }
 }
