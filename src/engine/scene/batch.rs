@@ -1,6 +1,7 @@
 //! Batches of rays through the engine, each of which feeds the refit-or-rebuild policy: its
 //! wall-clock time is recorded as the frame's trace time ([`Engine::record_trace`]) and one ray
-//! in [`crate::engine::ray_work::SAMPLE_STRIDE`] is taken into the ray-work sample in the same
+//! in [`crate::engine::ray_work::SAMPLE_STRIDE`] (at most about
+//! [`crate::engine::ray_work::SAMPLE_MAX`] a frame) is taken into the ray-work sample in the same
 //! pass, so that a caller who only casts batches gets the same decisions as the frame loop of
 //! the benchmarks. The `&self` forms (`*_batch`) trace the same rays without telling the
 //! policy, for callers that price their trace themselves or cast from several threads at once.
