@@ -450,15 +450,14 @@ impl Bvh {
             if self.nodes.capacity() == 0 {
                 // A cold build: fresh zeroed pages, as huge pages where they are large
                 // (faulted by the threads that write them), with the headroom of `compact`.
-                let cap = (count + count / 8 + 8).min(2 * n - 1).max(count);
+                let cap = node_room(count, 2 * n - 1);
                 self.nodes = bytemuck::zeroed_vec(cap);
                 crate::simd::advise_huge_vec(&mut self.nodes);
                 self.nodes.truncate(count);
             } else {
                 if count > self.nodes.capacity() {
                     self.nodes.clear();
-                    self.nodes
-                        .reserve_exact((count + count / 8 + 8).min(2 * n - 1).max(count));
+                    self.nodes.reserve_exact(node_room(count, 2 * n - 1));
                 }
                 // Every node is written below: the old tree's need not be cleared first.
                 self.nodes
@@ -476,14 +475,13 @@ impl Bvh {
                 compact_in_place(&mut slots, count);
             }
             let count = slots.len();
-            slots.shrink_to((count + count / 8 + 8).min(2 * n - 1));
+            slots.shrink_to(node_room(count, 2 * n - 1));
             self.nodes = slots;
         } else if let (true, Some(count)) = (packed, count) {
             debug_assert_eq!(count, count_nodes(&slots[..2 * n - 1], 0));
             self.nodes.clear();
             if count > self.nodes.capacity() {
-                self.nodes
-                    .reserve_exact((count + count / 8 + 8).min(2 * n - 1).max(count));
+                self.nodes.reserve_exact(node_room(count, 2 * n - 1));
             }
             self.nodes.extend_from_slice(&slots[..count]);
         } else {
@@ -648,19 +646,23 @@ fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
 /// order, and with it every invariant, is kept. `count` is the tree's node count if the builder
 /// knows it.
 fn compact(slots: &[Node], count: Option<usize>, out: &mut Vec<Node>) {
-    // Grow with 1/8 headroom plus a few nodes, but never past the most a tree over these
-    // primitives can have (`slots.len()`): rebuilds of a deforming mesh vary in node count by
-    // a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
-    // and then fit without reallocating.
     let count = count.unwrap_or_else(|| count_nodes(slots, 0));
     debug_assert_eq!(count, count_nodes(slots, 0));
     if count > out.capacity() {
-        out.reserve_exact((count + count / 8 + 8).min(slots.len()).max(count));
+        out.reserve_exact(node_room(count, slots.len()));
     }
     out.push(slots[0]);
     if !slots[0].is_leaf() {
         emit_pair(slots, 0, out);
     }
+}
+
+/// Room for a tree of `count` nodes: 1/8 headroom plus a few nodes, but never past `most`, the
+/// most a tree over these primitives can have. Rebuilds of a deforming mesh vary in node count
+/// by a few per cent, and a small tree (a top-level tree over a few instances) by a few nodes,
+/// and then fit without reallocating.
+fn node_room(count: usize, most: usize) -> usize {
+    (count + count / 8 + 8).min(most).max(count)
 }
 
 /// [`compact`] of a parallel binned build's slots into `out` (as long as the tree; every node
@@ -827,14 +829,10 @@ mod tests {
                 let rb = RangeBounds::of(&refs, threshold);
                 let mut slots = vec![<Node as bytemuck::Zeroable>::zeroed(); 2 * n - 1];
                 let mut splits = Vec::new();
-                let (root, count, packed) = {
-                    let (r, desc) = slots.split_at_mut(1);
-                    let out = binned::build(&p, &mut refs, rb, desc, &mut splits);
-                    r[0] = out.0;
-                    out
-                };
+                let (root, desc) = slots.split_at_mut(1);
+                let (count, packed);
+                (root[0], count, packed) = binned::build(&p, &mut refs, rb, desc, &mut splits);
                 assert!(!packed || splits.is_empty());
-                let _ = root;
                 let mut serial = Vec::new();
                 compact(&slots, Some(count), &mut serial);
                 let mut parallel = vec![<Node as bytemuck::Zeroable>::zeroed(); count];

@@ -677,27 +677,46 @@ impl<const K: usize> WideBvh<K> {
     }
 }
 
-/// Levels of the binary tree whose two sides [`subtree_ranges`] fills in parallel.
+/// Levels of the binary tree whose two sides [`slot_ranges`] fills in parallel.
 const RANGE_SPLITS: u32 = 3;
 
-/// Fills `block` with the triangle slots `(first, count)` of the binary nodes `base ..
-/// base + block.len()`: a node's descendants (`base` its children's pair, then the left child's
-/// descendants, then the right's; or, at `base` 0, the whole tree), in a reverse pass
-/// (children after parents), the two children's blocks on two threads for `splits` more
-/// levels.
+/// Fills `ranges` with every binary node's triangle slots `(first, count)`, the two sides of
+/// the top `splits` levels on two threads (the root's descendants are the block after it, its
+/// children's pair first).
+fn slot_ranges(nodes: &[Node], ranges: &mut [(u32, u32)], splits: u32) {
+    if splits > 0 && !nodes[0].is_leaf() && nodes[0].first == 1 {
+        subtree_ranges(nodes, &mut ranges[1..], 1, splits);
+        ranges[0] = node_range(&nodes[0], ranges, 0);
+    } else {
+        reverse_ranges(nodes, ranges, 0);
+    }
+}
+
+/// Node `n`'s triangle slots, its children's (if any) already in `block`, which starts at
+/// node `base`.
+fn node_range(n: &Node, block: &[(u32, u32)], base: usize) -> (u32, u32) {
+    if n.is_leaf() {
+        (n.first, n.count)
+    } else {
+        let c = n.first as usize - base;
+        (block[c].0, block[c].1 + block[c + 1].1)
+    }
+}
+
+/// [`node_range`] of the nodes `base .. base + block.len()`, whose children all lie among
+/// them, in one reverse pass (children after parents).
+fn reverse_ranges(nodes: &[Node], block: &mut [(u32, u32)], base: usize) {
+    for k in (0..block.len()).rev() {
+        block[k] = node_range(&nodes[base + k], block, base);
+    }
+}
+
+/// [`reverse_ranges`] of a node's descendants, the block from `base`: its children's pair,
+/// then the left child's descendants, then the right's; the two children's blocks on two
+/// threads for `splits` more levels.
 fn subtree_ranges(nodes: &[Node], block: &mut [(u32, u32)], base: usize, splits: u32) {
-    let range = |n: &Node, block: &[(u32, u32)], base: usize| {
-        if n.is_leaf() {
-            (n.first, n.count)
-        } else {
-            let c = n.first as usize - base;
-            (block[c].0, block[c].1 + block[c + 1].1)
-        }
-    };
-    if splits == 0 || base == 0 || block.len() < 4096 {
-        for k in (0..block.len()).rev() {
-            block[k] = range(&nodes[base + k], block, base);
-        }
+    if splits == 0 || block.len() < 4096 {
+        reverse_ranges(nodes, block, base);
         return;
     }
     let (a, b) = (&nodes[base], &nodes[base + 1]);
@@ -717,8 +736,8 @@ fn subtree_ranges(nodes: &[Node], block: &mut [(u32, u32)], base: usize, splits:
         || subtree_ranges(nodes, a_block, a_base, splits - 1),
         || subtree_ranges(nodes, b_block, b_base, splits - 1),
     );
-    pair[0] = range(a, a_block, a_base);
-    pair[1] = range(b, b_block, b_base);
+    pair[0] = node_range(a, a_block, a_base);
+    pair[1] = node_range(b, b_block, b_base);
 }
 
 /// The collapse of a binary tree.
@@ -745,13 +764,7 @@ impl<'a> Collapse<'a> {
         ranges.reserve((2 * bvh.prim_count()).saturating_sub(1));
         ranges.resize(nodes.len(), (0, 0));
         let parallel = rayon::current_num_threads() > 1 && nodes.len() >= 2 * PARALLEL_PRIMS;
-        if parallel && !nodes[0].is_leaf() && nodes[0].first == 1 {
-            // The root's descendants are the block after it, its pair first.
-            subtree_ranges(nodes, &mut ranges[1..], 1, RANGE_SPLITS);
-            ranges[0] = (ranges[1].0, ranges[1].1 + ranges[2].1);
-        } else {
-            subtree_ranges(nodes, ranges, 0, 0);
-        }
+        slot_ranges(nodes, ranges, if parallel { RANGE_SPLITS } else { 0 });
         Self {
             bvh,
             tris,
@@ -967,14 +980,13 @@ mod tests {
             let nodes = m.bvh().nodes();
             assert!(nodes.len() > 4 * 4096, "{} nodes", nodes.len());
             let mut serial = vec![(0, 0); nodes.len()];
-            subtree_ranges(nodes, &mut serial, 0, 0);
+            slot_ranges(nodes, &mut serial, 0);
             let mut split = vec![(0, 0); nodes.len()];
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(2)
                 .build()
                 .expect("pool");
-            pool.install(|| subtree_ranges(nodes, &mut split[1..], 1, RANGE_SPLITS));
-            split[0] = (split[1].0, split[1].1 + split[2].1);
+            pool.install(|| slot_ranges(nodes, &mut split, RANGE_SPLITS));
             assert_eq!(serial, split, "leaves of {leaf}");
             assert_eq!(serial[0], (0, mesh.len() as u32));
         }
