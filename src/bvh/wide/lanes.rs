@@ -441,6 +441,10 @@ pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits
     let mixed = ((u ^ v) | (u ^ w)).to_bitmask();
     let det = u + v + w;
     let bad_det = (det.simd_eq(zero) | !det.is_finite()).to_bitmask();
+    // No lane inside its triangle: nothing below could be kept (the division is skipped).
+    if !(mixed | bad_det) & 0xF == 0 {
+        return BlockHits::None;
+    }
     let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
     let rcp = f32x4::splat(1.0) / det;
     let t = t_scaled * rcp;
