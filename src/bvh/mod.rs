@@ -120,6 +120,40 @@ impl Bvh {
             .map_or(crate::geom::Aabb::EMPTY, Node::bounds)
     }
 
+    /// The primitive slots of the subtree at node `n`: (first, count). Its first slot is its
+    /// leftmost leaf's; its last, its rightmost leaf's end.
+    #[must_use]
+    pub(crate) fn slot_range(&self, n: u32) -> (u32, u32) {
+        let nodes = &self.nodes;
+        let (mut lo, mut hi) = (n, n);
+        while !nodes[lo as usize].is_leaf() {
+            lo = nodes[lo as usize].first;
+        }
+        while !nodes[hi as usize].is_leaf() {
+            hi = nodes[hi as usize].first + 1;
+        }
+        let first = nodes[lo as usize].first;
+        let last = &nodes[hi as usize];
+        (first, last.first + last.count - first)
+    }
+
+    /// One past the last descendant of interior node `n`: the last pair allocated under it is
+    /// under its right child, unless that is a leaf.
+    #[must_use]
+    pub(crate) fn descendants_end(&self, mut n: usize) -> usize {
+        let nodes = &self.nodes;
+        loop {
+            let c = nodes[n].first as usize;
+            if !nodes[c + 1].is_leaf() {
+                n = c + 1;
+            } else if !nodes[c].is_leaf() {
+                n = c;
+            } else {
+                return c + 2;
+            }
+        }
+    }
+
     /// Depth of the deepest leaf (the root is at depth 0; 0 for the empty tree).
     #[must_use]
     pub fn depth(&self) -> usize {

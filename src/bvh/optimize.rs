@@ -189,6 +189,7 @@ impl Topology {
         self.parent[l as usize] = n;
         self.parent[r as usize] = n;
         self.bounds[n as usize] = self.bounds[l as usize].union(self.bounds[r as usize]);
+        self.touch(n);
         self.insert(n, p, sibling);
         (None, visits)
     }
@@ -214,6 +215,7 @@ impl Topology {
             let [c0, c1] = self.child[y as usize];
             let before = self.area(y);
             self.bounds[y as usize] = self.bounds[c0 as usize].union(self.bounds[c1 as usize]);
+            self.touch(y);
             delta += self.area(y) - before;
             y = self.parent[y as usize];
         }
@@ -228,6 +230,7 @@ impl Topology {
         self.bounds[free as usize] = self.bounds[best as usize].union(b);
         self.child[free as usize] = [best, x];
         self.leaf[free as usize] = [0, 0];
+        self.touch(free);
         if gp == NONE {
             self.root = free;
             self.parent[free as usize] = NONE;

@@ -213,7 +213,7 @@ impl PartialCut {
             if r >= n {
                 return false;
             }
-            let (first, count) = slot_range(bvh, r);
+            let (first, count) = bvh.slot_range(r);
             if first != next {
                 return false;
             }
@@ -258,7 +258,7 @@ impl MeshBvh {
         s.work.clear();
         s.ranked.clear();
         for (j, (&r, &reference)) in cut.roots.iter().zip(&cut.reference).enumerate() {
-            let (first, count) = slot_range(&self.bvh, r);
+            let (first, count) = self.bvh.slot_range(r);
             s.work.push(CutWork {
                 first,
                 count,
@@ -658,22 +658,6 @@ fn prim_counts(bvh: &Bvh, out: &mut Vec<u32>) {
     }
 }
 
-/// The primitive slots of the subtree at `n`: (first, count).
-fn slot_range(bvh: &Bvh, mut n: u32) -> (u32, u32) {
-    let nodes = bvh.nodes();
-    // Its first slot is its leftmost leaf's; its last, its rightmost leaf's end.
-    let mut lo = n;
-    while !nodes[lo as usize].is_leaf() {
-        lo = nodes[lo as usize].first;
-    }
-    while !nodes[n as usize].is_leaf() {
-        n = nodes[n as usize].first + 1;
-    }
-    let first = nodes[lo as usize].first;
-    let last = &nodes[n as usize];
-    (first, last.first + last.count - first)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -698,7 +682,7 @@ mod tests {
             .iter()
             .zip(&cut.reference)
             .map(|(&r, &reference)| {
-                let (first, count) = slot_range(t.bvh(), r);
+                let (first, count) = t.bvh().slot_range(r);
                 let prims = &t.bvh().prim_indices()[first as usize..(first + count) as usize];
                 (*prims.iter().min().unwrap(), reference)
             })

@@ -6,7 +6,11 @@
 //! Write-back lays the reachable nodes out depth first: a node's two children are allocated
 //! together, then the left child's descendants, then the right's, so every node's children are
 //! adjacent and after it and every subtree owns one range of nodes and one of primitive slots.
-//! Leaves keep their primitives; the new slot order is returned as a permutation of the old.
+//! Leaves keep their primitives; the new slot order is returned as runs of old slots. A subtree
+//! no change reached (no link or box below it changed: [`Topology::touch`] marks every node a
+//! change passes) is already laid out so in the loaded tree, so it is copied as one block of
+//! nodes with their indices shifted and one run of slots: an optimisation that moves a few
+//! hundred nodes rewrites the paths above them, not the whole tree.
 
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::Aabb;
@@ -27,32 +31,82 @@ pub struct Topology {
     pub(crate) root: u32,
     /// Write-back stack: (node, position, depth).
     stack: Vec<(u32, u32, u32)>,
-    /// Each node's position in the last write-back ([`NONE`] when not reachable).
-    pos: Vec<u32>,
+    /// Nodes a change passed since the load ([`Topology::touch`]): their subtrees differ
+    /// from the loaded tree's.
+    touched: Vec<bool>,
+    /// Each node's height in the loaded tree (0 for a leaf): a copied subtree's.
+    height: Vec<u8>,
 }
 
+/// Nodes from which [`Topology::load`] runs on two threads.
+const PARALLEL_LOAD: usize = 1 << 15;
+
 impl Topology {
-    /// Loads `bvh`'s topology (node ids are its node indices). Allocates only to grow.
+    /// Loads `bvh`'s topology (node ids are its node indices). Allocates only to grow. On
+    /// several threads for large trees: the boxes and leaves on one, the links and heights on
+    /// another.
     pub fn load(&mut self, bvh: &Bvh) {
         let nodes = bvh.nodes();
-        self.bounds.clear();
-        self.child.clear();
-        self.leaf.clear();
-        self.parent.clear();
-        self.parent.resize(nodes.len(), NONE);
-        for (i, n) in nodes.iter().enumerate() {
-            self.bounds.push(n.bounds());
-            if n.is_leaf() {
-                self.child.push([NONE; 2]);
-                self.leaf.push([n.first, n.count]);
-            } else {
-                self.child.push([n.first, n.first + 1]);
-                self.leaf.push([0, 0]);
-                self.parent[n.first as usize] = i as u32;
-                self.parent[n.first as usize + 1] = i as u32;
+        let Self {
+            bounds,
+            child,
+            parent,
+            leaf,
+            touched,
+            height,
+            ..
+        } = self;
+        let mut boxes = || {
+            bounds.clear();
+            bounds.extend(nodes.iter().map(Node::bounds));
+            leaf.clear();
+            leaf.extend(nodes.iter().map(|n| {
+                if n.is_leaf() {
+                    [n.first, n.count]
+                } else {
+                    [0, 0]
+                }
+            }));
+        };
+        let mut links = || {
+            child.clear();
+            child.extend(nodes.iter().map(|n| {
+                if n.is_leaf() {
+                    [NONE; 2]
+                } else {
+                    [n.first, n.first + 1]
+                }
+            }));
+            parent.clear();
+            parent.resize(nodes.len(), NONE);
+            height.clear();
+            height.resize(nodes.len(), 0);
+            // Children after parents: in reverse, a node's children are done before it.
+            for (i, n) in nodes.iter().enumerate().rev() {
+                if !n.is_leaf() {
+                    let c = n.first as usize;
+                    parent[c] = i as u32;
+                    parent[c + 1] = i as u32;
+                    // A valid tree is at most `MAX_DEPTH` deep, which fits.
+                    height[i] = height[c].max(height[c + 1]).saturating_add(1);
+                }
             }
+            touched.clear();
+            touched.resize(nodes.len(), false);
+        };
+        if nodes.len() >= PARALLEL_LOAD && rayon::current_num_threads() > 1 {
+            rayon::join(boxes, links);
+        } else {
+            boxes();
+            links();
         }
         self.root = 0;
+    }
+
+    /// Marks `n` as changed: its subtree is written node by node.
+    #[inline]
+    pub(crate) fn touch(&mut self, n: u32) {
+        self.touched[n as usize] = true;
     }
 
     /// Number of node ids (reachable or not).
@@ -84,6 +138,7 @@ impl Topology {
     pub(crate) fn link(&mut self, p: u32, side: usize, c: u32) {
         self.child[p as usize][side] = c;
         self.parent[c as usize] = p;
+        self.touch(p);
     }
 
     /// Which child of its parent `n` is (0 or 1).
@@ -100,22 +155,23 @@ impl Topology {
             if a != NONE {
                 self.bounds[n as usize] = self.bounds[a as usize].union(self.bounds[b as usize]);
             }
+            self.touch(n);
             n = self.parent[n as usize];
         }
     }
 
-    /// Where node `n` went in the last write-back.
-    #[must_use]
-    pub fn position(&self, n: u32) -> u32 {
-        self.pos[n as usize]
-    }
-
-    /// Writes the reachable tree into `nodes` in the builders' layout, and into `perm` the old
-    /// primitive slot of each new slot. Returns false (writing nothing) when the tree is deeper
-    /// than [`MAX_DEPTH`]. Allocates only to grow.
-    pub(crate) fn write(&mut self, nodes: &mut Vec<Node>, perm: &mut Vec<u32>) -> bool {
+    /// Writes the reachable tree into `nodes` in the builders' layout (`loaded`: the nodes it
+    /// was loaded from, whose untouched subtrees are copied as blocks), and into `runs` the old
+    /// primitive slots of the new ones in order, as runs `[first, count]`. Returns false
+    /// (writing nothing) when the tree is deeper than [`MAX_DEPTH`]. Allocates only to grow.
+    pub(crate) fn write(
+        &mut self,
+        loaded: &Bvh,
+        nodes: &mut Vec<Node>,
+        runs: &mut Vec<[u32; 2]>,
+    ) -> bool {
         nodes.clear();
-        perm.clear();
+        runs.clear();
         if self.bounds.is_empty() {
             return true;
         }
@@ -123,8 +179,7 @@ impl Topology {
         stack.clear();
         stack.push((self.root, 0, 0));
         nodes.push(Node::default());
-        self.pos.clear();
-        self.pos.resize(self.bounds.len(), NONE);
+        let mut slots = 0u32;
         let mut ok = true;
         while let Some((n, pos, depth)) = stack.pop() {
             if depth as usize > MAX_DEPTH {
@@ -132,11 +187,31 @@ impl Topology {
                 break;
             }
             let b = self.bounds[n as usize];
-            self.pos[n as usize] = pos;
             if self.is_leaf(n) {
                 let [first, count] = self.leaf[n as usize];
-                nodes[pos as usize] = Node::leaf(b, perm.len() as u32, count);
-                perm.extend(first..first + count);
+                nodes[pos as usize] = Node::leaf(b, slots, count);
+                push_run(runs, first, count);
+                slots += count;
+            } else if !self.touched[n as usize]
+                && (depth + u32::from(self.height[n as usize])) as usize <= MAX_DEPTH
+            {
+                // As loaded: its descendants and slots are one range each there.
+                let (lo, count) = loaded.slot_range(n);
+                let first = loaded.nodes[n as usize].first;
+                let end = loaded.descendants_end(n as usize);
+                let q = nodes.len() as u32;
+                nodes[pos as usize] = Node::interior(b, q);
+                let shift_node = q.wrapping_sub(first);
+                let shift_slot = slots.wrapping_sub(lo);
+                nodes.extend(loaded.nodes[first as usize..end].iter().map(|&m| {
+                    let shift = if m.is_leaf() { shift_slot } else { shift_node };
+                    Node {
+                        first: m.first.wrapping_add(shift),
+                        ..m
+                    }
+                }));
+                push_run(runs, lo, count);
+                slots += count;
             } else {
                 let q = nodes.len() as u32;
                 nodes.push(Node::default());
@@ -150,9 +225,18 @@ impl Topology {
         self.stack = stack;
         if !ok {
             nodes.clear();
-            perm.clear();
+            runs.clear();
         }
         ok
+    }
+}
+
+/// Appends the slots `first .. first + count` to `runs`, extending the last run when they
+/// continue it.
+fn push_run(runs: &mut Vec<[u32; 2]>, first: u32, count: u32) {
+    match runs.last_mut() {
+        Some(last) if last[0] + last[1] == first => last[1] += count,
+        _ => runs.push([first, count]),
     }
 }
 
@@ -162,7 +246,7 @@ impl Topology {
 pub struct RestructureWorkspace {
     pub(crate) topo: Topology,
     pub(crate) nodes: Vec<Node>,
-    pub(crate) perm: Vec<u32>,
+    pub(crate) runs: Vec<[u32; 2]>,
     pub(crate) old_prims: Vec<u32>,
     pub(crate) old_tris: Vec<[Vec3; 3]>,
     pub(crate) old_leaf_indices: Vec<[u32; 3]>,
@@ -183,10 +267,11 @@ impl RestructureWorkspace {
         to(&mut t.child, nodes);
         to(&mut t.parent, nodes);
         to(&mut t.leaf, nodes);
-        to(&mut t.pos, nodes);
+        to(&mut t.touched, nodes);
+        to(&mut t.height, nodes);
         to(&mut t.stack, 2 * MAX_DEPTH + 2);
         to(&mut self.nodes, nodes);
-        to(&mut self.perm, tris);
+        to(&mut self.runs, tris);
         to(&mut self.old_prims, tris);
         to(&mut self.old_tris, tris);
         to(&mut self.old_leaf_indices, tris);
@@ -200,7 +285,10 @@ impl RestructureWorkspace {
             + (t.child.capacity() + t.leaf.capacity()) * 8
             + t.parent.capacity() * 4
             + self.nodes.capacity() * std::mem::size_of::<Node>()
-            + (self.perm.capacity() + self.old_prims.capacity()) * 4
+            + t.touched.capacity()
+            + t.height.capacity()
+            + self.runs.capacity() * 8
+            + self.old_prims.capacity() * 4
             + self.old_tris.capacity() * 36
             + self.old_leaf_indices.capacity() * 12
     }
@@ -211,13 +299,13 @@ impl MeshBvh {
     /// leaf-ordered triangles with their slots. Returns false, leaving the tree as it was, when
     /// the topology is deeper than [`MAX_DEPTH`].
     pub(crate) fn apply_topology(&mut self, ws: &mut RestructureWorkspace) -> bool {
-        if !ws.topo.write(&mut ws.nodes, &mut ws.perm) {
+        if !ws.topo.write(&self.bvh, &mut ws.nodes, &mut ws.runs) {
             return false;
         }
-        debug_assert_eq!(ws.perm.len(), self.tris.len());
-        gather(&mut ws.old_prims, &self.bvh.prim_indices, &ws.perm);
-        gather(&mut ws.old_tris, &self.tris, &ws.perm);
-        gather(&mut ws.old_leaf_indices, &self.leaf_indices, &ws.perm);
+        gather(&mut ws.old_prims, &self.bvh.prim_indices, &ws.runs);
+        gather(&mut ws.old_tris, &self.tris, &ws.runs);
+        gather(&mut ws.old_leaf_indices, &self.leaf_indices, &ws.runs);
+        debug_assert_eq!(ws.old_tris.len(), self.tris.len());
         take_or_copy(&mut self.bvh.nodes, &mut ws.nodes);
         take_or_copy(&mut self.bvh.prim_indices, &mut ws.old_prims);
         take_or_copy(&mut self.tris, &mut ws.old_tris);
@@ -238,8 +326,56 @@ pub(crate) fn take_or_copy<T: Copy>(dst: &mut Vec<T>, scratch: &mut Vec<T>) {
     }
 }
 
-/// `out[i] = from[perm[i]]`.
-fn gather<T: Copy>(out: &mut Vec<T>, from: &[T], perm: &[u32]) {
+/// The runs `[first, count]` of `from`, one after another.
+fn gather<T: Copy>(out: &mut Vec<T>, from: &[T], runs: &[[u32; 2]]) {
     out.clear();
-    out.extend(perm.iter().map(|&p| from[p as usize]));
+    for &[first, count] in runs {
+        out.extend_from_slice(&from[first as usize..(first + count) as usize]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anim::generate::{Kind, generate};
+    use crate::bvh::BuildParams;
+    use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
+
+    /// The new slots' old slots, one by one.
+    fn slots(runs: &[[u32; 2]]) -> Vec<u32> {
+        runs.iter().flat_map(|&[f, c]| f..f + c).collect()
+    }
+
+    #[test]
+    fn untouched_subtrees_copied_as_blocks_give_the_node_by_node_layout() {
+        for kind in [Kind::Swap, Kind::Explode] {
+            let g = generate(kind, 6000, 1);
+            let (a, b) = (&g.checks[0].1, &g.checks[1].1);
+            let pos: Vec<Vec3> = a.iter().zip(b).map(|(a, b)| *a + 0.4 * (*b - *a)).collect();
+            let tris: Vec<[u32; 3]> = (0..a.len() as u32 / 3)
+                .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                .collect();
+            let mut t = MeshBvh::build_indexed(a, &tris, &BuildParams::BINNED);
+            t.refit_indexed(&pos, &tris);
+            for share in [0.01, 0.1, 0.5] {
+                let mut topo = Topology::default();
+                topo.load(t.bvh());
+                let budget = OptimizeBudget {
+                    share,
+                    ..OptimizeBudget::default()
+                };
+                let stats = topo.optimize(budget, &mut OptimizeScratch::default());
+                assert!(stats.moved > 0, "{kind:?} {share}: nothing moved");
+                let untouched = topo.touched.iter().filter(|&&x| !x).count();
+                assert!(untouched > 0, "{kind:?} {share}: every node touched");
+                let mut every = topo.clone();
+                every.touched.fill(true);
+                let (mut n1, mut r1, mut n2, mut r2) = (vec![], vec![], vec![], vec![]);
+                assert!(topo.write(t.bvh(), &mut n1, &mut r1));
+                assert!(every.write(t.bvh(), &mut n2, &mut r2));
+                assert_eq!(n1, n2, "{kind:?} {share}: nodes");
+                assert_eq!(slots(&r1), slots(&r2), "{kind:?} {share}: slots");
+            }
+        }
+    }
 }
