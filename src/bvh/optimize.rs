@@ -97,7 +97,9 @@ impl Topology {
     /// Optimises in place within `budget` (see the module docs).
     pub fn optimize(&mut self, budget: OptimizeBudget, s: &mut OptimizeScratch) -> OptimizeStats {
         let mut stats = OptimizeStats::default();
-        let interior = self.child.iter().filter(|c| c[0] != NONE).count();
+        // Every interior node has two children and every id is in the tree: one more leaf
+        // than interior nodes.
+        let interior = self.len() / 2;
         let k = ((interior as f64 * f64::from(budget.share.clamp(0.0, 1.0))).ceil() as usize)
             .min(interior);
         for _ in 0..budget.passes {
@@ -121,6 +123,15 @@ impl Topology {
     /// The `k` reachable interior nodes (not the root nor its children) with the largest
     /// combined measure, into `picks`.
     fn pick(&self, k: usize, picks: &mut Vec<(f32, u32)>) {
+        match self.loaded_areas() {
+            Some(areas) => self.pick_by(k, picks, |n| areas[n as usize]),
+            None => self.pick_by(k, picks, |n| self.area(n)),
+        }
+    }
+
+    /// [`Topology::pick`] with the half areas `area`.
+    #[inline(always)]
+    fn pick_by(&self, k: usize, picks: &mut Vec<(f32, u32)>, area: impl Fn(u32) -> f32) {
         picks.clear();
         for n in 0..self.len() as u32 {
             // Interior and not the root (unreachable ids have no parent either).
@@ -128,7 +139,7 @@ impl Topology {
                 continue;
             }
             let [l, r] = self.child[n as usize];
-            let (a, al, ar) = (self.area(n), self.area(l), self.area(r));
+            let (a, al, ar) = (area(n), area(l), area(r));
             let m = if al + ar > 0.0 && al.min(ar) > 0.0 {
                 a * (a / (al + ar)) * (a / al.min(ar))
             } else {

@@ -36,6 +36,10 @@ pub struct Topology {
     touched: Vec<bool>,
     /// Each node's height in the loaded tree (0 for a leaf): a copied subtree's.
     height: Vec<u8>,
+    /// Each node's half area as loaded, while no change has been made since
+    /// ([`Topology::loaded_areas`]).
+    areas: Vec<f32>,
+    unchanged: bool,
 }
 
 /// Nodes from which [`Topology::load`] runs on two threads.
@@ -54,11 +58,14 @@ impl Topology {
             leaf,
             touched,
             height,
+            areas,
             ..
         } = self;
         let mut boxes = || {
             bounds.clear();
             bounds.extend(nodes.iter().map(Node::bounds));
+            areas.clear();
+            areas.extend(bounds.iter().map(Aabb::half_area));
             leaf.clear();
             leaf.extend(nodes.iter().map(|n| {
                 if n.is_leaf() {
@@ -101,12 +108,19 @@ impl Topology {
             links();
         }
         self.root = 0;
+        self.unchanged = true;
+    }
+
+    /// The half areas of the nodes as loaded, while the tree is as loaded.
+    pub(crate) fn loaded_areas(&self) -> Option<&[f32]> {
+        self.unchanged.then_some(self.areas.as_slice())
     }
 
     /// Marks `n` as changed: its subtree is written node by node.
     #[inline]
     pub(crate) fn touch(&mut self, n: u32) {
         self.touched[n as usize] = true;
+        self.unchanged = false;
     }
 
     /// Number of node ids (reachable or not).
@@ -269,6 +283,7 @@ impl RestructureWorkspace {
         to(&mut t.leaf, nodes);
         to(&mut t.touched, nodes);
         to(&mut t.height, nodes);
+        to(&mut t.areas, nodes);
         to(&mut t.stack, 2 * MAX_DEPTH + 2);
         to(&mut self.nodes, nodes);
         to(&mut self.runs, tris);
@@ -287,6 +302,7 @@ impl RestructureWorkspace {
             + self.nodes.capacity() * std::mem::size_of::<Node>()
             + t.touched.capacity()
             + t.height.capacity()
+            + t.areas.capacity() * 4
             + self.runs.capacity() * 8
             + self.old_prims.capacity() * 4
             + self.old_tris.capacity() * 36
