@@ -240,7 +240,6 @@ impl Topology {
         let gp = self.parent[best as usize];
         self.bounds[free as usize] = self.bounds[best as usize].union(b);
         self.child[free as usize] = [best, x];
-        self.leaf[free as usize] = [0, 0];
         self.touch(free);
         if gp == NONE {
             self.root = free;

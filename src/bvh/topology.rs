@@ -20,14 +20,13 @@ use glam::Vec3;
 pub(crate) const NONE: u32 = u32::MAX;
 
 /// A tree in linked form: node `i` has box `bounds[i]`; interior nodes have `child[i]`, leaves
-/// `child[i] == [NONE; 2]` and primitive slots `leaf[i]` (first, count) of the tree it was
-/// loaded from. Nodes not reachable from `root` are unused.
+/// `child[i] == [NONE; 2]` and the primitive slots they have in the tree it was loaded from
+/// (leaves are never changed). Nodes not reachable from `root` are unused.
 #[derive(Clone, Debug, Default)]
 pub struct Topology {
     pub(crate) bounds: Vec<Aabb>,
     pub(crate) child: Vec<[u32; 2]>,
     pub(crate) parent: Vec<u32>,
-    pub(crate) leaf: Vec<[u32; 2]>,
     pub(crate) root: u32,
     /// Write-back stack: (node, position, depth).
     stack: Vec<(u32, u32, u32)>,
@@ -47,7 +46,7 @@ const PARALLEL_LOAD: usize = 1 << 15;
 
 impl Topology {
     /// Loads `bvh`'s topology (node ids are its node indices). Allocates only to grow. On
-    /// several threads for large trees: the boxes and leaves on one, the links and heights on
+    /// several threads for large trees: the boxes and areas on one, the links and heights on
     /// another.
     pub fn load(&mut self, bvh: &Bvh) {
         let nodes = bvh.nodes();
@@ -55,7 +54,6 @@ impl Topology {
             bounds,
             child,
             parent,
-            leaf,
             touched,
             height,
             areas,
@@ -66,14 +64,6 @@ impl Topology {
             bounds.extend(nodes.iter().map(Node::bounds));
             areas.clear();
             areas.extend(bounds.iter().map(Aabb::half_area));
-            leaf.clear();
-            leaf.extend(nodes.iter().map(|n| {
-                if n.is_leaf() {
-                    [n.first, n.count]
-                } else {
-                    [0, 0]
-                }
-            }));
         };
         let mut links = || {
             child.clear();
@@ -202,7 +192,7 @@ impl Topology {
             }
             let b = self.bounds[n as usize];
             if self.is_leaf(n) {
-                let [first, count] = self.leaf[n as usize];
+                let Node { first, count, .. } = loaded.nodes[n as usize];
                 nodes[pos as usize] = Node::leaf(b, slots, count);
                 push_run(runs, first, count);
                 slots += count;
@@ -280,7 +270,6 @@ impl RestructureWorkspace {
         to(&mut t.bounds, nodes);
         to(&mut t.child, nodes);
         to(&mut t.parent, nodes);
-        to(&mut t.leaf, nodes);
         to(&mut t.touched, nodes);
         to(&mut t.height, nodes);
         to(&mut t.areas, nodes);
@@ -297,7 +286,7 @@ impl RestructureWorkspace {
     pub fn memory_bytes(&self) -> usize {
         let t = &self.topo;
         t.bounds.capacity() * std::mem::size_of::<Aabb>()
-            + (t.child.capacity() + t.leaf.capacity()) * 8
+            + t.child.capacity() * 8
             + t.parent.capacity() * 4
             + self.nodes.capacity() * std::mem::size_of::<Node>()
             + t.touched.capacity()
