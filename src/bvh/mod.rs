@@ -137,23 +137,6 @@ impl Bvh {
         (first, last.first + last.count - first)
     }
 
-    /// One past the last descendant of interior node `n`: the last pair allocated under it is
-    /// under its right child, unless that is a leaf.
-    #[must_use]
-    pub(crate) fn descendants_end(&self, mut n: usize) -> usize {
-        let nodes = &self.nodes;
-        loop {
-            let c = nodes[n].first as usize;
-            if !nodes[c + 1].is_leaf() {
-                n = c + 1;
-            } else if !nodes[c].is_leaf() {
-                n = c;
-            } else {
-                return c + 2;
-            }
-        }
-    }
-
     /// Depth of the deepest leaf (the root is at depth 0; 0 for the empty tree).
     #[must_use]
     pub fn depth(&self) -> usize {

@@ -69,3 +69,18 @@ impl Node {
         self.max = b.max.into();
     }
 }
+
+/// One past the last descendant of interior node `n` (in the builders' layout a node's
+/// descendants follow one another: its children, the left one's descendants, the right's).
+pub(crate) fn descendants_end(nodes: &[Node], mut n: usize) -> usize {
+    loop {
+        let c = nodes[n].first as usize;
+        if !nodes[c + 1].is_leaf() {
+            n = c + 1;
+        } else if !nodes[c].is_leaf() {
+            n = c;
+        } else {
+            return c + 2;
+        }
+    }
+}

@@ -10,6 +10,7 @@
 //! the cut subtrees by their SAH now over that reference, rebuilds the worst ones up to a share
 //! of the triangles, then builds the top over the cut subtrees' boxes with the binned SAH.
 
+use super::node::descendants_end;
 use super::topology::RestructureWorkspace;
 use super::{BuildParams, BuildWorkspace, Bvh, MAX_DEPTH, MeshBvh, Node, SahCost};
 use crate::geom::Aabb;
@@ -611,21 +612,6 @@ fn rebuild_chosen(
             || rebuild_chosen(wa, src, da, ba, params, tasks),
             || rebuild_chosen(wb, src, db, bb, params, tasks),
         );
-    }
-}
-
-/// One past the last descendant of interior node `n` (in the builders' layout a node's
-/// descendants follow one another: its children, the left one's descendants, the right's).
-fn descendants_end(nodes: &[Node], mut n: usize) -> usize {
-    loop {
-        let c = nodes[n].first as usize;
-        if !nodes[c + 1].is_leaf() {
-            n = c + 1;
-        } else if !nodes[c].is_leaf() {
-            n = c;
-        } else {
-            return c + 2;
-        }
     }
 }
 

@@ -12,6 +12,7 @@
 //! nodes with their indices shifted and one run of slots: an optimisation that moves a few
 //! hundred nodes rewrites the paths above them, not the whole tree.
 
+use super::node::descendants_end;
 use super::{Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::Aabb;
 use glam::Vec3;
@@ -202,7 +203,7 @@ impl Topology {
                 // As loaded: its descendants and slots are one range each there.
                 let (lo, count) = loaded.slot_range(n);
                 let first = loaded.nodes[n as usize].first;
-                let end = loaded.descendants_end(n as usize);
+                let end = descendants_end(&loaded.nodes, n as usize);
                 let q = nodes.len() as u32;
                 nodes[pos as usize] = Node::interior(b, q);
                 let shift_node = q.wrapping_sub(first);
