@@ -728,11 +728,18 @@ impl PolicyState {
 
     /// Learns from a trial rebuild undone because its tree did worse on the replayed rays than
     /// the refitted one (`cost_ms` spent for nothing): the extra trace time counts afresh, and
-    /// the next rebuild must be expected to save twice as much ([`PolicyState::rebuild_failed`]).
+    /// the next rebuild must be expected to save twice as much ([`PolicyState::rebuild_failed`]),
+    /// unless it was a routine rebuild's check: those hold their own rebuilds off
+    /// ([`Routine::record_check`]), and a fresh tree no better than the refitted one at one
+    /// frame says nothing of what a rebuild for a later degradation would save (on the default
+    /// job's clip, checks failing early in the clip raised the bar 64-fold and kept the rebuilds
+    /// the degradation at its end called for from being made: `docs/ray_work.md`).
     pub fn rebuild_rejected(&mut self, cost_ms: f64) {
         self.rebuild_ms = cost_ms;
         self.extra_ms = 0.0;
-        self.rebuild_failed();
+        if !self.routine.now {
+            self.rebuild_failed();
+        }
     }
 
     /// Learns that a rebuild paid for itself.
@@ -1086,6 +1093,28 @@ mod tests {
         // Rebuilding does not forget it.
         s.rebuilt(1.0, 1.0, 10.0);
         assert_eq!(s.rebuild_scale, MAX_REBUILD_SCALE);
+    }
+
+    #[test]
+    fn a_routine_check_that_finds_no_gain_leaves_the_bar_where_it_was() {
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, 10.0);
+        // A trial the amortized rule made, undone: the next must save twice as much.
+        s.extra_ms = 30.0;
+        s.rebuild_rejected(12.0);
+        assert_eq!(
+            (s.rebuild_scale, s.rebuild_ms, s.extra_ms),
+            (2.0, 12.0, 0.0)
+        );
+        // A routine rebuild's check, undone: the routine holds its rebuilds off by its own
+        // rule, and the amortized rule's bar stays.
+        assert!(s.routine.decide(true) && s.routine.checked);
+        s.extra_ms = 5.0;
+        s.rebuild_rejected(11.0);
+        assert_eq!(
+            (s.rebuild_scale, s.rebuild_ms, s.extra_ms),
+            (2.0, 11.0, 0.0)
+        );
     }
 
     impl PolicyState {
