@@ -731,9 +731,8 @@ impl PolicyState {
     /// the next rebuild must be expected to save twice as much ([`PolicyState::rebuild_failed`]),
     /// unless it was a routine rebuild's check: those hold their own rebuilds off
     /// ([`Routine::record_check`]), and a fresh tree no better than the refitted one at one
-    /// frame says nothing of what a rebuild for a later degradation would save (on the default
-    /// job's clip, checks failing early in the clip raised the bar 64-fold and kept the rebuilds
-    /// the degradation at its end called for from being made: `docs/ray_work.md`).
+    /// frame says nothing of what a rebuild for a later degradation would save (raising the
+    /// bar for it kept such rebuilds from being made: `docs/ray_work.md`).
     pub fn rebuild_rejected(&mut self, cost_ms: f64) {
         self.rebuild_ms = cost_ms;
         self.extra_ms = 0.0;
