@@ -120,7 +120,7 @@ impl Topology {
         stats
     }
 
-    /// The `k` reachable interior nodes (not the root nor its children) with the largest
+    /// The `k` reachable interior nodes but the root with the largest
     /// combined measure, into `picks`.
     fn pick(&self, k: usize, picks: &mut Vec<(f32, u32)>) {
         match self.loaded_areas() {
