@@ -19,6 +19,7 @@ pub mod optimize;
 mod overlap;
 mod packet;
 pub mod partial;
+pub mod ray_order;
 pub(crate) use packet::with_packet;
 mod refit;
 pub mod topology;

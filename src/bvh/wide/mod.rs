@@ -17,6 +17,7 @@
 //! - every lane's box holds its subtree's triangles.
 
 mod all_hits;
+mod batch;
 mod closest_point;
 mod fill;
 pub(crate) use closest_point::Placed;
