@@ -87,6 +87,12 @@ trait Accel: Sized + Sync {
             .map(|h| h.0)
             .sum()
     }
+    /// [`Accel::trace_all`] on the pool's threads: runs of [`PAR_CHUNK`] rays across them,
+    /// unless the variant spreads a whole set over the threads itself.
+    fn trace_all_threads(&self, rays: &[Self::R]) -> f32 {
+        use rayon::prelude::*;
+        rays.par_chunks(PAR_CHUNK).map(|c| self.trace_all(c)).sum()
+    }
 }
 
 /// Accumulates an SAH sum in f64 from node boxes.
@@ -244,8 +250,14 @@ impl Accel for DynWideBefore {
     }
 }
 
-/// dynbvh's 8-wide tree traced a whole ray set at a time (`MeshBvh8::closest_hit_batch`, one
-/// thread): incoherent sets reordered by where their rays travel before they are traced (the
+/// A batch's hits and its ordering scratch.
+type BatchScratch = (
+    Vec<Option<dynbvh::geom::Hit>>,
+    dynbvh::bvh::ray_order::RayBatch<Option<dynbvh::geom::Hit>>,
+);
+
+/// dynbvh's 8-wide tree traced a whole ray set at a time (`MeshBvh8::closest_hit_batch`, on
+/// the bench's threads): incoherent sets reordered by where their rays travel before they are traced (the
 /// ordering inside the timing), coherent ones traced as they come.
 struct DynWideBatch(DynWide);
 
@@ -264,7 +276,7 @@ impl Accel for DynWideBatch {
     fn trace_all(&self, rays: &[Ray]) -> f32 {
         thread_local! {
             // The hits and the ordering's scratch, kept between passes as a caller would.
-            static SCRATCH: std::cell::RefCell<(Vec<Option<dynbvh::geom::Hit>>, dynbvh::bvh::ray_order::RayOrder)> =
+            static SCRATCH: std::cell::RefCell<BatchScratch> =
                 std::cell::RefCell::default();
         }
         SCRATCH.with_borrow_mut(|(hits, order)| {
@@ -272,6 +284,9 @@ impl Accel for DynWideBatch {
             self.0.0.closest_hit_batch(rays, hits, order);
             hits.iter().flatten().map(|h| h.t).sum()
         })
+    }
+    fn trace_all_threads(&self, rays: &[Ray]) -> f32 {
+        self.trace_all(rays)
     }
     fn sah(&self) -> f64 {
         f64::NAN
@@ -1033,11 +1048,10 @@ impl<A: Accel, F: Fn(A::Input) -> A> Measure for Gen<'_, A, F> {
             return (passes * rays.len()) as f64 / (cpu::cpu_s() - c) / 1e6;
         }
         if threads() > 1 {
-            use rayon::prelude::*;
             let t = Instant::now();
             let mut passes = 0;
             while passes == 0 || t.elapsed().as_secs_f64() < 0.3 {
-                let sum: f32 = rays.par_chunks(PAR_CHUNK).map(|c| accel.trace_all(c)).sum();
+                let sum: f32 = accel.trace_all_threads(rays);
                 black_box(sum);
                 passes += 1;
             }

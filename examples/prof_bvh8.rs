@@ -4,7 +4,8 @@
 //! the agreement with the binary tree on a sample, and Mrays/s in CPU time (median of `PASSES`,
 //! default 5, over the first `RAYS` rays of each set, default 2^18). `VARIANTS=a,b,..` times
 //! `MeshBvh8::bench_closest_hit` with those switches instead, interleaved pass by pass, and
-//! prints each one's median and its median ratio to the first.
+//! prints each one's median and its median ratio to the first. `BATCH=1` times
+//! `MeshBvh8::closest_hit_batch` (incoherent sets reordered first) against the loop instead.
 use dynbvh::bvh::{BuildParams, Child, MeshBvh, MeshBvh8, TraversalStats};
 use dynbvh::geom::Ray;
 
@@ -122,6 +123,29 @@ fn main() {
                     })
                     .collect();
                 println!("  {set}: {}", line.join(", "));
+                continue;
+            }
+            if std::env::var_os("BATCH").is_some() {
+                // The batch call (reordered when incoherent) against the loop, pass by pass.
+                let mut order = dynbvh::bvh::ray_order::RayBatch::default();
+                let mut hits = vec![None; rays.len()];
+                let (mut lp, mut bt) = (Vec::new(), Vec::new());
+                for _ in 0..passes {
+                    let c = cpu_s();
+                    let n = rays.iter().filter(|r| w8.closest_hit(r).is_some()).count();
+                    std::hint::black_box(n);
+                    lp.push(rays.len() as f64 / (cpu_s() - c) / 1e6);
+                    let c = cpu_s();
+                    w8.closest_hit_batch(&rays, &mut hits, &mut order);
+                    std::hint::black_box(&hits);
+                    bt.push(rays.len() as f64 / (cpu_s() - c) / 1e6);
+                }
+                let ratio = median(bt.iter().zip(&lp).map(|(b, l)| b / l).collect());
+                println!(
+                    "  {set}: loop {:.2} Mrays/s, batch {:.2} Mrays/s, batch / loop {ratio:.3}",
+                    median(lp),
+                    median(bt)
+                );
                 continue;
             }
             let mut v: Vec<f64> = (0..passes)

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{Rng, same_closest};
-use dynbvh::bvh::ray_order::RayOrder;
+use dynbvh::bvh::ray_order::{RayBatch, RayOrder};
 use dynbvh::bvh::{BuildParams, MeshBvh, MeshBvh8, brute_force_any, brute_force_closest};
 use dynbvh::geom::{Ray, TriMesh, shapes};
 use glam::Vec3;
@@ -39,12 +39,19 @@ fn camera(mesh: &TriMesh, side: usize) -> Vec<Ray> {
         .collect()
 }
 
+/// The two queries' batch scratch, reused from batch to batch.
+#[derive(Default)]
+struct Scratch {
+    closest: RayBatch<Option<dynbvh::geom::Hit>>,
+    any: RayBatch<bool>,
+}
+
 /// The batch's answers against each ray's own queries, and a share against brute force.
-fn check(mesh: &TriMesh, w: &MeshBvh8, rays: &[Ray], order: &mut RayOrder, what: &str) {
+fn check(mesh: &TriMesh, w: &MeshBvh8, rays: &[Ray], s: &mut Scratch, what: &str) {
     let mut hits = vec![None; rays.len()];
     let mut any = vec![false; rays.len()];
-    w.closest_hit_batch(rays, &mut hits, order);
-    w.any_hit_batch(rays, &mut any, order);
+    w.closest_hit_batch(rays, &mut hits, &mut s.closest);
+    w.any_hit_batch(rays, &mut any, &mut s.any);
     for (i, r) in rays.iter().enumerate() {
         let single = w.closest_hit(r);
         assert_eq!(
@@ -77,23 +84,18 @@ fn batches_answer_every_ray_as_its_own_query_does() {
         order.plan(&random, &w.bounds()).is_some(),
         "a scattered batch is reordered"
     );
-    check(&mesh, &w, &random, &mut order, "scattered");
+    let mut s = Scratch::default();
+    check(&mesh, &w, &random, &mut s, "scattered");
     let view = camera(&mesh, 96);
     assert!(
         order.plan(&view, &w.bounds()).is_none(),
         "a camera's rows are traced as they come"
     );
-    check(&mesh, &w, &view, &mut order, "camera");
+    check(&mesh, &w, &view, &mut s, "camera");
     // The scratch left by a larger batch serves a smaller one, and small batches go as given.
-    check(
-        &mesh,
-        &w,
-        &random[..RayOrder::MIN_RAYS],
-        &mut order,
-        "smaller",
-    );
-    check(&mesh, &w, &random[..100], &mut order, "small");
-    check(&mesh, &w, &[], &mut order, "empty");
+    check(&mesh, &w, &random[..RayOrder::MIN_RAYS], &mut s, "smaller");
+    check(&mesh, &w, &random[..100], &mut s, "small");
+    check(&mesh, &w, &[], &mut s, "empty");
 }
 
 #[test]
@@ -116,5 +118,5 @@ fn reordered_batches_with_rays_that_miss_or_are_not_numbers() {
     }
     let mut order = RayOrder::default();
     assert!(order.plan(&rays, &w.bounds()).is_some());
-    check(&mesh, &w, &rays, &mut order, "bad rays");
+    check(&mesh, &w, &rays, &mut Scratch::default(), "bad rays");
 }

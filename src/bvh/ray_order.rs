@@ -15,11 +15,14 @@
 
 use crate::geom::{Aabb, Ray};
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Bits of a key per axis.
-const AXIS_BITS: u32 = 10;
-/// Bits of one radix pass (three passes cover the 30-bit keys).
-const DIGIT_BITS: u32 = 10;
+const AXIS_BITS: u32 = 7;
+/// Bits of one radix pass.
+const DIGIT_BITS: u32 = 11;
+/// Radix passes that cover a key.
+const PASSES: usize = (3 * AXIS_BITS).div_ceil(DIGIT_BITS) as usize;
 /// The key of a ray whose span misses the scene's box (or is not a number): the last cell's.
 const MISS_KEY: u32 = (1 << (3 * AXIS_BITS)) - 1;
 /// Adjacent pairs of rays sampled to judge a batch's coherence.
@@ -37,6 +40,8 @@ pub struct RayOrder {
     tmp: Vec<u64>,
     /// The batch's indices in tracing order (when reordered).
     order: Vec<u32>,
+    /// The inverse: each ray's place in `order`.
+    position: Vec<u32>,
 }
 
 impl RayOrder {
@@ -52,14 +57,18 @@ impl RayOrder {
             return None;
         }
         let cells = Cells::new(scene);
-        self.pairs.clear();
-        self.pairs.extend(
-            rays.iter()
-                .enumerate()
-                .map(|(i, r)| u64::from(cells.key(r)) << 32 | i as u64),
-        );
+        rays.par_iter()
+            .enumerate()
+            .with_min_len(CHUNK)
+            .map(|(i, r)| u64::from(cells.key(r)) << 32 | i as u64)
+            .collect_into_vec(&mut self.pairs);
         self.sort();
         Some(&self.order)
+    }
+
+    /// Where each ray of the last reordered batch is traced: `position()[order[j]] == j`.
+    fn position(&self) -> &[u32] {
+        &self.position
     }
 
     /// Sorts `pairs` by key (stable, digit by digit from the least significant), writing the
@@ -68,7 +77,7 @@ impl RayOrder {
         const BUCKETS: usize = 1 << DIGIT_BITS;
         let n = self.pairs.len();
         // Every pass's digit counts in one read of the keys.
-        let mut counts = [[0u32; BUCKETS]; 3];
+        let mut counts = [[0u32; BUCKETS]; PASSES];
         for &p in &self.pairs {
             let k = (p >> 32) as u32;
             for (pass, c) in counts.iter_mut().enumerate() {
@@ -77,6 +86,7 @@ impl RayOrder {
         }
         self.tmp.resize(n, 0);
         self.order.resize(n, 0);
+        self.position.resize(n, 0);
         for (pass, c) in counts.iter().enumerate() {
             let mut start = [0u32; BUCKETS];
             let mut sum = 0;
@@ -89,10 +99,11 @@ impl RayOrder {
             } else {
                 (&self.tmp, &mut self.pairs)
             };
-            if pass == 2 {
+            if pass == PASSES - 1 {
                 for &p in from.iter() {
                     let d = digit((p >> 32) as u32, pass);
                     self.order[start[d] as usize] = p as u32;
+                    self.position[p as u32 as usize] = start[d];
                     start[d] += 1;
                 }
             } else {
@@ -103,6 +114,64 @@ impl RayOrder {
                 }
             }
         }
+    }
+}
+
+/// Rays a task of a batch takes at a time.
+const CHUNK: usize = 1024;
+
+/// Rays ahead in the planned order whose data is asked for before their turn: they lie
+/// anywhere in the batch.
+const AHEAD: usize = 8;
+
+/// Answers a batch of rays in parallel, `out[i] = f(&rays[i])`, in the order [`RayOrder`]
+/// plans; holds the scratch (reused between batches: a batch allocates only to grow it).
+#[derive(Clone, Debug, Default)]
+pub struct RayBatch<T> {
+    order: RayOrder,
+    /// The answers in tracing order, before they are put in the batch's order.
+    answers: Vec<T>,
+}
+
+impl<T: Copy + Default + Send + Sync> RayBatch<T> {
+    /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; a large
+    /// incoherent batch is answered in the order [`RayOrder::plan`] gives against `scene`,
+    /// the others as they come.
+    ///
+    /// # Panics
+    /// When `out` and `rays` differ in length.
+    pub fn run(&mut self, rays: &[Ray], scene: &Aabb, out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
+        let Some(order) = self.order.plan(rays, scene) else {
+            out.par_chunks_mut(CHUNK)
+                .zip(rays.par_chunks(CHUNK))
+                .for_each(|(o, r)| {
+                    for (o, r) in o.iter_mut().zip(r) {
+                        *o = f(r);
+                    }
+                });
+            return;
+        };
+        self.answers.resize(rays.len(), T::default());
+        self.answers
+            .par_chunks_mut(CHUNK)
+            .zip(order.par_chunks(CHUNK))
+            .for_each(|(a, o)| {
+                for (j, (a, &i)) in a.iter_mut().zip(o).enumerate() {
+                    if let Some(&next) = o.get(j + AHEAD) {
+                        crate::simd::prefetch_all(&rays[next as usize]);
+                    }
+                    *a = f(&rays[i as usize]);
+                }
+            });
+        let answers = &self.answers;
+        out.par_chunks_mut(CHUNK)
+            .zip(self.order.position().par_chunks(CHUNK))
+            .for_each(|(o, p)| {
+                for (o, &p) in o.iter_mut().zip(p) {
+                    *o = answers[p as usize];
+                }
+            });
     }
 }
 
@@ -233,6 +302,13 @@ mod tests {
             .plan(&rays, &scene)
             .expect("scattered rays are reordered")
             .to_vec();
+        for (j, &i) in order.iter().enumerate() {
+            assert_eq!(
+                o.position()[i as usize] as usize,
+                j,
+                "the inverse of the order"
+            );
+        }
         let mut seen = vec![false; rays.len()];
         for &i in &order {
             assert!(!seen[i as usize], "ray {i} twice");
