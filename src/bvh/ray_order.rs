@@ -40,8 +40,6 @@ pub struct RayOrder {
     tmp: Vec<u64>,
     /// The batch's indices in tracing order (when reordered).
     order: Vec<u32>,
-    /// The inverse: each ray's place in `order`.
-    position: Vec<u32>,
 }
 
 impl RayOrder {
@@ -53,22 +51,24 @@ impl RayOrder {
     /// its indices in the order to trace them; `None` for a batch that is small or already
     /// coherent, to be traced as it comes.
     pub fn plan(&mut self, rays: &[Ray], scene: &Aabb) -> Option<&[u32]> {
-        if rays.len() < Self::MIN_RAYS || rays.len() > u32::MAX as usize || coherent(rays, scene) {
+        if !Self::reordered(rays, scene) {
             return None;
         }
         let cells = Cells::new(scene);
-        rays.par_iter()
-            .enumerate()
-            .with_min_len(CHUNK)
-            .map(|(i, r)| u64::from(cells.key(r)) << 32 | i as u64)
-            .collect_into_vec(&mut self.pairs);
+        self.pairs.clear();
+        self.pairs.extend(
+            rays.iter()
+                .enumerate()
+                .map(|(i, r)| u64::from(cells.key(r)) << 32 | i as u64),
+        );
         self.sort();
         Some(&self.order)
     }
 
-    /// Where each ray of the last reordered batch is traced: `position()[order[j]] == j`.
-    fn position(&self) -> &[u32] {
-        &self.position
+    /// True when [`RayOrder::plan`] reorders the batch: it is large and incoherent.
+    #[must_use]
+    pub fn reordered(rays: &[Ray], scene: &Aabb) -> bool {
+        rays.len() >= Self::MIN_RAYS && rays.len() <= u32::MAX as usize && !coherent(rays, scene)
     }
 
     /// Sorts `pairs` by key (stable, digit by digit from the least significant), writing the
@@ -86,7 +86,6 @@ impl RayOrder {
         }
         self.tmp.resize(n, 0);
         self.order.resize(n, 0);
-        self.position.resize(n, 0);
         for (pass, c) in counts.iter().enumerate() {
             let mut start = [0u32; BUCKETS];
             let mut sum = 0;
@@ -103,7 +102,6 @@ impl RayOrder {
                 for &p in from.iter() {
                     let d = digit((p >> 32) as u32, pass);
                     self.order[start[d] as usize] = p as u32;
-                    self.position[p as u32 as usize] = start[d];
                     start[d] += 1;
                 }
             } else {
@@ -117,59 +115,79 @@ impl RayOrder {
     }
 }
 
-/// Rays a task of a batch takes at a time.
-const CHUNK: usize = 1024;
+/// Parts a batch is cut into a thread when there are several.
+const PARTS_A_THREAD: usize = 4;
+
+/// Rays a task answers at a time in a batch traced as it comes.
+const RUN: usize = 256;
 
 /// Rays ahead in the planned order whose data is asked for before their turn: they lie
 /// anywhere in the batch.
 const AHEAD: usize = 8;
 
 /// Answers a batch of rays in parallel, `out[i] = f(&rays[i])`, in the order [`RayOrder`]
-/// plans; holds the scratch (reused between batches: a batch allocates only to grow it).
+/// plans: the batch is cut into parts, a few a thread, and each part is ordered and answered
+/// by one task (so the ordering runs in parallel too, and each task writes only its own part's
+/// answers). Holds the scratch, reused between batches: a batch allocates only to grow it.
 #[derive(Clone, Debug, Default)]
 pub struct RayBatch<T> {
-    order: RayOrder,
-    /// The answers in tracing order, before they are put in the batch's order.
-    answers: Vec<T>,
+    parts: Vec<RayOrder>,
+    _answers: std::marker::PhantomData<T>,
 }
 
-impl<T: Copy + Default + Send + Sync> RayBatch<T> {
-    /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; a large
-    /// incoherent batch is answered in the order [`RayOrder::plan`] gives against `scene`,
-    /// the others as they come.
+impl<T: Copy + Send + Sync> RayBatch<T> {
+    /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; each part of
+    /// a large incoherent batch is answered in the order [`RayOrder::plan`] gives against
+    /// `scene`, the others as they come.
     ///
     /// # Panics
     /// When `out` and `rays` differ in length.
     pub fn run(&mut self, rays: &[Ray], scene: &Aabb, out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        let Some(order) = self.order.plan(rays, scene) else {
-            out.par_chunks_mut(CHUNK)
-                .zip(rays.par_chunks(CHUNK))
+        if !RayOrder::reordered(rays, scene) {
+            // As they come, in runs small enough to keep the threads evenly busy.
+            out.par_chunks_mut(RUN)
+                .zip(rays.par_chunks(RUN))
                 .for_each(|(o, r)| {
                     for (o, r) in o.iter_mut().zip(r) {
                         *o = f(r);
                     }
                 });
             return;
-        };
-        self.answers.resize(rays.len(), T::default());
-        self.answers
-            .par_chunks_mut(CHUNK)
-            .zip(order.par_chunks(CHUNK))
-            .for_each(|(a, o)| {
-                for (j, (a, &i)) in a.iter_mut().zip(o).enumerate() {
-                    if let Some(&next) = o.get(j + AHEAD) {
-                        crate::simd::prefetch_all(&rays[next as usize]);
+        }
+        // One part on one thread; on several, a few a thread, so that a thread another
+        // process holds up leaves its other parts to the rest.
+        let threads = rayon::current_num_threads();
+        let parts = if threads == 1 {
+            1
+        } else {
+            PARTS_A_THREAD * threads
+        }
+        .min(rays.len() / RayOrder::MIN_RAYS)
+        .max(1);
+        let size = rays.len().div_ceil(parts).max(1);
+        if self.parts.len() < parts {
+            self.parts.resize_with(parts, RayOrder::default);
+        }
+        self.parts[..parts]
+            .par_iter_mut()
+            .zip(rays.par_chunks(size))
+            .zip(out.par_chunks_mut(size))
+            .for_each(|((order, rays), out)| match order.plan(rays, scene) {
+                Some(order) => {
+                    for (j, &i) in order.iter().enumerate() {
+                        // The ray and its answer's slot a few rays ahead, anywhere in the part.
+                        if let Some(&next) = order.get(j + AHEAD) {
+                            crate::simd::prefetch_all(&rays[next as usize]);
+                            crate::simd::prefetch(&out[next as usize]);
+                        }
+                        out[i as usize] = f(&rays[i as usize]);
                     }
-                    *a = f(&rays[i as usize]);
                 }
-            });
-        let answers = &self.answers;
-        out.par_chunks_mut(CHUNK)
-            .zip(self.order.position().par_chunks(CHUNK))
-            .for_each(|(o, p)| {
-                for (o, &p) in o.iter_mut().zip(p) {
-                    *o = answers[p as usize];
+                None => {
+                    for (o, r) in out.iter_mut().zip(rays) {
+                        *o = f(r);
+                    }
                 }
             });
     }
@@ -302,13 +320,6 @@ mod tests {
             .plan(&rays, &scene)
             .expect("scattered rays are reordered")
             .to_vec();
-        for (j, &i) in order.iter().enumerate() {
-            assert_eq!(
-                o.position()[i as usize] as usize,
-                j,
-                "the inverse of the order"
-            );
-        }
         let mut seen = vec![false; rays.len()];
         for &i in &order {
             assert!(!seen[i as usize], "ray {i} twice");
