@@ -25,11 +25,10 @@ const DIGIT_BITS: u32 = 11;
 const PASSES: usize = (3 * AXIS_BITS).div_ceil(DIGIT_BITS) as usize;
 /// The key of a ray whose span misses the scene's box (or is not a number): the last cell's.
 const MISS_KEY: u32 = (1 << (3 * AXIS_BITS)) - 1;
-/// Adjacent pairs of rays sampled to judge a batch's coherence.
+/// Pairs of rays sampled to judge a batch's coherence.
 const COHERENCE_PAIRS: usize = 256;
-/// Leading key bits two adjacent rays share when they travel close together: 5 an axis, cells
-/// of 1/32 of the scene's box on each side.
-const COHERENT_BITS: u32 = 15;
+/// How much closer than rays far apart adjacent rays are in a coherent batch.
+const COHERENT_SHARE: f64 = 0.25;
 
 /// Scratch for reordering batches of rays (reused: a batch allocates only to grow it past the
 /// largest batch so far).
@@ -199,20 +198,28 @@ fn digit(key: u32, pass: usize) -> usize {
     ((key >> (pass as u32 * DIGIT_BITS)) & ((1 << DIGIT_BITS) - 1)) as usize
 }
 
-/// True when most of a sample of adjacent rays (spread over the batch) have keys that agree in
-/// their leading [`COHERENT_BITS`]: they travel through the same cells of the scene.
+/// True when adjacent rays travel much closer together than rays far apart in the batch: over
+/// a sample of pairs spread through the batch, the middles of adjacent rays' spans lie less
+/// than [`COHERENT_SHARE`] as far apart as those of rays half a batch apart. Scale-free: a
+/// coarse camera image is coherent as a fine one is.
 fn coherent(rays: &[Ray], scene: &Aabb) -> bool {
     let cells = Cells::new(scene);
     let pairs = COHERENCE_PAIRS.min(rays.len() / 2);
-    let step = (rays.len() - 1) / pairs.max(1);
-    let shift = 3 * AXIS_BITS - COHERENT_BITS;
-    let close = (0..pairs)
-        .filter(|&j| {
-            let i = j * step;
-            cells.key(&rays[i]) >> shift == cells.key(&rays[i + 1]) >> shift
-        })
-        .count();
-    2 * close >= pairs
+    let step = (rays.len() / 2).div_ceil(pairs.max(1)).max(1);
+    let half = rays.len() / 2;
+    let (mut near, mut far) = (0.0f64, 0.0f64);
+    for i in (0..half).step_by(step) {
+        let (Some(a), Some(b), Some(c)) = (
+            cells.middle(&rays[i]),
+            cells.middle(&rays[i + 1]),
+            cells.middle(&rays[i + half]),
+        ) else {
+            continue;
+        };
+        near += f64::from(a.distance(b));
+        far += f64::from(a.distance(c));
+    }
+    near < COHERENT_SHARE * far
 }
 
 /// The scene's box cut into `2^AXIS_BITS` cells an axis.
@@ -233,12 +240,10 @@ impl Cells {
         }
     }
 
-    /// The Morton code of the cell holding the middle of the ray's span through the box
-    /// (within its own interval); [`MISS_KEY`] for a ray whose span misses the box. Not
-    /// inlined: inlined, the key loop is vectorised with gathers of the rays' fields, which
-    /// take longer than the scalar loop.
-    #[inline(never)]
-    fn key(&self, r: &Ray) -> u32 {
+    /// The middle of the ray's span through the box (within its own interval), in cells from
+    /// the box's lower corner; `None` when the span misses the box or is not a number.
+    #[inline(always)]
+    fn middle(&self, r: &Ray) -> Option<Vec3> {
         let (o, inv) = (r.origin(), r.inv_dir());
         let t0 = (self.min - o) * inv;
         let t1 = (self.max - o) * inv;
@@ -246,9 +251,18 @@ impl Cells {
         let far = t0.max(t1).min_element().min(r.tmax);
         let mid = (o + r.dir() * (0.5 * (near + far)) - self.min) * self.scale;
         // Not `near > far`: a NaN span is a miss too.
-        if !(near <= far && mid.is_finite()) {
+        (near <= far && mid.is_finite()).then_some(mid)
+    }
+
+    /// The Morton code of the cell holding the middle of the ray's span through the box
+    /// (within its own interval); [`MISS_KEY`] for a ray whose span misses the box. Not
+    /// inlined: inlined, the key loop is vectorised with gathers of the rays' fields, which
+    /// take longer than the scalar loop.
+    #[inline(never)]
+    fn key(&self, r: &Ray) -> u32 {
+        let Some(mid) = self.middle(r) else {
             return MISS_KEY;
-        }
+        };
         let top = ((1u32 << AXIS_BITS) - 1) as f32;
         // Non-negative and at most `top` (the `as` conversion saturates at 0 for the rest).
         let p = mid.min(Vec3::splat(top)).to_array().map(|x| x as u32);
@@ -342,17 +356,18 @@ mod tests {
     fn coherent_and_small_batches_keep_their_order() {
         let scene = unit();
         let mut o = RayOrder::default();
-        // A camera's rows: neighbours travel side by side.
+        // A camera's rows, coarse or fine: neighbours travel side by side.
         let eye = Vec3::new(0.5, 0.5, -2.0);
-        let side = 128;
-        let camera: Vec<Ray> = (0..side * side)
-            .map(|i| {
-                let (x, y) = ((i % side) as f32, (i / side) as f32);
-                let target = Vec3::new(x / side as f32, y / side as f32, 0.5);
-                Ray::new(eye, target - eye)
-            })
-            .collect();
-        assert!(o.plan(&camera, &scene).is_none());
+        for side in [64, 128, 512] {
+            let camera: Vec<Ray> = (0..side * side)
+                .map(|i| {
+                    let (x, y) = ((i % side) as f32, (i / side) as f32);
+                    let target = Vec3::new(x / side as f32, y / side as f32, 0.5);
+                    Ray::new(eye, target - eye)
+                })
+                .collect();
+            assert!(o.plan(&camera, &scene).is_none(), "{side}x{side}");
+        }
         assert!(o.plan(&scattered(RayOrder::MIN_RAYS - 1), &scene).is_none());
         assert!(o.plan(&[], &scene).is_none());
     }

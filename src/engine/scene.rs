@@ -19,6 +19,7 @@ use super::policy::{Action, Decision, Policy, PolicyState};
 use super::prices::Prices;
 use super::ray_work::{CostMeasure, Degradation, MeshSample, RaySample, SampleEntry};
 use super::stats::{FrameStats, MeshStats};
+use crate::bvh::ray_order::RayBatch;
 use crate::bvh::wide::{Child, NO_PRIM};
 use crate::bvh::{
     BuildParams, BuildWorkspace, Bvh, Counters, MeshBvh, MeshBvh8, Node, TraversalStats, WideBvh,
@@ -26,6 +27,7 @@ use crate::bvh::{
 use crate::geom::{Aabb, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
+use std::sync::Mutex;
 use std::time::Instant;
 
 mod background;
@@ -433,6 +435,10 @@ pub struct Engine {
     /// The next update's action for every mesh that moved, in place of the policy's
     /// ([`Engine::force_next`]).
     forced: Option<Decision>,
+    /// Scratch of the batch queries that reorder large incoherent batches
+    /// ([`crate::bvh::ray_order`]); a batch that finds it in use goes as it comes.
+    order_closest: Mutex<RayBatch<Option<SceneHit>>>,
+    order_any: Mutex<RayBatch<bool>>,
 }
 
 impl Engine {
@@ -462,6 +468,8 @@ impl Engine {
             horizon: None,
             unsampled_meshes: false,
             forced: None,
+            order_closest: Mutex::default(),
+            order_any: Mutex::default(),
         }
     }
 

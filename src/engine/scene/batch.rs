@@ -5,6 +5,9 @@
 //! pass, so that a caller who only casts batches gets the same decisions as the frame loop of
 //! the benchmarks. The `&self` forms (`*_batch`) trace the same rays without telling the
 //! policy, for callers that price their trace themselves or cast from several threads at once.
+//! Large incoherent batches are traced in the order [`crate::bvh::ray_order`] plans (rays that
+//! travel close together one after the other), except in a pass that takes the frame's
+//! sample, whose picks follow the batch's own order.
 
 use super::{Engine, RAY_CHUNK, SceneHit, ms_since};
 use crate::bvh::MAX_PACKET;
@@ -118,13 +121,12 @@ impl Engine {
     /// When the lengths differ.
     pub fn closest_hit_batch(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        out.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
-            .for_each(|(o, r)| {
-                for (o, r) in o.iter_mut().zip(r) {
-                    *o = self.closest_hit(r);
-                }
-            });
+        let answer = |r: &Ray| self.closest_hit(r);
+        if let Ok(mut order) = self.order_closest.try_lock() {
+            order.run(rays, &self.bounds(), out, answer);
+        } else {
+            as_they_come(rays, out, answer);
+        }
     }
 
     /// Any-hit answers of many rays, in parallel. Does not tell the policy (see
@@ -134,13 +136,12 @@ impl Engine {
     /// When the lengths differ.
     pub fn any_hit_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
-        out.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
-            .for_each(|(o, r)| {
-                for (o, r) in o.iter_mut().zip(r) {
-                    *o = self.any_hit(r);
-                }
-            });
+        let answer = |r: &Ray| self.any_hit(r);
+        if let Ok(mut order) = self.order_any.try_lock() {
+            order.run(rays, &self.bounds(), out, answer);
+        } else {
+            as_they_come(rays, out, answer);
+        }
     }
 
     /// [`Engine::sample_rays`], its wall-clock time added to the frame's `sample_ms`.
@@ -162,4 +163,15 @@ impl Engine {
         self.record_trace(ms, rays.len() as u64);
         ms
     }
+}
+
+/// `out[i] = f(&rays[i])` in parallel runs, in the batch's order.
+fn as_they_come<T: Send>(rays: &[Ray], out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
+    out.par_chunks_mut(RAY_CHUNK)
+        .zip(rays.par_chunks(RAY_CHUNK))
+        .for_each(|(o, r)| {
+            for (o, r) in o.iter_mut().zip(r) {
+                *o = f(r);
+            }
+        });
 }

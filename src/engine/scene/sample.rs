@@ -167,13 +167,15 @@ impl Engine {
     /// sampled rays traced with counters, their entries kept). Returns the share of the pass's
     /// time the sampling took beyond tracing those rays plainly (from the tasks' clocks).
     pub(super) fn closest_sampled(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
-        self.sampled_pass(rays, out, Query::Closest, Engine::closest_hit, |t| t.hit)
+        let batch = (Engine::closest_hit, Engine::closest_hit_batch);
+        self.sampled_pass(rays, out, Query::Closest, batch, |t| t.hit)
     }
 
     /// Any-hit answers of a batch with the sample taken in the same pass (see
     /// [`Engine::closest_sampled`]).
     pub(super) fn any_sampled(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
-        self.sampled_pass(rays, out, Query::Any, Engine::any_hit, |t| t.blocked)
+        let batch = (Engine::any_hit, Engine::any_hit_batch);
+        self.sampled_pass(rays, out, Query::Any, batch, |t| t.blocked)
     }
 
     fn sampled_pass<O: Send>(
@@ -181,22 +183,18 @@ impl Engine {
         rays: &[Ray],
         out: &mut [O],
         query: Query,
-        plain: impl Fn(&Engine, &Ray) -> O + Sync,
+        (plain, batch): (
+            impl Fn(&Engine, &Ray) -> O + Sync,
+            impl FnOnce(&Engine, &[Ray], &mut [O]),
+        ),
         recorded: impl Fn(&Traced) -> O + Sync,
     ) -> f64 {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let pass = Instant::now();
         // Nothing to sample (no mesh moved, or the batch ends before its first sampled ray):
-        // the plain pass.
+        // the plain pass (reordered when the batch is incoherent).
         let Some(plan) = self.begin_sample(rays.len()).filter(|p| !p.is_empty()) else {
-            let this = &*self;
-            out.par_chunks_mut(RAY_CHUNK)
-                .zip(rays.par_chunks(RAY_CHUNK))
-                .for_each(|(o, r)| {
-                    for (o, r) in o.iter_mut().zip(r) {
-                        *o = plain(this, r);
-                    }
-                });
+            batch(self, rays, out);
             return 0.0;
         };
         let (before, log) = self.open_log();
