@@ -200,8 +200,9 @@ fn digit(key: u32, pass: usize) -> usize {
 
 /// True when adjacent rays travel much closer together than rays far apart in the batch: over
 /// a sample of pairs spread through the batch, the middles of adjacent rays' spans lie less
-/// than [`COHERENT_SHARE`] as far apart as those of rays half a batch apart. Scale-free: a
-/// coarse camera image is coherent as a fine one is.
+/// than [`COHERENT_SHARE`] as far apart as those of rays half a batch apart (pairs with a ray
+/// that misses the box left out). Scale-free: a coarse camera image is coherent as a fine one
+/// is.
 fn coherent(rays: &[Ray], scene: &Aabb) -> bool {
     let cells = Cells::new(scene);
     let pairs = COHERENCE_PAIRS.min(rays.len() / 2);
@@ -219,7 +220,9 @@ fn coherent(rays: &[Ray], scene: &Aabb) -> bool {
         near += f64::from(a.distance(b));
         far += f64::from(a.distance(c));
     }
-    near < COHERENT_SHARE * far
+    // No spread at all (every sampled ray misses the box, or they are one ray): nothing to
+    // gain from an order.
+    far == 0.0 || near < COHERENT_SHARE * far
 }
 
 /// The scene's box cut into `2^AXIS_BITS` cells an axis.
@@ -369,6 +372,9 @@ mod tests {
             assert!(o.plan(&camera, &scene).is_none(), "{side}x{side}");
         }
         assert!(o.plan(&scattered(RayOrder::MIN_RAYS - 1), &scene).is_none());
+        // Every ray misses the box: no order helps.
+        let away = vec![Ray::new(Vec3::splat(3.0), Vec3::ONE); RayOrder::MIN_RAYS];
+        assert!(o.plan(&away, &scene).is_none());
         assert!(o.plan(&[], &scene).is_none());
     }
 
