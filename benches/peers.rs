@@ -257,8 +257,8 @@ type BatchScratch = (
 );
 
 /// dynbvh's 8-wide tree traced a whole ray set at a time (`MeshBvh8::closest_hit_batch`, on
-/// the bench's threads): incoherent sets reordered by where their rays travel before they are traced (the
-/// ordering inside the timing), coherent ones traced as they come.
+/// the bench's threads): incoherent sets reordered by where their rays travel before they are
+/// traced (the ordering inside the timing), coherent ones traced as they come.
 struct DynWideBatch(DynWide);
 
 impl Accel for DynWideBatch {

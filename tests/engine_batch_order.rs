@@ -8,6 +8,7 @@ use dynbvh::bvh::ray_order::RayOrder;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
 use dynbvh::engine::{Engine, EngineConfig, SceneHit};
+use dynbvh::geom::Ray;
 use dynbvh::report::rays::{camera_rays, random_rays};
 
 fn bits(h: Option<SceneHit>) -> Option<(u32, u32, u32, u32, u32)> {
@@ -22,27 +23,40 @@ fn bits(h: Option<SceneHit>) -> Option<(u32, u32, u32, u32, u32)> {
     })
 }
 
-fn check(e: &mut Engine, rays: &[dynbvh::geom::Ray], what: &str) {
+/// The batch queries of the closest hit: the plain one, and the frame pass (sampled on the
+/// frames the policy wants a sample of, plain and reordered on the others).
+type Closest = fn(&mut Engine, &[Ray], &mut [Option<SceneHit>]);
+/// The same for any hit.
+type Any = fn(&mut Engine, &[Ray], &mut [bool]);
+
+fn check(e: &mut Engine, rays: &[Ray], what: &str) {
     let want: Vec<_> = rays.iter().map(|r| bits(e.closest_hit(r))).collect();
     let want_any: Vec<bool> = rays.iter().map(|r| e.any_hit(r)).collect();
-    let mut hits = vec![None; rays.len()];
-    let mut any = vec![false; rays.len()];
-    e.closest_hit_batch(rays, &mut hits);
-    assert!(
-        hits.iter().map(|&h| bits(h)).eq(want.iter().copied()),
-        "{what}: closest_hit_batch"
-    );
-    e.any_hit_batch(rays, &mut any);
-    assert_eq!(any, want_any, "{what}: any_hit_batch");
-    // The frame's pass: sampled on the frames the policy wants a sample of, plain (and
-    // reordered) on the others.
-    e.trace_closest(rays, &mut hits);
-    assert!(
-        hits.iter().map(|&h| bits(h)).eq(want.iter().copied()),
-        "{what}: trace_closest"
-    );
-    e.trace_any(rays, &mut any);
-    assert_eq!(any, want_any, "{what}: trace_any");
+    let closest: [(&str, Closest); 2] = [
+        ("closest_hit_batch", |e, r, o| e.closest_hit_batch(r, o)),
+        ("trace_closest", |e, r, o| {
+            e.trace_closest(r, o);
+        }),
+    ];
+    let any: [(&str, Any); 2] = [
+        ("any_hit_batch", |e, r, o| e.any_hit_batch(r, o)),
+        ("trace_any", |e, r, o| {
+            e.trace_any(r, o);
+        }),
+    ];
+    for (name, query) in closest {
+        let mut hits = vec![None; rays.len()];
+        query(e, rays, &mut hits);
+        assert!(
+            hits.iter().map(|&h| bits(h)).eq(want.iter().copied()),
+            "{what}: {name}"
+        );
+    }
+    for (name, query) in any {
+        let mut blocked = vec![false; rays.len()];
+        query(e, rays, &mut blocked);
+        assert_eq!(blocked, want_any, "{what}: {name}");
+    }
 }
 
 #[test]
