@@ -253,7 +253,7 @@ impl Accel for DynWideBefore {
 /// A batch's hits and its ordering scratch.
 type BatchScratch = (
     Vec<Option<dynbvh::geom::Hit>>,
-    dynbvh::bvh::ray_order::RayBatch<Option<dynbvh::geom::Hit>>,
+    dynbvh::bvh::ray_order::RayBatch,
 );
 
 /// dynbvh's 8-wide tree traced a whole ray set at a time (`MeshBvh8::closest_hit_batch`, on

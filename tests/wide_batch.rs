@@ -39,19 +39,12 @@ fn camera(mesh: &TriMesh, side: usize) -> Vec<Ray> {
         .collect()
 }
 
-/// The two queries' batch scratch, reused from batch to batch.
-#[derive(Default)]
-struct Scratch {
-    closest: RayBatch<Option<dynbvh::geom::Hit>>,
-    any: RayBatch<bool>,
-}
-
 /// The batch's answers against each ray's own queries, and a share against brute force.
-fn check(mesh: &TriMesh, w: &MeshBvh8, rays: &[Ray], s: &mut Scratch, what: &str) {
+fn check(mesh: &TriMesh, w: &MeshBvh8, rays: &[Ray], s: &mut RayBatch, what: &str) {
     let mut hits = vec![None; rays.len()];
     let mut any = vec![false; rays.len()];
-    w.closest_hit_batch(rays, &mut hits, &mut s.closest);
-    w.any_hit_batch(rays, &mut any, &mut s.any);
+    w.closest_hit_batch(rays, &mut hits, s);
+    w.any_hit_batch(rays, &mut any, s);
     for (i, r) in rays.iter().enumerate() {
         let single = w.closest_hit(r);
         assert_eq!(
@@ -84,7 +77,7 @@ fn batches_answer_every_ray_as_its_own_query_does() {
         order.plan(&random, &w.bounds()).is_some(),
         "a scattered batch is reordered"
     );
-    let mut s = Scratch::default();
+    let mut s = RayBatch::default();
     check(&mesh, &w, &random, &mut s, "scattered");
     let view = camera(&mesh, 96);
     assert!(
@@ -118,5 +111,5 @@ fn reordered_batches_with_rays_that_miss_or_are_not_numbers() {
     }
     let mut order = RayOrder::default();
     assert!(order.plan(&rays, &w.bounds()).is_some());
-    check(&mesh, &w, &rays, &mut Scratch::default(), "bad rays");
+    check(&mesh, &w, &rays, &mut RayBatch::default(), "bad rays");
 }

@@ -6,12 +6,13 @@
 //! the cache each of their walks waits on memory. Reordering them by where they travel is the
 //! idea of memory-coherent ray tracing (Pharr et al. 1997) and of ray reordering by estimated
 //! hit points (Moon et al. 2010); here each ray's key is the Morton code of the middle of its
-//! span through the scene's box, 10 bits an axis, and the batch is sorted by key with a
-//! least-significant-digit radix sort (three passes of 10 bits), linear in the rays.
+//! span through the scene's box, 7 bits an axis, and the batch is sorted by key with a
+//! least-significant-digit radix sort (two passes of 11 bits), linear in the rays.
 //!
-//! A batch whose consecutive rays already travel close together (camera rays in tiles, a
-//! lidar's sweep) is left as it is: a sample of adjacent pairs decides, before any key of the
-//! whole batch is computed. Reordering changes which ray is traced when, never a ray's answer.
+//! A batch whose adjacent rays already travel much closer together than rays far apart in it
+//! (camera images, a lidar's sweep) is left as it is: a sample of pairs decides, before any key
+//! of the whole batch is computed. Reordering changes which ray is traced when, never a ray's
+//! answer.
 
 use crate::geom::{Aabb, Ray};
 use glam::Vec3;
@@ -129,19 +130,24 @@ const AHEAD: usize = 8;
 /// by one task (so the ordering runs in parallel too, and each task writes only its own part's
 /// answers). Holds the scratch, reused between batches: a batch allocates only to grow it.
 #[derive(Clone, Debug, Default)]
-pub struct RayBatch<T> {
+pub struct RayBatch {
     parts: Vec<RayOrder>,
-    _answers: std::marker::PhantomData<T>,
 }
 
-impl<T: Copy + Send + Sync> RayBatch<T> {
+impl RayBatch {
     /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; each part of
     /// a large incoherent batch is answered in the order [`RayOrder::plan`] gives against
     /// `scene`, the others as they come.
     ///
     /// # Panics
     /// When `out` and `rays` differ in length.
-    pub fn run(&mut self, rays: &[Ray], scene: &Aabb, out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
+    pub fn run<T: Send>(
+        &mut self,
+        rays: &[Ray],
+        scene: &Aabb,
+        out: &mut [T],
+        f: impl Fn(&Ray) -> T + Sync,
+    ) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         if !RayOrder::reordered(rays, scene) {
             // As they come, in runs small enough to keep the threads evenly busy.

@@ -437,8 +437,7 @@ pub struct Engine {
     forced: Option<Decision>,
     /// Scratch of the batch queries that reorder large incoherent batches
     /// ([`crate::bvh::ray_order`]); a batch that finds it in use goes as it comes.
-    order_closest: Mutex<RayBatch<Option<SceneHit>>>,
-    order_any: Mutex<RayBatch<bool>>,
+    order: Mutex<RayBatch>,
 }
 
 impl Engine {
@@ -468,8 +467,7 @@ impl Engine {
             horizon: None,
             unsampled_meshes: false,
             forced: None,
-            order_closest: Mutex::default(),
-            order_any: Mutex::default(),
+            order: Mutex::default(),
         }
     }
 

@@ -13,12 +13,7 @@ impl<const K: usize> WideBvh<K> {
     ///
     /// # Panics
     /// When `out` and `rays` differ in length.
-    pub fn closest_hit_batch(
-        &self,
-        rays: &[Ray],
-        out: &mut [Option<Hit>],
-        batch: &mut RayBatch<Option<Hit>>,
-    ) {
+    pub fn closest_hit_batch(&self, rays: &[Ray], out: &mut [Option<Hit>], batch: &mut RayBatch) {
         batch.run(rays, &self.bounds(), out, |r| self.closest_hit(r));
     }
 
@@ -27,7 +22,7 @@ impl<const K: usize> WideBvh<K> {
     ///
     /// # Panics
     /// When `out` and `rays` differ in length.
-    pub fn any_hit_batch(&self, rays: &[Ray], out: &mut [bool], batch: &mut RayBatch<bool>) {
+    pub fn any_hit_batch(&self, rays: &[Ray], out: &mut [bool], batch: &mut RayBatch) {
         batch.run(rays, &self.bounds(), out, |r| self.any_hit(r));
     }
 }

@@ -122,7 +122,7 @@ impl Engine {
     pub fn closest_hit_batch(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let answer = |r: &Ray| self.closest_hit(r);
-        if let Ok(mut order) = self.order_closest.try_lock() {
+        if let Ok(mut order) = self.order.try_lock() {
             order.run(rays, &self.bounds(), out, answer);
         } else {
             as_they_come(rays, out, answer);
@@ -137,7 +137,7 @@ impl Engine {
     pub fn any_hit_batch(&self, rays: &[Ray], out: &mut [bool]) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let answer = |r: &Ray| self.any_hit(r);
-        if let Ok(mut order) = self.order_any.try_lock() {
+        if let Ok(mut order) = self.order.try_lock() {
             order.run(rays, &self.bounds(), out, answer);
         } else {
             as_they_come(rays, out, answer);
