@@ -150,14 +150,7 @@ impl RayBatch {
     ) {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         if !RayOrder::reordered(rays, scene) {
-            // As they come, in runs small enough to keep the threads evenly busy.
-            out.par_chunks_mut(RUN)
-                .zip(rays.par_chunks(RUN))
-                .for_each(|(o, r)| {
-                    for (o, r) in o.iter_mut().zip(r) {
-                        *o = f(r);
-                    }
-                });
+            as_they_come(rays, out, f);
             return;
         }
         // One part on one thread; on several, a few a thread, so that a thread another
@@ -196,6 +189,22 @@ impl RayBatch {
                 }
             });
     }
+}
+
+/// `out[i] = f(&rays[i])` on the current rayon pool's threads, in the batch's own order, in
+/// runs small enough to keep the threads evenly busy.
+///
+/// # Panics
+/// When `out` and `rays` differ in length.
+pub fn as_they_come<T: Send>(rays: &[Ray], out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
+    assert_eq!(rays.len(), out.len(), "one output per ray");
+    out.par_chunks_mut(RUN)
+        .zip(rays.par_chunks(RUN))
+        .for_each(|(o, r)| {
+            for (o, r) in o.iter_mut().zip(r) {
+                *o = f(r);
+            }
+        });
 }
 
 /// Digit `pass` of a key, from the least significant.

@@ -9,8 +9,9 @@
 //! travel close together one after the other), except in a pass that takes the frame's
 //! sample, whose picks follow the batch's own order.
 
-use super::{Engine, RAY_CHUNK, SceneHit, ms_since};
+use super::{Engine, SceneHit, ms_since};
 use crate::bvh::MAX_PACKET;
+use crate::bvh::ray_order::as_they_come;
 use crate::engine::ray_work::Query;
 use crate::geom::Ray;
 use rayon::prelude::*;
@@ -163,15 +164,4 @@ impl Engine {
         self.record_trace(ms, rays.len() as u64);
         ms
     }
-}
-
-/// `out[i] = f(&rays[i])` in parallel runs, in the batch's order.
-fn as_they_come<T: Send>(rays: &[Ray], out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
-    out.par_chunks_mut(RAY_CHUNK)
-        .zip(rays.par_chunks(RAY_CHUNK))
-        .for_each(|(o, r)| {
-            for (o, r) in o.iter_mut().zip(r) {
-                *o = f(r);
-            }
-        });
 }
