@@ -23,8 +23,9 @@ fn bits(h: Option<SceneHit>) -> Option<(u32, u32, u32, u32, u32)> {
     })
 }
 
-/// The batch queries of the closest hit: the plain one, and the frame pass (sampled on the
-/// frames the policy wants a sample of, plain and reordered on the others).
+/// The batch queries of the closest hit: the plain one, the frame pass (sampled on the frames
+/// the policy wants a sample of, plain and reordered on the others), and the packets' pass
+/// (single rays in the planned order for a scattered batch).
 type Closest = fn(&mut Engine, &[Ray], &mut [Option<SceneHit>]);
 /// The same for any hit.
 type Any = fn(&mut Engine, &[Ray], &mut [bool]);
@@ -32,16 +33,22 @@ type Any = fn(&mut Engine, &[Ray], &mut [bool]);
 fn check(e: &mut Engine, rays: &[Ray], what: &str) {
     let want: Vec<_> = rays.iter().map(|r| bits(e.closest_hit(r))).collect();
     let want_any: Vec<bool> = rays.iter().map(|r| e.any_hit(r)).collect();
-    let closest: [(&str, Closest); 2] = [
+    let closest: [(&str, Closest); 3] = [
         ("closest_hit_batch", |e, r, o| e.closest_hit_batch(r, o)),
         ("trace_closest", |e, r, o| {
             e.trace_closest(r, o);
         }),
+        ("trace_closest_packets", |e, r, o| {
+            e.trace_closest_packets(r, o);
+        }),
     ];
-    let any: [(&str, Any); 2] = [
+    let any: [(&str, Any); 3] = [
         ("any_hit_batch", |e, r, o| e.any_hit_batch(r, o)),
         ("trace_any", |e, r, o| {
             e.trace_any(r, o);
+        }),
+        ("trace_any_packets", |e, r, o| {
+            e.trace_any_packets(r, o);
         }),
     ];
     for (name, query) in closest {

@@ -11,7 +11,7 @@
 
 use super::{Engine, SceneHit, ms_since};
 use crate::bvh::MAX_PACKET;
-use crate::bvh::ray_order::as_they_come;
+use crate::bvh::ray_order::{RayOrder, as_they_come};
 use crate::engine::ray_work::Query;
 use crate::geom::Ray;
 use rayon::prelude::*;
@@ -76,16 +76,22 @@ impl Engine {
 
     /// Closest hits as packets ([`Engine::closest_hit_packet`] on runs of consecutive rays, the
     /// runs in parallel), recorded as this frame's trace as [`Engine::trace_closest`] records.
-    /// Give coherent rays next to each other. Returns the trace time in ms.
+    /// Give coherent rays next to each other; a large batch whose neighbours are not is traced
+    /// ray by ray in the order [`crate::bvh::ray_order`] plans. Returns the trace time in ms.
     ///
     /// # Panics
     /// When the lengths differ.
     pub fn trace_closest_packets(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let t = Instant::now();
-        out.par_chunks_mut(PACKET_CHUNK)
-            .zip(rays.par_chunks(PACKET_CHUNK))
-            .for_each(|(o, r)| self.closest_hit_packet(r, o));
+        if RayOrder::reordered(rays, &self.bounds()) {
+            // No packet of these would be coherent: single rays, in the order planned for them.
+            self.closest_hit_batch(rays, out);
+        } else {
+            out.par_chunks_mut(PACKET_CHUNK)
+                .zip(rays.par_chunks(PACKET_CHUNK))
+                .for_each(|(o, r)| self.closest_hit_packet(r, o));
+        }
         self.traced(ms_since(t), rays, Query::Closest)
     }
 
@@ -97,9 +103,13 @@ impl Engine {
     pub fn trace_any_packets(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let t = Instant::now();
-        out.par_chunks_mut(PACKET_CHUNK)
-            .zip(rays.par_chunks(PACKET_CHUNK))
-            .for_each(|(o, r)| self.any_hit_packet(r, o));
+        if RayOrder::reordered(rays, &self.bounds()) {
+            self.any_hit_batch(rays, out);
+        } else {
+            out.par_chunks_mut(PACKET_CHUNK)
+                .zip(rays.par_chunks(PACKET_CHUNK))
+                .for_each(|(o, r)| self.any_hit_packet(r, o));
+        }
         self.traced(ms_since(t), rays, Query::Any)
     }
 
