@@ -7,7 +7,7 @@
 //! together, then the left child's descendants, then the right's, so every node's children are
 //! adjacent and after it and every subtree owns one range of nodes and one of primitive slots.
 //! Leaves keep their primitives; the new slot order is returned as runs of old slots. A subtree
-//! no change reached (no link or box below it changed: [`Topology::touch`] marks every node a
+//! no change reached (no link or box below it changed: `Topology::touch` marks every node a
 //! change passes) is already laid out so in the loaded tree, so it is copied as one block of
 //! nodes with their indices shifted and one run of slots: an optimisation that moves a few
 //! hundred nodes rewrites the paths above them, not the whole tree.
