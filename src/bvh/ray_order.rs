@@ -250,11 +250,20 @@ struct Cells {
 
 impl Cells {
     fn new(scene: &Aabb) -> Self {
-        let size = (scene.max - scene.min).max(Vec3::splat(f32::MIN_POSITIVE));
+        let cells = (1u32 << AXIS_BITS) as f32;
+        // A flat box (a ground plane) is one cell thick on its flat axis; a scale that is not
+        // finite (a box of subnormal size) likewise.
+        let scale = (scene.max - scene.min).to_array().map(|s| {
+            if s > 0.0 && (cells / s).is_finite() {
+                cells / s
+            } else {
+                0.0
+            }
+        });
         Self {
             min: scene.min,
             max: scene.max,
-            scale: Vec3::splat((1u32 << AXIS_BITS) as f32) / size,
+            scale: Vec3::from(scale),
         }
     }
 
@@ -391,6 +400,37 @@ mod tests {
         let away = vec![Ray::new(Vec3::splat(3.0), Vec3::ONE); RayOrder::MIN_RAYS];
         assert!(o.plan(&away, &scene).is_none());
         assert!(o.plan(&[], &scene).is_none());
+    }
+
+    #[test]
+    fn a_flat_scene_orders_its_rays_on_its_other_two_axes() {
+        // A ground plane at y = 0, rays from scattered points above it to scattered points in
+        // it (away from its edges).
+        let scene = Aabb {
+            min: Vec3::new(0.0, 0.0, 0.0),
+            max: Vec3::new(1.0, 0.0, 1.0),
+        };
+        let a = scattered(20_000);
+        let b = scattered(20_000 + 7);
+        let rays: Vec<Ray> = a
+            .iter()
+            .zip(&b[7..])
+            .map(|(p, q)| {
+                let from = p.origin() + Vec3::Y;
+                let to = Vec3::new(0.05 + 0.9 * q.origin().x, 0.0, 0.05 + 0.9 * q.origin().z);
+                Ray::new(from, to - from)
+            })
+            .collect();
+        let keys: Vec<u32> = rays.iter().map(|r| key(r, &scene)).collect();
+        assert!(
+            keys.iter().all(|&k| k != MISS_KEY),
+            "every ray meets the plane"
+        );
+        assert!(
+            keys.iter().any(|&k| k != keys[0]),
+            "keys spread over the plane"
+        );
+        assert!(RayOrder::default().plan(&rays, &scene).is_some());
     }
 
     #[test]
