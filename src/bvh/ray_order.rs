@@ -253,17 +253,19 @@ impl Cells {
         let cells = (1u32 << AXIS_BITS) as f32;
         // A flat box (a ground plane) is one cell thick on its flat axis; a scale that is not
         // finite (a box of subnormal size) likewise.
-        let scale = (scene.max - scene.min).to_array().map(|s| {
-            if s > 0.0 && (cells / s).is_finite() {
-                cells / s
+        let per_unit = |size: f32| {
+            let scale = cells / size;
+            if size > 0.0 && scale < f32::INFINITY {
+                scale
             } else {
                 0.0
             }
-        });
+        };
+        let size = scene.max - scene.min;
         Self {
             min: scene.min,
             max: scene.max,
-            scale: Vec3::from(scale),
+            scale: Vec3::new(per_unit(size.x), per_unit(size.y), per_unit(size.z)),
         }
     }
 
