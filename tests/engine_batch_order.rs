@@ -70,7 +70,14 @@ fn check(e: &mut Engine, rays: &[Ray], what: &str) {
 fn reordered_batches_answer_as_single_queries_on_every_frame() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("animations");
     let mut files = 0;
-    for name in ["explode.glb", "orbit.glb", "swap.glb", "wave.glb"] {
+    for name in [
+        "explode.glb",
+        "lidar_cloth.glb",
+        "orbit.glb",
+        "swap.glb",
+        "tube.glb",
+        "wave.glb",
+    ] {
         let (scene, _) = Scene::load(dir.join(name)).unwrap();
         let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(12)).unwrap();
         let mut e = src.engine(EngineConfig::default());
@@ -89,5 +96,5 @@ fn reordered_batches_answer_as_single_queries_on_every_frame() {
         }
         files += 1;
     }
-    assert_eq!(files, 4);
+    assert_eq!(files, 6);
 }

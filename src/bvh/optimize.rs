@@ -120,8 +120,8 @@ impl Topology {
         stats
     }
 
-    /// The `k` reachable interior nodes but the root with the largest
-    /// combined measure, into `picks`.
+    /// The `k` reachable interior nodes but the root with the largest combined measure, into
+    /// `picks`.
     fn pick(&self, k: usize, picks: &mut Vec<(f32, u32)>) {
         match self.loaded_areas() {
             Some(areas) => self.pick_by(k, picks, |n| areas[n as usize]),

@@ -51,9 +51,11 @@ impl RayOrder {
     /// its indices in the order to trace them; `None` for a batch that is small or already
     /// coherent, to be traced as it comes.
     pub fn plan(&mut self, rays: &[Ray], scene: &Aabb) -> Option<&[u32]> {
-        if !Self::reordered(rays, scene) {
-            return None;
-        }
+        Self::reordered(rays, scene).then(|| self.by_key(rays, scene))
+    }
+
+    /// The indices of `rays` sorted by key, whatever the batch (at most `u32::MAX` rays).
+    fn by_key(&mut self, rays: &[Ray], scene: &Aabb) -> &[u32] {
         let cells = Cells::new(scene);
         self.pairs.clear();
         self.pairs.extend(
@@ -62,7 +64,7 @@ impl RayOrder {
                 .map(|(i, r)| u64::from(cells.key(r)) << 32 | i as u64),
         );
         self.sort();
-        Some(&self.order)
+        &self.order
     }
 
     /// True when [`RayOrder::plan`] reorders the batch: it is large and incoherent.
@@ -135,9 +137,9 @@ pub struct RayBatch {
 }
 
 impl RayBatch {
-    /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; each part of
-    /// a large incoherent batch is answered in the order [`RayOrder::plan`] gives against
-    /// `scene`, the others as they come.
+    /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; a batch that
+    /// [`RayOrder::reordered`] judges incoherent against `scene` is answered part by part, each
+    /// part in key order; the others as they come.
     ///
     /// # Panics
     /// When `out` and `rays` differ in length.
@@ -171,21 +173,16 @@ impl RayBatch {
             .par_iter_mut()
             .zip(rays.par_chunks(size))
             .zip(out.par_chunks_mut(size))
-            .for_each(|((order, rays), out)| match order.plan(rays, scene) {
-                Some(order) => {
-                    for (j, &i) in order.iter().enumerate() {
-                        // The ray and its answer's slot a few rays ahead, anywhere in the part.
-                        if let Some(&next) = order.get(j + AHEAD) {
-                            crate::simd::prefetch_all(&rays[next as usize]);
-                            crate::simd::prefetch(&out[next as usize]);
-                        }
-                        out[i as usize] = f(&rays[i as usize]);
+            .for_each(|((order, rays), out)| {
+                // Each part ordered as the batch was judged, not judged again.
+                let order = order.by_key(rays, scene);
+                for (j, &i) in order.iter().enumerate() {
+                    // The ray and its answer's slot a few rays ahead, anywhere in the part.
+                    if let Some(&next) = order.get(j + AHEAD) {
+                        crate::simd::prefetch_all(&rays[next as usize]);
+                        crate::simd::prefetch(&out[next as usize]);
                     }
-                }
-                None => {
-                    for (o, r) in out.iter_mut().zip(rays) {
-                        *o = f(r);
-                    }
+                    out[i as usize] = f(&rays[i as usize]);
                 }
             });
     }

@@ -17,6 +17,9 @@ use crate::geom::Ray;
 use rayon::prelude::*;
 use std::time::Instant;
 
+/// A query answering a run of rays on the engine.
+type Answers<T> = fn(&Engine, &[Ray], &mut [T]);
+
 /// Rays per parallel task of the packet batches (whole packets).
 const PACKET_CHUNK: usize = 8 * MAX_PACKET;
 
@@ -82,17 +85,12 @@ impl Engine {
     /// # Panics
     /// When the lengths differ.
     pub fn trace_closest_packets(&mut self, rays: &[Ray], out: &mut [Option<SceneHit>]) -> f64 {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
-        let t = Instant::now();
-        if RayOrder::reordered(rays, &self.bounds()) {
-            // No packet of these would be coherent: single rays, in the order planned for them.
-            self.closest_hit_batch(rays, out);
-        } else {
-            out.par_chunks_mut(PACKET_CHUNK)
-                .zip(rays.par_chunks(PACKET_CHUNK))
-                .for_each(|(o, r)| self.closest_hit_packet(r, o));
-        }
-        self.traced(ms_since(t), rays, Query::Closest)
+        self.packets_pass(
+            rays,
+            out,
+            Query::Closest,
+            (Engine::closest_hit_batch, Engine::closest_hit_packet),
+        )
     }
 
     /// Any-hit answers as packets, recorded as this frame's trace (see
@@ -101,16 +99,34 @@ impl Engine {
     /// # Panics
     /// When the lengths differ.
     pub fn trace_any_packets(&mut self, rays: &[Ray], out: &mut [bool]) -> f64 {
+        self.packets_pass(
+            rays,
+            out,
+            Query::Any,
+            (Engine::any_hit_batch, Engine::any_hit_packet),
+        )
+    }
+
+    /// The packets' frame pass of either query: `packet` on runs of consecutive rays in
+    /// parallel, or `batch` (single rays in the planned order) for a batch none of whose
+    /// packets would be coherent; recorded and sampled as this frame's trace.
+    fn packets_pass<T: Send>(
+        &mut self,
+        rays: &[Ray],
+        out: &mut [T],
+        query: Query,
+        (batch, packet): (Answers<T>, Answers<T>),
+    ) -> f64 {
         assert_eq!(rays.len(), out.len(), "one output per ray");
         let t = Instant::now();
         if RayOrder::reordered(rays, &self.bounds()) {
-            self.any_hit_batch(rays, out);
+            batch(self, rays, out);
         } else {
             out.par_chunks_mut(PACKET_CHUNK)
                 .zip(rays.par_chunks(PACKET_CHUNK))
-                .for_each(|(o, r)| self.any_hit_packet(r, o));
+                .for_each(|(o, r)| packet(self, r, o));
         }
-        self.traced(ms_since(t), rays, Query::Any)
+        self.traced(ms_since(t), rays, query)
     }
 
     /// A frame scope for the single-ray and packet queries (`&self`): runs `f` on the engine
