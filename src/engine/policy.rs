@@ -354,6 +354,12 @@ pub struct PolicyState {
     /// The extra trace time the last frame's degradation added (ms): what an action that
     /// removes it saves each frame from now on.
     pub frame_extra_ms: f64,
+    /// The last sampled frame's degradation (ray-work measure): its ratio less 1, times
+    /// `estimate_gain`.
+    pub frame_degradation: f64,
+    /// Frames `extra_ms` has been counted over (since the last build, or since a rejected
+    /// trial or a rung restarted the count).
+    pub extra_frames: u32,
     /// Frames the run still traces, this one included (`None`: open-ended; see
     /// [`super::Engine::plan_frames`]). An action is taken only if it pays for itself within
     /// them.
@@ -431,6 +437,8 @@ impl Default for PolicyState {
                 },
             ],
             frame_extra_ms: 0.0,
+            frame_degradation: 0.0,
+            extra_frames: 0,
             frames_left: None,
             payback: None,
             routine: Routine::default(),
@@ -517,16 +525,19 @@ impl PolicyState {
     /// The amortized rule over the policy's actions: each action `a` wins back a share
     /// `recovery(a)` of the extra trace time degradation costs (1 for a rebuild) at a cost
     /// `cost(a)`; once `recovery(a) * extra > cost(a)` for some action, take the one with the
-    /// largest `recovery * extra - cost`. With a known end of the run, an action must also
-    /// pay for itself before it: `recovery(a) * frame_extra * frames_left > cost(a)` (what it
-    /// saves each frame, were the degradation to stay as it is, over the frames left).
+    /// largest `recovery * extra - cost`. `extra` is the time lost since the last build, or,
+    /// under an evident degradation, what the present frame's loss comes to over as many
+    /// frames again ([`PolicyState::forward_ms`]). With a known end of the run, an action must
+    /// also pay for itself before it: `recovery(a) * frame_extra * frames_left > cost(a)`
+    /// (what it saves each frame, were the degradation to stay as it is, over the frames left).
     fn choose(&self, policy: Policy) -> Decision {
         let (options, n) = self.options(policy);
         let mut best = (Decision::Refit, 0.0);
+        let basis = self.extra_ms.max(self.forward_ms());
         for &(d, recovery, cost) in &options[..n] {
             let won = match self.frames_left {
-                Some(left) => self.extra_ms.min(self.frame_extra_ms * left as f64),
-                None => self.extra_ms,
+                Some(left) => basis.min(self.frame_extra_ms * left as f64),
+                None => basis,
             };
             let net = recovery * won - cost;
             if net > best.1 {
@@ -537,6 +548,23 @@ impl PolicyState {
             (Policy::Async, Decision::Rebuild) if self.background.running => Decision::Refit,
             (Policy::Async, Decision::Rebuild) if self.waiting_pays() => Decision::Background,
             (_, d) => d,
+        }
+    }
+
+    /// Under a sampled degradation of at least [`FORWARD_DEGRADATION`] (the ray-work measure),
+    /// the frame's extra trace time times the frames the loss has been counted over (the
+    /// tree's age, unless a rejected trial restarted the count): a tree that lost this much within
+    /// that many frames is taken to keep losing at least as much over as many frames again.
+    /// The sum of the past losses, the amortized rule's measure, is as large only while the
+    /// degradation holds steady; while it grows, as an explosion's does, the sum lags its
+    /// present level and the rule rebuilds late (in the limit the classic rule's factor of two
+    /// against the best schedule). Below the bound a sampled ratio is mostly noise, and noise
+    /// times the age would pass for degradation; 0 there.
+    fn forward_ms(&self) -> f64 {
+        if self.frame_degradation >= FORWARD_DEGRADATION {
+            self.frame_extra_ms * f64::from(self.extra_frames.max(1))
+        } else {
+            0.0
         }
     }
 
@@ -608,7 +636,7 @@ impl PolicyState {
             self.rebuild_ms - self.replay_ms < 2.0 * ROUTINE_REBUILD_SHARE * frame_ms;
         self.watch.plan(
             needed || near_routine || self.payback.is_some(),
-            due - self.extra_ms,
+            due - self.extra_ms.max(self.forward_ms()),
             rate,
             self.since_build,
             sah_ratio,
@@ -629,12 +657,14 @@ impl PolicyState {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
                 let last = self.frame_extra_ms;
+                self.frame_degradation = degradation;
                 self.frame_extra_ms = fresh_ms * degradation;
                 // The frames traced without a sample since the last one: between the two
                 // sampled frames' extra times.
                 let gap = f64::from(std::mem::take(&mut self.unsampled));
                 let filled = gap * 0.5 * (last + self.frame_extra_ms);
                 self.extra_ms = (self.extra_ms + filled + self.frame_extra_ms).max(0.0);
+                self.extra_frames += gap as u32 + 1;
                 self.judge_payback();
                 let cheap = matches!(policy, Policy::Amortized | Policy::Ladder)
                     && self.rebuild_ms - self.replay_ms < ROUTINE_REBUILD_SHARE * fresh_ms;
@@ -688,6 +718,7 @@ impl PolicyState {
     /// is as degraded as the rung left it).
     pub fn restructured(&mut self) {
         self.extra_ms = 0.0;
+        self.extra_frames = 0;
     }
 
     /// Learns from a rebuild that followed a refit: the fresh ratio was estimated at
@@ -736,6 +767,7 @@ impl PolicyState {
     pub fn rebuild_rejected(&mut self, cost_ms: f64) {
         self.rebuild_ms = cost_ms;
         self.extra_ms = 0.0;
+        self.extra_frames = 0;
         if !self.routine.now {
             self.rebuild_failed();
         }
@@ -754,6 +786,8 @@ impl PolicyState {
         self.build_estimate = estimate;
         self.since_build = 0;
         self.extra_ms = 0.0;
+        self.extra_frames = 0;
+        self.frame_degradation = 0.0;
         self.rebuild_ms = ms;
         self.traced_ratio = 1.0;
         self.payback = None;
@@ -779,6 +813,10 @@ const MIN_RAY_GAIN: f32 = 0.25;
 const MIN_RAY_SIGNAL: f32 = 0.05;
 /// ...unless the replay itself shows at least this much.
 const MIN_RAY_SHOWN: f32 = 0.2;
+
+/// Sampled degradation (ratio less 1) from which [`PolicyState::forward_ms`] projects the
+/// frame's loss: half again a fresh tree's work, well clear of a sample's noise (docs/ray_work.md).
+const FORWARD_DEGRADATION: f64 = 0.5;
 
 /// Frames a rebuild is judged before it can be found to have failed (the first frames'
 /// samples are the noisiest part of the smoothed ratio).
@@ -937,6 +975,34 @@ mod tests {
         assert_eq!(run(Some(10)), None);
         // Eleven: at the sixth frame six are left (12 ms saved): it pays.
         assert_eq!(run(Some(11)), Some(6));
+    }
+
+    /// The first frame (1-based) the sampled amortized rule rebuilds at, with 4 ms of fresh
+    /// tracing a frame, rebuilds of `cost` ms and the sampled ratio `ratio(k)` at frame `k`.
+    fn sampled_rebuild_at(cost: f64, ratio: impl Fn(u32) -> f32) -> Option<u32> {
+        let mut s = PolicyState::default();
+        s.rebuilt(1.0, 1.0, cost);
+        s.trace_share_ms = 4.0;
+        (1..=40).find(|&k| {
+            let r = ratio(k);
+            s.after_refit_sampled(Policy::Amortized, r, r) == Decision::Rebuild
+        })
+    }
+
+    #[test]
+    fn an_evident_growing_degradation_is_rebuilt_before_its_past_loss_reaches_the_cost() {
+        // Ratio 1 + k / 2: 2k ms lost at frame k, k (k + 1) ms in all, which passes 40 ms at
+        // frame 6; frame 5 already loses 10 ms, 50 ms over as many frames again.
+        assert_eq!(sampled_rebuild_at(40.0, |k| 1.0 + 0.5 * k as f32), Some(5));
+        // A steady degradation: the projection is the past sum, the same frame as before
+        // (2 ms a frame passes 10 ms at the sixth).
+        assert_eq!(sampled_rebuild_at(10.0, |_| 1.5), Some(6));
+        // Below half a fresh tree's work the sum alone decides: 0.16k ms at frame k,
+        // 0.08 k (k + 1) in all, past 10 ms at frame 11 (the ratio is then 1.44).
+        assert_eq!(
+            sampled_rebuild_at(10.0, |k| 1.0 + 0.04 * k as f32),
+            Some(11)
+        );
     }
 
     #[test]
