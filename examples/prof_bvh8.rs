@@ -6,6 +6,9 @@
 //! `MeshBvh8::bench_closest_hit` with those switches instead, interleaved pass by pass, and
 //! prints each one's median and its median ratio to the first. `BATCH=1` times
 //! `MeshBvh8::closest_hit_batch` (incoherent sets reordered first) against the loop instead.
+//! `PARAMS=ct:ci:leaf,...` builds one tree per set of the binary build's traversal cost,
+//! intersection cost and largest leaf (`1:1:8` is `BuildParams::BINNED`) and times their
+//! closest hits interleaved pass by pass, each against the first.
 use dynbvh::bvh::{BuildParams, Child, MeshBvh, MeshBvh8, TraversalStats};
 use dynbvh::geom::Ray;
 
@@ -27,6 +30,10 @@ fn main() {
     let count = env("RAYS", 1 << 18);
     for name in &args[1..] {
         let mesh = dynbvh::io::read_tri(format!("{dir}/{name}.tri").as_ref()).unwrap();
+        if let Ok(list) = std::env::var("PARAMS") {
+            params(dir, name, &mesh, &list, passes, count);
+            continue;
+        }
         let bin = MeshBvh::build(&mesh, &BuildParams::BINNED);
         let w8 = MeshBvh8::from_mesh_bvh(&bin);
         // Leaves by number of blocks of four, and triangles per leaf.
@@ -168,5 +175,116 @@ fn main() {
                 sample.len()
             );
         }
+    }
+}
+
+/// The `PARAMS` mode: trees from several build settings, timed interleaved.
+fn params(
+    dir: &str,
+    name: &str,
+    mesh: &dynbvh::geom::TriMesh,
+    list: &str,
+    passes: usize,
+    count: usize,
+) {
+    let sets: Vec<BuildParams> = list
+        .split(',')
+        .map(|s| {
+            let f: Vec<&str> = s.split(':').collect();
+            BuildParams {
+                traversal_cost: f[0].parse().unwrap(),
+                intersection_cost: f[1].parse().unwrap(),
+                max_leaf_size: f[2].parse().unwrap(),
+                ..BuildParams::BINNED
+            }
+        })
+        .collect();
+    let trees: Vec<(MeshBvh, MeshBvh8)> = sets
+        .iter()
+        .map(|p| {
+            let c = cpu_s();
+            let bin = MeshBvh::build(mesh, p);
+            let b = cpu_s();
+            let w8 = MeshBvh8::from_mesh_bvh(&bin);
+            let e = cpu_s();
+            println!(
+                "{name} ct {} ci {} leaf {}: build {:.1} + collapse {:.1} ms cpu, {} nodes, {} blocks, SAH {:.2}",
+                p.traversal_cost,
+                p.intersection_cost,
+                p.max_leaf_size,
+                (b - c) * 1e3,
+                (e - b) * 1e3,
+                w8.nodes().len(),
+                w8.blocks().len(),
+                bin.bvh().sah_cost()
+            );
+            (bin, w8)
+        })
+        .collect();
+    for set in ["primary", "random"] {
+        let mut rays = dynbvh::io::read_rays(format!("{dir}/{name}_{set}.rays").as_ref()).unwrap();
+        let side = (rays.len() as f64).sqrt().round() as usize;
+        if set == "primary" && side * side == rays.len() {
+            let half: Vec<Ray> = (0..side * side)
+                .filter(|i| (i / side).is_multiple_of(2) && (i % side).is_multiple_of(2))
+                .map(|i| rays[i])
+                .collect();
+            rays.clear();
+            dynbvh::bvh::image_tiles(side / 2, side / 2, |idx| {
+                rays.extend(idx.iter().map(|&i| half[i]));
+            });
+        }
+        rays.truncate(count);
+        let step = (rays.len() / 4096).max(1);
+        for (bin, w8) in &trees {
+            let bad = rays
+                .iter()
+                .step_by(step)
+                .filter(|r| bin.closest_hit(r).map(|h| h.t) != w8.closest_hit(r).map(|h| h.t))
+                .count();
+            assert_eq!(bad, 0, "a tree disagrees with its binary tree");
+        }
+        let work: Vec<(f64, f64)> = trees
+            .iter()
+            .map(|(_, w8)| {
+                let mut st = TraversalStats::default();
+                let mut n = 0;
+                for r in rays.iter().step_by(step) {
+                    let _ = w8.closest_hit_counted(r, &mut st);
+                    n += 1;
+                }
+                (st.nodes as f64 / n as f64, st.prims as f64 / n as f64)
+            })
+            .collect();
+        let mut speeds = vec![Vec::new(); trees.len()];
+        for _ in 0..passes {
+            for (i, (_, w8)) in trees.iter().enumerate() {
+                let c = cpu_s();
+                let n = rays.iter().filter(|r| w8.closest_hit(r).is_some()).count();
+                std::hint::black_box(n);
+                speeds[i].push(rays.len() as f64 / (cpu_s() - c) / 1e6);
+            }
+        }
+        let line: Vec<String> = (0..trees.len())
+            .map(|i| {
+                let ratio = median(
+                    speeds[i]
+                        .iter()
+                        .zip(&speeds[0])
+                        .map(|(a, b)| a / b)
+                        .collect(),
+                );
+                format!(
+                    "{}:{}:{} {:.2} ({ratio:.3}; {:.2} n {:.2} t)",
+                    sets[i].traversal_cost,
+                    sets[i].intersection_cost,
+                    sets[i].max_leaf_size,
+                    median(speeds[i].clone()),
+                    work[i].0,
+                    work[i].1
+                )
+            })
+            .collect();
+        println!("  {set}: {}", line.join(", "));
     }
 }
