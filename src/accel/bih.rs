@@ -460,14 +460,16 @@ impl Bih {
     }
 
     /// Visits the leaves the ray may meet, near child first, calling `leaf(slots, interval)`
-    /// until it returns true; `best()` is the closest hit so far.
+    /// until it returns true; `cap()` is the distance beyond which no node can hold a hit
+    /// closer than the best so far (`beyond` of it, computed when the best changes rather
+    /// than at every node).
     #[inline(always)]
     fn walk<C: Counters>(
         &self,
         ray: &Ray,
         c: &mut C,
         mut leaf: impl FnMut(std::ops::Range<usize>, (f32, f32), &mut C) -> bool,
-        best: impl Fn() -> f32,
+        cap: impl Fn() -> f32,
     ) {
         if self.nodes.is_empty() {
             return;
@@ -491,7 +493,7 @@ impl Bih {
                 // Nothing beyond the best hit can help: a child that starts past it is not
                 // entered (children overlap, so one may start past a hit found in the other).
                 // `tf` and `tn` are never NaN: the root's interval passed `tn <= tf`.
-                tf = min_of(tf, beyond(best()));
+                tf = min_of(tf, cap());
                 let axis = n.axis();
                 let first = n.first_child();
                 let second = ((second_near >> axis) & 1) as usize;
@@ -499,16 +501,10 @@ impl Bih {
                 let (near_plane, far_plane) = (n.planes[second], n.planes[second ^ 1]);
                 let dn = plane_distance(ray, axis, near_plane);
                 let df = plane_distance(ray, axis, far_plane);
-                let near_end = if dn.is_nan() {
-                    tf
-                } else {
-                    min_of(tf, upper(dn))
-                };
-                let far_start = if df.is_nan() {
-                    tn
-                } else {
-                    max_of(tn, lower(df))
-                };
+                // A NaN distance (the ray in the plane) fails the compare inside `min_of` and
+                // `max_of`, which then keep the whole interval.
+                let near_end = min_of(tf, upper(dn));
+                let far_start = max_of(tn, lower(df));
                 let (go_near, go_far) = (tn <= near_end, far_start <= tf);
                 if go_near {
                     if go_far {
@@ -528,7 +524,7 @@ impl Bih {
                 let Some((n, a, b)) = stack.pop() else {
                     return;
                 };
-                if a <= beyond(best()) {
+                if a <= cap() {
                     (node, tn, tf) = (n as usize, a, b);
                     break;
                 }
@@ -552,21 +548,23 @@ impl Bih {
     }
 
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let q = std::cell::RefCell::new(Closest::new(ray));
+        let mut q = Closest::new(ray);
+        let cap = std::cell::Cell::new(beyond(q.tmax));
         let slab = SlabRay::new(ray);
         self.walk(
             ray,
             c,
             |slots, interval, c| {
-                let mut q = q.borrow_mut();
                 self.leaf_candidates(&slab, slots, interval, |s| {
                     q.test(&self.tris[s], s as u32, c);
                     false
-                })
+                });
+                cap.set(beyond(q.tmax));
+                false
             },
-            || q.borrow().tmax,
+            || cap.get(),
         );
-        let hit = q.into_inner().hit;
+        let hit = q.hit;
         hit.map(|h| Hit {
             prim: self.prims[h.prim as usize],
             ..h
@@ -575,6 +573,7 @@ impl Bih {
 
     fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
         let q = AnyHit::new(ray);
+        let cap = beyond(ray.tmax);
         let slab = SlabRay::new(ray);
         let mut found = false;
         self.walk(
@@ -584,7 +583,7 @@ impl Bih {
                 found = self.leaf_candidates(&slab, slots, interval, |s| q.test(&self.tris[s], c));
                 found
             },
-            || ray.tmax,
+            || cap,
         );
         found
     }
