@@ -288,14 +288,15 @@ impl Grid {
     }
 
     /// Walks the cells along the ray in order; `cell` tests one cell's triangles and returns
-    /// true to stop; `best` is the distance beyond which no cell can help.
+    /// true to stop; `cap()` is the distance beyond which no cell can help (the best hit so far,
+    /// widened: `beyond` of it, set when the best changes).
     #[inline(always)]
     fn walk<C: Counters>(
         &self,
         ray: &Ray,
         c: &mut C,
         mut cell: impl FnMut(&[u32], &mut C) -> bool,
-        best: impl Fn() -> f32,
+        cap: impl Fn() -> f32,
     ) {
         if self.starts.is_empty() {
             return;
@@ -357,7 +358,7 @@ impl Grid {
             let t_exit = t_next[a];
             // The walk ends once the next cell starts beyond the best hit, or the ray does not
             // move at all.
-            let next_may_help = lower(t_exit) <= beyond(best());
+            let next_may_help = lower(t_exit) <= cap();
             if !next_may_help || step[a] == 0 {
                 return;
             }
@@ -377,27 +378,29 @@ impl Grid {
     }
 
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let q = std::cell::RefCell::new(Closest::new(ray));
+        let mut q = Closest::new(ray);
+        let cap = std::cell::Cell::new(beyond(q.tmax));
         let mut mailbox = Mailbox::new();
         self.walk(
             ray,
             c,
             |refs, c| {
-                let mut q = q.borrow_mut();
                 for &p in refs {
                     if !mailbox.seen(p) {
                         q.test(&self.tris.tris[p as usize], p, c);
                     }
                 }
+                cap.set(beyond(q.tmax));
                 false
             },
-            || q.borrow().tmax,
+            || cap.get(),
         );
-        q.into_inner().hit
+        q.hit
     }
 
     fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
         let q = AnyHit::new(ray);
+        let cap = beyond(ray.tmax);
         let mut mailbox = Mailbox::new();
         let mut found = false;
         self.walk(
@@ -409,7 +412,7 @@ impl Grid {
                     .any(|&p| !mailbox.seen(p) && q.test(&self.tris.tris[p as usize], c));
                 found
             },
-            || ray.tmax,
+            || cap,
         );
         found
     }

@@ -289,13 +289,16 @@ impl Octree {
         }
     }
 
+    /// Visits the leaves along the ray, nearest first, calling `leaf` until it returns true;
+    /// `cap()` is the distance beyond which no node can help (the best hit so far, widened:
+    /// `beyond` of it, set when the best changes).
     #[inline(always)]
     fn walk<C: Counters>(
         &self,
         ray: &Ray,
         c: &mut C,
         mut leaf: impl FnMut(&[u32], &mut C) -> bool,
-        best: impl Fn() -> f32,
+        cap: impl Fn() -> f32,
     ) {
         if self.nodes.is_empty() {
             return;
@@ -309,7 +312,7 @@ impl Octree {
         while sp > 0 {
             sp -= 1;
             let p = stack[sp];
-            if p.tn > beyond(best()) {
+            if p.tn > cap() {
                 continue;
             }
             c.node();
@@ -325,27 +328,29 @@ impl Octree {
     }
 
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let q = std::cell::RefCell::new(Closest::new(ray));
+        let mut q = Closest::new(ray);
+        let cap = std::cell::Cell::new(beyond(q.tmax));
         let mut mailbox = Mailbox::new();
         self.walk(
             ray,
             c,
             |refs, c| {
-                let mut q = q.borrow_mut();
                 for &p in refs {
                     if !mailbox.seen(p) {
                         q.test(&self.tris.tris[p as usize], p, c);
                     }
                 }
+                cap.set(beyond(q.tmax));
                 false
             },
-            || q.borrow().tmax,
+            || cap.get(),
         );
-        q.into_inner().hit
+        q.hit
     }
 
     fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
         let q = AnyHit::new(ray);
+        let cap = beyond(ray.tmax);
         let mut mailbox = Mailbox::new();
         let mut found = false;
         self.walk(
@@ -357,7 +362,7 @@ impl Octree {
                     .any(|&p| !mailbox.seen(p) && q.test(&self.tris.tris[p as usize], c));
                 found
             },
-            || ray.tmax,
+            || cap,
         );
         found
     }
