@@ -18,7 +18,7 @@
 //! `amortized` rebuilds when the trace time its degradation has cost since the last build
 //! passes a rebuild's cost: the optimal period for linearly growing degradation, and no rebuild
 //! without rays or degradation. Under the ray-work measure, a sampled degradation of at least
-//! half a fresh tree's work is also projected forward ([`PolicyState::forward_ms`]), so that
+//! half a fresh tree's work is also projected forward (`PolicyState::forward_ms`), so that
 //! one growing faster than that (an explosion) is not rebuilt late. `amortized-plain` is that rule without estimate, calibration or
 //! probation. The sweeps behind the default: `docs/policy_sweep.md`, `docs/ray_work.md`.
 use super::routine::{ROUTINE_REBUILD_SHARE, Routine};
