@@ -253,7 +253,13 @@ pub struct Degradation {
     observed: f64,
     /// Entries of the last frame observed.
     entries: u32,
+    /// A frame's sample has been weighed against the reference (not only made it).
+    compared: bool,
 }
+
+/// The SAH's degradation (ratio less 1) that stands in for the frame after a build, whose
+/// sample only made the reference and so reads no degradation at all.
+pub const EVIDENT_SAH: f64 = 0.5;
 
 /// Entries a frame under which a mesh's sampled ratio is capped by the SAH's
 /// ([`Degradation::judged`]).
@@ -266,7 +272,10 @@ impl Degradation {
     }
 
     /// The degradation a policy weighs: the smoothed ratio, or the SAH's ratio of the refitted
-    /// tree to its build (`sah_ratio`) before the fresh tree's cost is known; capped at
+    /// tree to its build (`sah_ratio`) before the fresh tree's cost is known, and, when it is
+    /// at least 1 + [`EVIDENT_SAH`], until a sample has been weighed against that cost (the
+    /// frame after a build reads 1 by construction; an explosion's SAH ratio there is 2.5);
+    /// capped at
     /// `sah_ratio` (at least 1) while the frames give fewer than [`FEW_ENTRIES`] entries: from
     /// a few dozen entries, against a reference of as few, the ratio can err by tens of per
     /// cent for a whole period between rebuilds, while the SAH's ratio is exact for what it
@@ -275,6 +284,7 @@ impl Degradation {
     pub fn judged(&self, sah_ratio: f32) -> f32 {
         match self.ratio() {
             None => sah_ratio,
+            Some(_) if !self.compared && f64::from(sah_ratio) >= 1.0 + EVIDENT_SAH => sah_ratio,
             Some(r) if self.entries < FEW_ENTRIES => (r as f32).min(sah_ratio.max(1.0)),
             Some(r) => r as f32,
         }
@@ -301,6 +311,7 @@ impl Degradation {
             Some(base) => {
                 let predicted = base.predict(s);
                 if predicted > 0.0 {
+                    self.compared = true;
                     let seen = p.trace_ms(s.work) / predicted;
                     self.observed = smoothing * self.observed + (1.0 - smoothing) * seen;
                 }
@@ -662,6 +673,28 @@ mod tests {
         d.observe(&entries(n / 2, 30, n / 2, 10), &p, 0.0);
         d.observe(&entries(n / 2, 90, n / 2, 30), &p, 0.0);
         assert!((d.judged(1.2) - 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn an_evident_sah_ratio_stands_in_until_a_sample_is_weighed_against_the_reference() {
+        let p = Prices::default();
+        let mut d = Degradation::default();
+        let n = FEW_ENTRIES;
+        // The frame after a build: its sample only made the reference (ratio 1).
+        d.observe(&entries(n / 2, 30, n / 2, 10), &p, 0.0);
+        assert_eq!(d.ratio(), Some(1.0));
+        assert_eq!(d.judged(2.5), 2.5, "an evident SAH ratio stands in");
+        assert_eq!(
+            d.judged(1.3),
+            1.0,
+            "below the bound the reference's 1 stands"
+        );
+        // Once a sample is weighed against the reference, it decides.
+        d.observe(&entries(n / 2, 60, n / 2, 20), &p, 0.0);
+        assert!((d.judged(2.5) - 2.0).abs() < 1e-6);
+        d.reset();
+        d.observe(&entries(n / 2, 30, n / 2, 10), &p, 0.0);
+        assert_eq!(d.judged(2.5), 2.5, "rebuilt: again until the next sample");
     }
 
     #[test]
