@@ -62,21 +62,7 @@ fn main() {
             &by_blocks[1..]
         );
         for set in ["primary", "random"] {
-            let mut rays =
-                dynbvh::io::read_rays(format!("{dir}/{name}_{set}.rays").as_ref()).unwrap();
-            let side = (rays.len() as f64).sqrt().round() as usize;
-            if set == "primary" && side * side == rays.len() {
-                // As the peers bench: every 2nd row and column, in the order of packet tiles.
-                let half: Vec<Ray> = (0..side * side)
-                    .filter(|i| (i / side).is_multiple_of(2) && (i % side).is_multiple_of(2))
-                    .map(|i| rays[i])
-                    .collect();
-                rays.clear();
-                dynbvh::bvh::image_tiles(side / 2, side / 2, |idx| {
-                    rays.extend(idx.iter().map(|&i| half[i]));
-                });
-            }
-            rays.truncate(count);
+            let rays = ray_set(dir, name, set, count);
             let step = (rays.len() / 4096).max(1);
             let sample: Vec<Ray> = rays.iter().step_by(step).copied().collect();
             let mismatches = sample
@@ -119,13 +105,7 @@ fn main() {
                     .iter()
                     .enumerate()
                     .map(|(i, x)| {
-                        let ratio = median(
-                            speeds[i]
-                                .iter()
-                                .zip(&speeds[0])
-                                .map(|(a, b)| a / b)
-                                .collect(),
-                        );
+                        let ratio = median_ratio(&speeds[i], &speeds[0]);
                         format!("v{x} {:.2} ({ratio:.3})", median(speeds[i].clone()))
                     })
                     .collect();
@@ -147,7 +127,7 @@ fn main() {
                     std::hint::black_box(&hits);
                     bt.push(rays.len() as f64 / (cpu_s() - c) / 1e6);
                 }
-                let ratio = median(bt.iter().zip(&lp).map(|(b, l)| b / l).collect());
+                let ratio = median_ratio(&bt, &lp);
                 println!(
                     "  {set}: loop {:.2} Mrays/s, batch {:.2} Mrays/s, batch / loop {ratio:.3}",
                     median(lp),
@@ -176,6 +156,30 @@ fn main() {
             );
         }
     }
+}
+
+/// The median over passes of `a`'s rate over `b`'s in the same pass.
+fn median_ratio(a: &[f64], b: &[f64]) -> f64 {
+    median(a.iter().zip(b).map(|(a, b)| a / b).collect())
+}
+
+/// The first `count` rays of `DIR/NAME_SET.rays`; a square camera image as the peers bench
+/// takes it: every 2nd row and column, in the order of packet tiles.
+fn ray_set(dir: &str, name: &str, set: &str, count: usize) -> Vec<Ray> {
+    let mut rays = dynbvh::io::read_rays(format!("{dir}/{name}_{set}.rays").as_ref()).unwrap();
+    let side = (rays.len() as f64).sqrt().round() as usize;
+    if set == "primary" && side * side == rays.len() {
+        let half: Vec<Ray> = (0..side * side)
+            .filter(|i| (i / side).is_multiple_of(2) && (i % side).is_multiple_of(2))
+            .map(|i| rays[i])
+            .collect();
+        rays.clear();
+        dynbvh::bvh::image_tiles(side / 2, side / 2, |idx| {
+            rays.extend(idx.iter().map(|&i| half[i]));
+        });
+    }
+    rays.truncate(count);
+    rays
 }
 
 /// The `PARAMS` mode: trees from several build settings, timed interleaved.
@@ -222,19 +226,7 @@ fn params(
         })
         .collect();
     for set in ["primary", "random"] {
-        let mut rays = dynbvh::io::read_rays(format!("{dir}/{name}_{set}.rays").as_ref()).unwrap();
-        let side = (rays.len() as f64).sqrt().round() as usize;
-        if set == "primary" && side * side == rays.len() {
-            let half: Vec<Ray> = (0..side * side)
-                .filter(|i| (i / side).is_multiple_of(2) && (i % side).is_multiple_of(2))
-                .map(|i| rays[i])
-                .collect();
-            rays.clear();
-            dynbvh::bvh::image_tiles(side / 2, side / 2, |idx| {
-                rays.extend(idx.iter().map(|&i| half[i]));
-            });
-        }
-        rays.truncate(count);
+        let rays = ray_set(dir, name, set, count);
         let step = (rays.len() / 4096).max(1);
         for (bin, w8) in &trees {
             let bad = rays
@@ -267,13 +259,7 @@ fn params(
         }
         let line: Vec<String> = (0..trees.len())
             .map(|i| {
-                let ratio = median(
-                    speeds[i]
-                        .iter()
-                        .zip(&speeds[0])
-                        .map(|(a, b)| a / b)
-                        .collect(),
-                );
+                let ratio = median_ratio(&speeds[i], &speeds[0]);
                 format!(
                     "{}:{}:{} {:.2} ({ratio:.3}; {:.2} n {:.2} t)",
                     sets[i].traversal_cost,
