@@ -19,8 +19,9 @@
 //! passes a rebuild's cost: the optimal period for linearly growing degradation, and no rebuild
 //! without rays or degradation. Under the ray-work measure, a sampled degradation of at least
 //! half a fresh tree's work is also projected forward (`PolicyState::forward_ms`), so that
-//! one growing faster than that (an explosion) is not rebuilt late. `amortized-plain` is that rule without estimate, calibration or
-//! probation. The sweeps behind the default: `docs/policy_sweep.md`, `docs/ray_work.md`.
+//! one growing faster than that (an explosion) is not rebuilt late. `amortized-plain` is that
+//! rule without estimate, calibration or probation. The sweeps behind the default:
+//! `docs/policy_sweep.md`, `docs/ray_work.md`.
 use super::routine::{ROUTINE_REBUILD_SHARE, Routine};
 use super::watch::{MIN_PLANNED_DEGRADATION, Watch};
 use std::fmt;
@@ -817,7 +818,8 @@ const MIN_RAY_SIGNAL: f32 = 0.05;
 const MIN_RAY_SHOWN: f32 = 0.2;
 
 /// Sampled degradation (ratio less 1) from which [`PolicyState::forward_ms`] projects the
-/// frame's loss: half again a fresh tree's work, well clear of a sample's noise (docs/ray_work.md).
+/// frame's loss: half again a fresh tree's work, well clear of a sample's noise (the sweep of
+/// this bound is in `docs/ray_work.md`).
 const FORWARD_DEGRADATION: f64 = 0.5;
 
 /// Frames a rebuild is judged before it can be found to have failed (the first frames'
