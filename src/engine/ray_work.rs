@@ -274,7 +274,8 @@ impl Degradation {
     /// The degradation a policy weighs: the smoothed ratio, or the SAH's ratio of the refitted
     /// tree to its build (`sah_ratio`) before the fresh tree's cost is known, and, when it is
     /// at least 1 + [`EVIDENT_SAH`], until a sample has been weighed against that cost (the
-    /// frame after a build reads 1 by construction; an explosion's SAH ratio there is 2.5);
+    /// frame after a build reads 1 by construction, however far an explosion has already
+    /// spread the tree's boxes);
     /// capped at
     /// `sah_ratio` (at least 1) while the frames give fewer than [`FEW_ENTRIES`] entries: from
     /// a few dozen entries, against a reference of as few, the ratio can err by tens of per
