@@ -43,7 +43,7 @@ impl Default for GridParams {
 
 /// Cell references allowed per triangle before the grid is made coarser (a few huge triangles
 /// in a fine grid would otherwise fill it).
-const MAX_REFS_PER_TRIANGLE: u64 = 64;
+pub(super) const MAX_REFS_PER_TRIANGLE: u64 = 64;
 
 /// Cells up to which the build enters triangles in the mesh's order whatever it is: the
 /// counts (4 bytes a cell) and lists of such a grid stay in the cache (see `count_refs`).
@@ -56,17 +56,15 @@ type Entry = (u32, [u16; 6]);
 /// A uniform grid over a mesh's triangles.
 #[derive(Clone, Debug, Default)]
 pub struct Grid {
-    bounds: Aabb,
-    /// Cells per axis.
-    res: [u32; 3],
-    cell_size: Vec3,
-    inv_cell_size: Vec3,
+    pub(super) bounds: Aabb,
+    /// The cells.
+    pub(super) lattice: Lattice,
     /// `refs[starts[c]..starts[c + 1]]`: the triangles of cell `c` (`x + nx (y + ny z)`).
-    starts: Vec<u32>,
-    refs: Vec<u32>,
-    tris: Triangles,
+    pub(super) starts: Vec<u32>,
+    pub(super) refs: Vec<u32>,
+    pub(super) tris: Triangles,
     /// The margin triangles were entered with, per axis.
-    margin: Vec3,
+    pub(super) margin: Vec3,
 }
 
 impl Grid {
@@ -100,31 +98,13 @@ impl Grid {
     }
 
     fn with_resolution(bounds: Aabb, res: [u32; 3]) -> Self {
-        let e = bounds.extent();
-        let r = Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
-        let cell_size = e / r;
-        let inv = |n: f32, e: f32| if e > 0.0 && e.is_finite() { n / e } else { 0.0 };
-        let inv_cell_size = Vec3::new(inv(r.x, e.x), inv(r.y, e.y), inv(r.z, e.z));
+        let lattice = Lattice::new(&bounds, res);
         let scale = bounds.min.abs().max(bounds.max.abs());
-        let margin = (cell_size * (1.0 / 1024.0)).max(scale * (1.0 / (1 << 18) as f32));
         Self {
             bounds,
-            res,
-            cell_size,
-            inv_cell_size,
-            margin: Vec3::select(margin.is_finite_mask(), margin, Vec3::ZERO),
+            lattice,
+            margin: lattice.margin(scale),
             ..Self::default()
-        }
-    }
-
-    /// The cell index along `axis` of coordinate `x`, clamped to the grid.
-    #[inline(always)]
-    fn cell_of(&self, axis: usize, x: f32) -> u32 {
-        let f = ((x - self.bounds.min[axis]) * self.inv_cell_size[axis]).floor();
-        if f >= 0.0 {
-            (f as u32).min(self.res[axis] - 1)
-        } else {
-            0
         }
     }
 
@@ -132,17 +112,15 @@ impl Grid {
     /// inclusive.
     #[inline(always)]
     fn cell_range(&self, b: &Aabb) -> [u32; 6] {
-        let lo: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.min[a] - self.margin[a]));
-        let hi: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.max[a] + self.margin[a]));
-        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
+        self.lattice.cell_range(b, self.margin)
     }
 
     fn cell_index(&self, x: u32, y: u32, z: u32) -> usize {
-        x as usize + self.res[0] as usize * (y as usize + self.res[1] as usize * z as usize)
+        self.lattice.cell_index(x, y, z)
     }
 
     fn cell_count(&self) -> usize {
-        self.res.iter().map(|&r| r as usize).product()
+        self.lattice.cell_count()
     }
 
     /// Each triangle with a box and its cell range (`[x0, y0, z0, x1, y1, z1]`, inclusive),
@@ -184,8 +162,9 @@ impl Grid {
         let mut entries = Vec::new();
         crate::simd::reserve_huge(&mut entries, tris.len(), 0);
         let mut total = 0u64;
-        let mut ys = vec![0u32; self.res[1] as usize + 1];
-        let mut zs = vec![0u32; self.res[2] as usize + 1];
+        let res = self.lattice.res;
+        let mut ys = vec![0u32; res[1] as usize + 1];
+        let mut zs = vec![0u32; res[2] as usize + 1];
         // Consecutive triangles whose first cells lie in neighbouring rows.
         let (mut near, mut last) = (0usize, [u32::MAX; 6]);
         for (i, b) in boxes() {
@@ -249,10 +228,8 @@ impl Grid {
     /// y1, z1]`, inclusive): consecutive cells along `x`.
     #[inline(always)]
     fn for_each_row(&self, r: &[u16; 6], mut f: impl FnMut(std::ops::Range<usize>)) {
-        let (nx, nxy) = (
-            self.res[0] as usize,
-            self.res[0] as usize * self.res[1] as usize,
-        );
+        let res = self.lattice.res;
+        let (nx, nxy) = (res[0] as usize, res[0] as usize * res[1] as usize);
         for z in r[2] as usize..=r[5] as usize {
             for y in r[1] as usize..=r[4] as usize {
                 let row = z * nxy + y * nx;
@@ -301,80 +278,16 @@ impl Grid {
         if self.starts.is_empty() {
             return;
         }
-        let Some((tn, _)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
-            return;
-        };
-        // The entry point. Where the direction is infinite on an axis and the distance zero,
-        // their product is NaN and the point's coordinate is the origin's.
-        let t0 = tn.max(ray.tmin);
-        let p: [f32; 3] = std::array::from_fn(|a| {
-            let s = ray.dir[a] * t0;
-            if s.is_nan() {
-                ray.origin[a]
-            } else {
-                ray.origin[a] + s
-            }
-        });
-        let mut idx = [0u32; 3];
-        let mut step = [0i32; 3];
-        for a in 0..3 {
-            idx[a] = self.cell_of(a, p[a]);
-            step[a] = if ray.dir[a] > 0.0 {
-                1
-            } else if ray.dir[a] < 0.0 {
-                -1
-            } else {
-                0
-            };
-        }
-        // Distance along the ray to the next cell boundary on each axis.
-        let exit = |a: usize, i: u32, s: i32| -> f32 {
-            if s == 0 {
-                return f32::INFINITY;
-            }
-            let face = if s > 0 { i + 1 } else { i };
-            let x = self.bounds.min[a] + face as f32 * self.cell_size[a];
-            (x - ray.origin[a]) * ray.inv_dir[a]
-        };
-        let mut t_next = [
-            exit(0, idx[0], step[0]),
-            exit(1, idx[1], step[1]),
-            exit(2, idx[2], step[2]),
-        ];
-        loop {
-            c.node();
-            let ci = self.cell_index(idx[0], idx[1], idx[2]);
-            let refs = &self.refs[self.starts[ci] as usize..self.starts[ci + 1] as usize];
-            if !refs.is_empty() && cell(refs, c) {
-                return;
-            }
-            let a = if t_next[0] <= t_next[1] && t_next[0] <= t_next[2] {
-                0
-            } else if t_next[1] <= t_next[2] {
-                1
-            } else {
-                2
-            };
-            let t_exit = t_next[a];
-            // The walk ends once the next cell starts beyond the best hit, or the ray does not
-            // move at all.
-            let next_may_help = lower(t_exit) <= cap();
-            if !next_may_help || step[a] == 0 {
-                return;
-            }
-            if step[a] > 0 {
-                if idx[a] + 1 >= self.res[a] {
-                    return;
-                }
-                idx[a] += 1;
-            } else {
-                if idx[a] == 0 {
-                    return;
-                }
-                idx[a] -= 1;
-            }
-            t_next[a] = exit(a, idx[a], step[a]);
-        }
+        self.lattice.walk(
+            ray,
+            (self.bounds.min, self.bounds.max),
+            c,
+            |ci, _, c| {
+                let refs = &self.refs[self.starts[ci] as usize..self.starts[ci + 1] as usize];
+                !refs.is_empty() && cell(refs, c)
+            },
+            cap,
+        );
     }
 
     fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
@@ -420,7 +333,7 @@ impl Grid {
     /// Cells per axis.
     #[must_use]
     pub fn resolution(&self) -> [u32; 3] {
-        self.res
+        self.lattice.res
     }
 
     fn check(&self, mesh: &TriMesh) -> Result<(), String> {
@@ -465,6 +378,193 @@ impl Grid {
     }
 }
 
+/// Equal cells over a box: `res` per axis from `min`, each `cell_size` wide. The uniform grid
+/// is one; the two-level grid has one on top and one in each of its top cells.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Lattice {
+    pub min: Vec3,
+    /// Cells per axis (at least 1).
+    pub res: [u32; 3],
+    pub cell_size: Vec3,
+    /// `res / extent` per axis, 0 on a flat or unbounded side.
+    pub inv_cell_size: Vec3,
+}
+
+impl Lattice {
+    /// `res` cells over `bounds`.
+    pub fn new(bounds: &Aabb, res: [u32; 3]) -> Self {
+        let e = bounds.extent();
+        let r = Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
+        let inv = |n: f32, e: f32| if e > 0.0 && e.is_finite() { n / e } else { 0.0 };
+        Self {
+            min: bounds.min,
+            res,
+            cell_size: e / r,
+            inv_cell_size: Vec3::new(inv(r.x, e.x), inv(r.y, e.y), inv(r.z, e.z)),
+        }
+    }
+
+    /// The margin triangles are entered with: a small share of a cell, and at least a few
+    /// units in the last place of coordinates as large as `scale`.
+    pub fn margin(&self, scale: Vec3) -> Vec3 {
+        let margin = (self.cell_size * (1.0 / 1024.0)).max(scale * (1.0 / (1 << 18) as f32));
+        Vec3::select(margin.is_finite_mask(), margin, Vec3::ZERO)
+    }
+
+    /// The cell index along `axis` of coordinate `x`, clamped to the lattice.
+    #[inline(always)]
+    pub fn cell_of(&self, axis: usize, x: f32) -> u32 {
+        let f = ((x - self.min[axis]) * self.inv_cell_size[axis]).floor();
+        if f >= 0.0 {
+            (f as u32).min(self.res[axis] - 1)
+        } else {
+            0
+        }
+    }
+
+    /// The cells box `b` widened by `margin` overlaps: `[x0, y0, z0, x1, y1, z1]`, inclusive.
+    #[inline(always)]
+    pub fn cell_range(&self, b: &Aabb, margin: Vec3) -> [u32; 6] {
+        let lo: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.min[a] - margin[a]));
+        let hi: [u32; 3] = std::array::from_fn(|a| self.cell_of(a, b.max[a] + margin[a]));
+        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
+    }
+
+    /// The table index of cell `(x, y, z)`.
+    #[inline(always)]
+    pub fn cell_index(&self, x: u32, y: u32, z: u32) -> usize {
+        x as usize + self.res[0] as usize * (y as usize + self.res[1] as usize * z as usize)
+    }
+
+    /// Cells in all.
+    pub fn cell_count(&self) -> usize {
+        self.res.iter().map(|&r| r as usize).product()
+    }
+
+    /// The position of the cell of table index `i`.
+    pub fn position(&self, i: usize) -> [u32; 3] {
+        let (nx, ny) = (self.res[0] as usize, self.res[1] as usize);
+        [
+            (i % nx) as u32,
+            (i / nx % ny) as u32,
+            (i / (nx * ny)) as u32,
+        ]
+    }
+
+    /// The box of the cell at `idx`, its faces where the walk puts them.
+    #[inline(always)]
+    pub fn cell_box(&self, idx: [u32; 3]) -> Aabb {
+        let face = |a: usize, i: u32| self.min[a] + i as f32 * self.cell_size[a];
+        Aabb {
+            min: Vec3::new(face(0, idx[0]), face(1, idx[1]), face(2, idx[2])),
+            max: Vec3::new(
+                face(0, idx[0] + 1),
+                face(1, idx[1] + 1),
+                face(2, idx[2] + 1),
+            ),
+        }
+    }
+
+    /// `res` cells over the cell at `idx` (its sizes from this lattice's, without a division
+    /// by the box's extent: the walk makes one for every cell it enters).
+    #[inline(always)]
+    pub fn sub(&self, idx: [u32; 3], res: [u32; 3]) -> Self {
+        let r = Vec3::new(res[0] as f32, res[1] as f32, res[2] as f32);
+        Self {
+            min: self.cell_box(idx).min,
+            res,
+            cell_size: self.cell_size / r,
+            inv_cell_size: self.inv_cell_size * r,
+        }
+    }
+
+    /// The 3D-DDA: calls `cell` with the table index and position of each cell the ray crosses inside the
+    /// box `(lo, hi)`, in order, until `cell` returns true, the walk leaves the lattice, or the
+    /// next cell starts beyond `cap()`.
+    #[inline(always)]
+    pub fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        (lo, hi): (Vec3, Vec3),
+        c: &mut C,
+        mut cell: impl FnMut(usize, [u32; 3], &mut C) -> bool,
+        cap: impl Fn() -> f32,
+    ) {
+        let Some((tn, _)) = box_interval(ray, lo, hi, ray.tmax) else {
+            return;
+        };
+        // The entry point. Where the direction is infinite on an axis and the distance zero,
+        // their product is NaN and the point's coordinate is the origin's.
+        let t0 = tn.max(ray.tmin);
+        let p: [f32; 3] = std::array::from_fn(|a| {
+            let s = ray.dir[a] * t0;
+            if s.is_nan() {
+                ray.origin[a]
+            } else {
+                ray.origin[a] + s
+            }
+        });
+        let mut idx = [0u32; 3];
+        let mut step = [0i32; 3];
+        for a in 0..3 {
+            idx[a] = self.cell_of(a, p[a]);
+            step[a] = if ray.dir[a] > 0.0 {
+                1
+            } else if ray.dir[a] < 0.0 {
+                -1
+            } else {
+                0
+            };
+        }
+        // Distance along the ray to the next cell boundary on each axis.
+        let exit = |a: usize, i: u32, s: i32| -> f32 {
+            if s == 0 {
+                return f32::INFINITY;
+            }
+            let face = if s > 0 { i + 1 } else { i };
+            let x = self.min[a] + face as f32 * self.cell_size[a];
+            (x - ray.origin[a]) * ray.inv_dir[a]
+        };
+        let mut t_next = [
+            exit(0, idx[0], step[0]),
+            exit(1, idx[1], step[1]),
+            exit(2, idx[2], step[2]),
+        ];
+        loop {
+            c.node();
+            if cell(self.cell_index(idx[0], idx[1], idx[2]), idx, c) {
+                return;
+            }
+            let a = if t_next[0] <= t_next[1] && t_next[0] <= t_next[2] {
+                0
+            } else if t_next[1] <= t_next[2] {
+                1
+            } else {
+                2
+            };
+            let t_exit = t_next[a];
+            // The walk ends once the next cell starts beyond the best hit, or the ray does not
+            // move at all.
+            let next_may_help = lower(t_exit) <= cap();
+            if !next_may_help || step[a] == 0 {
+                return;
+            }
+            if step[a] > 0 {
+                if idx[a] + 1 >= self.res[a] {
+                    return;
+                }
+                idx[a] += 1;
+            } else {
+                if idx[a] == 0 {
+                    return;
+                }
+                idx[a] -= 1;
+            }
+            t_next[a] = exit(a, idx[a], step[a]);
+        }
+    }
+}
+
 /// `n` copies of `x` in storage asked to be backed by huge pages
 /// ([`crate::simd::reserve_huge`]): the build's tables are large and written in scattered
 /// order, and rays read the cell lists in random order; with 4 KiB pages most of the build's
@@ -478,7 +578,7 @@ fn huge_vec<T: Clone>(n: usize, x: T) -> Vec<T> {
 
 /// Cells per axis for about `target` cells over `bounds`, proportional to its sides (flat or
 /// unbounded sides get one cell).
-fn resolution(bounds: &Aabb, target: f64) -> [u32; 3] {
+pub(super) fn resolution(bounds: &Aabb, target: f64) -> [u32; 3] {
     let e = bounds.extent();
     let sides: Vec<f64> = (0..3)
         .map(|a| f64::from(e[a]))

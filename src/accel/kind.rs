@@ -1,6 +1,9 @@
 //! The structures by name, as `build-bench --methods` and the tests know them.
 
-use super::{Accel, Bih, BihParams, Grid, GridParams, KdParams, KdTree, Octree, OctreeParams};
+use super::{
+    Accel, Bih, BihParams, Grid, Grid2, Grid2Params, GridParams, KdParams, KdTree, Octree,
+    OctreeParams,
+};
 use crate::geom::TriMesh;
 use std::fmt;
 use std::str::FromStr;
@@ -16,17 +19,20 @@ pub enum AccelKind {
     Bih,
     /// Uniform grid with `λ N` cells (`grid`, or `gridL` for another `λ`, e.g. `grid4`).
     Grid(f32),
+    /// Two-level grid (`grid2`).
+    Grid2,
     /// Octree (`octree`).
     Octree,
 }
 
 impl AccelKind {
     /// Every structure with its default settings.
-    pub const ALL: [AccelKind; 5] = [
+    pub const ALL: [AccelKind; 6] = [
         AccelKind::KdTree,
         AccelKind::KdTreeNaive,
         AccelKind::Bih,
         AccelKind::Grid(GridParams::DEFAULT_DENSITY),
+        AccelKind::Grid2,
         AccelKind::Octree,
     ];
 
@@ -47,6 +53,7 @@ impl AccelKind {
                     ..GridParams::default()
                 },
             )),
+            AccelKind::Grid2 => Box::new(Grid2::build(mesh, &Grid2Params::default())),
             AccelKind::Octree => Box::new(Octree::build(mesh, &OctreeParams::default())),
         }
     }
@@ -66,6 +73,7 @@ impl fmt::Display for AccelKind {
             AccelKind::Bih => f.write_str("bih"),
             AccelKind::Grid(d) if *d == GridParams::DEFAULT_DENSITY => f.write_str("grid"),
             AccelKind::Grid(d) => write!(f, "grid{d}"),
+            AccelKind::Grid2 => f.write_str("grid2"),
             AccelKind::Octree => f.write_str("octree"),
         }
     }
@@ -80,6 +88,7 @@ impl FromStr for AccelKind {
             "kdtree-naive" => AccelKind::KdTreeNaive,
             "bih" => AccelKind::Bih,
             "grid" => AccelKind::Grid(GridParams::DEFAULT_DENSITY),
+            "grid2" => AccelKind::Grid2,
             "octree" => AccelKind::Octree,
             _ => {
                 let density = s
@@ -89,7 +98,7 @@ impl FromStr for AccelKind {
                     .ok_or_else(|| {
                         format!(
                             "unknown structure {s:?}: kdtree, kdtree-naive, bih, grid, gridL \
-                             (L from {} to {} cells per triangle), octree",
+                             (L from {} to {} cells per triangle), grid2, octree",
                             GridParams::MIN_DENSITY,
                             GridParams::MAX_DENSITY
                         )

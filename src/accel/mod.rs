@@ -1,6 +1,7 @@
 //! The course's other acceleration structures, side by side with the BVH: the kd-tree (SAH,
 //! built in O(N log N) by Wald & Havran 2006, and naively), the bounding interval hierarchy
-//! (Wächter & Keller 2006), the uniform grid (3D-DDA, Amanatides & Woo 1987) and the octree.
+//! (Wächter & Keller 2006), the uniform grid (3D-DDA, Amanatides & Woo 1987), the two-level grid
+//! (a uniform grid of uniform grids, Jevans & Wyvill 1989) and the octree.
 //!
 //! Every structure offers the same [`Accel`] interface (closest hit, any hit, counted variants,
 //! `validate`, memory), so benchmarks and tests treat them alike and a new structure is one
@@ -13,6 +14,7 @@
 mod bih;
 mod bvh;
 mod grid;
+mod grid2;
 mod interval;
 mod kdtree;
 mod kind;
@@ -22,6 +24,7 @@ mod triangles;
 
 pub use bih::{Bih, BihParams};
 pub use grid::{Grid, GridParams};
+pub use grid2::{Grid2, Grid2Params};
 pub use kdtree::{KdBuild, KdParams, KdTree, MAX_KD_DEPTH};
 pub use kind::AccelKind;
 pub use octree::{MAX_OCTREE_DEPTH, Octree, OctreeParams};
