@@ -45,12 +45,12 @@ pub struct AccelBenchArgs {
           value_parser = clap::value_parser!(u64).range(1..=args::MAX_TIMELINE))]
     frames: u64,
     /// Structures, comma separated: bvh (binned SAH, refitted), bvh-rebuild, bih (refitted),
-    /// bih-rebuild, kdtree, kdtree-naive, grid, gridL (L cells per triangle), octree (the last
-    /// four rebuilt every frame).
+    /// bih-rebuild, kdtree, kdtree-naive, grid, gridL (L cells per triangle), grid2 (two
+    /// levels), octree (the last five rebuilt every frame).
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "bvh,bih,kdtree,grid,octree"
+        default_value = "bvh,bih,kdtree,grid,grid2,octree"
     )]
     structures: Vec<Structure>,
     /// Rays per frame, comma separated, each traced every frame (k = 1024, m = 2^20): camera
@@ -141,7 +141,7 @@ impl FromStr for Structure {
             other => Structure::Rebuilt(other.parse::<AccelKind>().map_err(|_| {
                 format!(
                     "unknown structure {other:?}: bvh, bvh-rebuild, bih, bih-rebuild, kdtree, \
-                     kdtree-naive, grid, gridL (L cells per triangle), octree"
+                     kdtree-naive, grid, gridL (L cells per triangle), grid2, octree"
                 )
             })?),
         })

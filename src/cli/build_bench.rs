@@ -56,7 +56,7 @@ pub struct BuildBenchArgs {
     /// optionally followed by +opt (then optimised: three passes over a fifth of the interior
     /// nodes, or +optSHARE[xPASSES]), and
     /// the other structures: kdtree, kdtree-naive, bih, grid (gridL: L cells per triangle),
-    /// octree.
+    /// grid2 (two levels), octree.
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Builds per method; the median is reported.
@@ -112,7 +112,7 @@ fn parse_build(s: &str) -> Result<BuildParams> {
             let rest = s.strip_prefix("binned").with_context(|| {
                 format!(
                     "unknown method {s:?}: median, sweep, binnedK, binnedK-widest (each with \
-                     an optional +opt), kdtree, kdtree-naive, bih, grid, gridL, octree"
+                     an optional +opt), kdtree, kdtree-naive, bih, grid, gridL, grid2, octree"
                 )
             })?;
             let (k, widest) = match rest.strip_suffix("-widest") {

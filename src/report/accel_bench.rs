@@ -1,4 +1,4 @@
-//! `build-bench --methods kdtree,kdtree-naive,bih,grid,octree`: the course's other structures
+//! `build-bench --methods kdtree,kdtree-naive,bih,grid,grid2,octree`: the course's other structures
 //! measured as the BVH builders are (build time, size, single-ray closest and any hit, agreement
 //! with brute force), in the same rows, and their build time against trace time per ray.
 
