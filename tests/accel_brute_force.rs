@@ -1,8 +1,9 @@
-//! The course's other structures (kd-tree with both builders, BIH, grid, octree) against brute
-//! force: closest hit (same distance; another triangle only at a tie) and any hit on every ray
-//! set, on every frame of the shipped animations and of the animated glTF samples (rebuilt each
-//! frame, and the BIH also refitted from the first frame), on rays along the axes, through the
-//! vertices and edges of closed meshes, lying in split planes, and on degenerate inputs.
+//! The course's other structures (kd-tree with both builders, BIH, grid, two-level grid,
+//! octree) against brute force: closest hit (same distance; another triangle only at a tie) and
+//! any hit on every ray set, on every frame of the shipped animations and of the animated glTF
+//! samples (rebuilt each frame, and the BIH also refitted from the first frame), on rays along
+//! the axes, through the vertices and edges of closed meshes, lying in split planes, on
+//! degenerate inputs, and at extreme scales and far from the origin (with the BVH beside them).
 //! `validate` runs after every build and refit.
 
 mod common;
@@ -13,10 +14,11 @@ use dynbvh::accel::{
     OctreeParams,
 };
 use dynbvh::anim::Scene;
-use dynbvh::bvh::{brute_force_any, brute_force_closest};
-use dynbvh::geom::{Ray, TriMesh, shapes};
+use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
+use dynbvh::engine::{Engine, EngineConfig};
+use dynbvh::geom::{Hit, Ray, TriMesh, shapes};
 use dynbvh::report::rays::{camera_rays, random_rays};
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 use std::path::{Path, PathBuf};
 
 /// Every structure, with the defaults and with settings that take their rarer paths.
@@ -190,6 +192,60 @@ fn spheres_and_soups_match_brute_force() {
     }
     let hostile = common::soup_with_nan_and_inf();
     check_all("NaN and inf soup", &hostile, &ray_sets(&hostile, 300, 3));
+}
+
+/// Floats fail at extreme scales: a sphere and a soup shrunk to 1e-10 and grown to 1e10 (every
+/// area, product and plane distance far from 1; the triangle test multiplies three coordinates,
+/// which leaves f32's range beyond about 1e±12), and moved 30,000 units from the origin, where
+/// a coordinate's last place (about 0.002) is a few per cent of a triangle's edge, and 300,000,
+/// where it is half an edge. The BVH beside them, binary and in the engine (8-wide).
+#[test]
+fn extreme_scales_and_far_offsets_match_brute_force() {
+    let sphere = shapes::bumpy_sphere(5000);
+    let soup = TriMesh::from_soup(&Rng(11).soup(1500, 0.03));
+    for (at, scale, offset) in [
+        ("1e-10", 1e-10, Vec3::ZERO),
+        ("1e10", 1e10, Vec3::ZERO),
+        ("an offset of 3e4", 1.0, Vec3::new(3e4, -2e4, 1e4)),
+        ("an offset of 3e5", 1.0, Vec3::new(3e5, -2e5, 1e5)),
+    ] {
+        for (name, m) in [("sphere", &sphere), ("soup", &soup)] {
+            let moved = TriMesh::new(
+                m.positions.iter().map(|p| *p * scale + offset).collect(),
+                m.indices.clone(),
+            );
+            let rays = ray_sets(&moved, 200, 12);
+            let what = format!("{name} at {at}");
+            let hits = check_all(&what, &moved, &rays);
+            let n = hits.iter().filter(|(c, _)| c.is_some()).count();
+            let bvh = MeshBvh::build(&moved, &BuildParams::BINNED);
+            bvh.validate(&moved).unwrap();
+            let mut bad = compare(&what, &moved, &bvh, &rays, &hits);
+            let mut engine = Engine::new(EngineConfig::default());
+            let id = engine.add_mesh(moved.positions.clone(), moved.indices.clone());
+            engine.add_instance(id, Affine3A::IDENTITY);
+            engine.update();
+            for (i, (r, &(closest, any))) in rays.iter().zip(&hits).enumerate() {
+                let got = engine.closest_hit(r).map(|h| Hit {
+                    t: h.t,
+                    u: h.u,
+                    v: h.v,
+                    prim: h.prim,
+                });
+                if !same_closest(&moved, r, closest, got) || engine.any_hit(r) != any {
+                    bad.push(format!(
+                        "{what} engine: ray {i}: brute force {closest:?}, {got:?}"
+                    ));
+                }
+            }
+            assert!(bad.is_empty(), "{}", bad.join("\n"));
+            assert!(
+                n > rays.len() / 10,
+                "{name} at {at}: {n} of {} rays hit",
+                rays.len()
+            );
+        }
+    }
 }
 
 /// A closed box made of unit quads on the integer lattice: its edges, vertices and the split
