@@ -194,9 +194,9 @@ fn spheres_and_soups_match_brute_force() {
     check_all("NaN and inf soup", &hostile, &ray_sets(&hostile, 300, 3));
 }
 
-/// Floats fail at extreme scales: a sphere and a soup shrunk to 1e-10 and grown to 1e10 (every
-/// area, product and plane distance far from 1; the triangle test multiplies three coordinates,
-/// which leaves f32's range beyond about 1e±12), and moved 30,000 units from the origin, where
+/// Floats fail at extreme scales: a sphere and a soup shrunk to 1e-16 and 1e-10 and grown to
+/// 1e10 (every area, product and plane distance far from 1; the triangle test's scaled distance
+/// is a cube of the coordinates, which underflows f32 below about 1e-13), and moved 30,000 units from the origin, where
 /// a coordinate's last place (about 0.002) is a few per cent of a triangle's edge, and 300,000,
 /// where it is half an edge. The BVH beside them, binary and in the engine (8-wide).
 #[test]
@@ -204,6 +204,7 @@ fn extreme_scales_and_far_offsets_match_brute_force() {
     let sphere = shapes::bumpy_sphere(5000);
     let soup = TriMesh::from_soup(&Rng(11).soup(1500, 0.03));
     for (at, scale, offset) in [
+        ("1e-16", 1e-16, Vec3::ZERO),
         ("1e-10", 1e-10, Vec3::ZERO),
         ("1e10", 1e10, Vec3::ZERO),
         ("an offset of 3e4", 1.0, Vec3::new(3e4, -2e4, 1e4)),

@@ -100,11 +100,12 @@ pub fn intersect_triangle(
     // The range test uses the divided t, the very value reported, so that which of two nearly
     // equal hits is the closest never depends on the order they were tested in.
     let rcp = 1.0 / det;
-    let t = if t_scaled.is_finite() {
+    let t = if scaled_t_in_range(t_scaled) {
         t_scaled * rcp
     } else {
-        // The scaled distance is a cube of the coordinates: past about 7e12 it overflows f32
-        // although the distance does not. Redone in f64, where it cannot.
+        // The scaled distance is a cube of the coordinates: past about 7e12 it overflows f32,
+        // below about 1e-13 it underflows (to a subnormal of a few bits, or to 0: a hit at
+        // the origin), although the distance does neither. Redone in f64, where it cannot.
         scaled_t_f64(u, v, w, det, [az, bz, cz])
     };
     if !(t >= ray.tmin && t < tmax) {
@@ -113,8 +114,18 @@ pub fn intersect_triangle(
     Some((t, v * rcp, w * rcp))
 }
 
+/// True when a scaled distance is a normal f32 (neither overflowed nor underflowed): else the
+/// distance is redone by [`scaled_t_f64`]. Exactly 0 is redone too (it costs a hit through the
+/// ray's origin a slower path, and a product that underflowed to 0 reports the true distance).
+#[inline(always)]
+pub(crate) fn scaled_t_in_range(t_scaled: f32) -> bool {
+    let a = t_scaled.abs();
+    (f32::MIN_POSITIVE..f32::INFINITY).contains(&a)
+}
+
 /// `(u az + v bz + w cz) / det` in f64, rounded to f32 once: the distance of a hit whose
-/// scaled distance overflows f32 (coordinates of the order of 1e13 and more).
+/// scaled distance overflows or underflows f32 (coordinates of the order of 1e13 and more, or
+/// 1e-13 and less).
 #[cold]
 #[inline(never)]
 pub(crate) fn scaled_t_f64(u: f32, v: f32, w: f32, det: f32, z: [f32; 3]) -> f32 {
@@ -150,8 +161,9 @@ mod tests {
     #[test]
     fn far_and_huge_triangles_report_their_distance() {
         // At 1e15 the scaled distance (a cube of the coordinates) overflows f32; at 1e-10 it
-        // is of the order of 1e-30. Both report the distance.
-        for s in [1e-10f32, 1.0, 1e13, 1e15, 1e18] {
+        // is of the order of 1e-30, at 1e-13 a subnormal, at 1e-15 it underflows to 0. All
+        // report the distance.
+        for s in [1e-17f32, 1e-15, 1e-13, 1e-10, 1.0, 1e13, 1e15, 1e18] {
             let tri = [Vec3::ZERO, Vec3::X * s, Vec3::Y * s];
             let (t, u, v) = hit(Vec3::new(0.25, 0.25, 3.0) * s, -Vec3::Z, tri).unwrap();
             assert!((t / (3.0 * s) - 1.0).abs() < 1e-6, "scale {s}: t = {t}");
