@@ -1,7 +1,7 @@
-//! The same mesh at scales from 1e-10 to 1e15, rendered through `dynbvh render` as a user runs
+//! The same mesh at scales from 1e-15 to 1e15, rendered through `dynbvh render` as a user runs
 //! it: the object must cover the same share of the picture, lit the same, at every scale,
 //! whether the scale is in the vertices themselves (world coordinates of 1e15: the watertight
-//! test's scaled distance overflows f32 there) or in the node's transform.
+//! test's scaled distance overflows f32 there; at 1e-15 it underflows) or in the node's transform.
 
 mod anim_util;
 mod cli_util;
@@ -11,7 +11,7 @@ use dynbvh::geom::shapes;
 use serde_json::json;
 use std::path::Path;
 
-const SCALES: [f32; 6] = [1e-10, 1e-5, 1.0, 1e5, 1e10, 1e15];
+const SCALES: [f32; 7] = [1e-15, 1e-10, 1e-5, 1.0, 1e5, 1e10, 1e15];
 
 /// A glTF file of a sphere with a dent (so that shading shows its shape), of radius `scale`
 /// in its vertices (`in_node` false) or of radius 1 under a node scaled by `scale`, with a
@@ -108,7 +108,7 @@ fn object_pixels(file: &str, out: &Path) -> (usize, f64) {
 }
 
 #[test]
-fn the_same_mesh_renders_alike_from_1e_minus_10_to_1e15() {
+fn the_same_mesh_renders_alike_from_1e_minus_15_to_1e15() {
     let d = tmp_dir("scale", "sweep");
     for in_node in [false, true] {
         let (unit, unit_light) = object_pixels(&sphere_file(&d, 1.0, in_node), &d.join("unit"));
