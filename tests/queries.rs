@@ -226,6 +226,34 @@ fn mesh_queries_match_brute_force_every_frame() {
     }
 }
 
+/// The same queries on a sphere shrunk to 1e-10 and grown to 1e10 (squared distances far from
+/// 1), and moved 30,000 and 300,000 units from the origin, where a coordinate's last place is a
+/// few per cent and half of a triangle's edge.
+#[test]
+fn mesh_queries_match_brute_force_at_extreme_scales() {
+    let sphere = dynbvh::geom::shapes::bumpy_sphere(3000);
+    for (at, scale, offset) in [
+        ("1e-10", 1e-10, Vec3::ZERO),
+        ("1e10", 1e10, Vec3::ZERO),
+        ("an offset of 3e4", 1.0, Vec3::new(3e4, -2e4, 1e4)),
+        ("an offset of 3e5", 1.0, Vec3::new(3e5, -2e5, 1e5)),
+    ] {
+        let mesh = TriMesh::new(
+            sphere
+                .positions
+                .iter()
+                .map(|p| *p * scale + offset)
+                .collect(),
+            sphere.indices.clone(),
+        );
+        let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+        let mut probe = Probe(11);
+        check_mesh_queries(&mesh, &bvh, &mut probe, &format!("sphere at {at}"));
+        let wide = MeshBvh8::from_mesh_bvh(&bvh);
+        check_wide_queries(&mesh, &wide, &mut probe, &format!("sphere at {at}, wide"));
+    }
+}
+
 /// Every live instance's world triangles as the engine holds them: `(instance, triangle,
 /// corners)`.
 fn world_triangles(e: &Engine) -> Vec<(InstanceId, u32, [Vec3; 3])> {
