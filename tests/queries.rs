@@ -576,7 +576,7 @@ fn closest_point_from_a_sphere_centre() {
 }
 
 /// The engine's queries with one instance placed by the identity and others scaled (evenly,
-/// unevenly, tiny and far), sheared, turned and moved, under both traversals (the wide one
+/// unevenly, tiny and far), sheared, mirrored, turned and moved, under both traversals (the wide one
 /// searches placed meshes in their own space, the binary one carries its boxes into the
 /// world), against brute force over their world triangles.
 #[test]
@@ -618,8 +618,16 @@ fn engine_queries_on_placed_and_identity_instances() {
             Vec3::new(0.3, 1.4, -0.2),
         );
         e.add_instance(mesh, tiny);
+        // Mirrored (a negative determinant: the triangles' winding turns over).
+        let mirrored = Affine3A::from_scale_rotation_translation(
+            Vec3::new(-0.7, 0.9, 0.8),
+            dynbvh::glam::Quat::from_rotation_x(0.6),
+            Vec3::new(0.1, -0.3, 1.7),
+        );
+        let mirrored = e.add_instance(mesh, mirrored);
+        e.set_instance_mask(mirrored, 2);
         e.update();
-        check_engine_queries(&e, &mut Probe(5), &format!("five spheres, {traversal}"));
+        check_engine_queries(&e, &mut Probe(5), &format!("six spheres, {traversal}"));
         // Far from the origin, where the placed vertices' rounding is largest.
         let mut far = Engine::new(EngineConfig {
             traversal,
