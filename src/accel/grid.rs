@@ -7,9 +7,9 @@
 //! the other side of the exact one still meets every triangle near it.
 
 use super::Accel;
-use super::interval::{beyond, box_interval, lower};
-use super::mailbox::Mailbox;
-use super::triangles::{AnyHit, Closest, Triangles};
+use super::interval::{box_interval, lower};
+use super::mailbox::CellWalk;
+use super::triangles::Triangles;
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
 use glam::Vec3;
@@ -262,72 +262,6 @@ impl Grid {
         }
         self.starts = starts;
         self.refs = refs;
-    }
-
-    /// Walks the cells along the ray in order; `cell` tests one cell's triangles and returns
-    /// true to stop; `cap()` is the distance beyond which no cell can help (the best hit so far,
-    /// widened: `beyond` of it, set when the best changes).
-    #[inline(always)]
-    fn walk<C: Counters>(
-        &self,
-        ray: &Ray,
-        c: &mut C,
-        mut cell: impl FnMut(&[u32], &mut C) -> bool,
-        cap: impl Fn() -> f32,
-    ) {
-        if self.starts.is_empty() {
-            return;
-        }
-        self.lattice.walk(
-            ray,
-            (self.bounds.min, self.bounds.max),
-            c,
-            |ci, _, c| {
-                let refs = &self.refs[self.starts[ci] as usize..self.starts[ci + 1] as usize];
-                !refs.is_empty() && cell(refs, c)
-            },
-            cap,
-        );
-    }
-
-    fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let mut q = Closest::new(ray);
-        let cap = std::cell::Cell::new(beyond(q.tmax));
-        let mut mailbox = Mailbox::new();
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                for &p in refs {
-                    if !mailbox.seen(p) {
-                        q.test(&self.tris.tris[p as usize], p, c);
-                    }
-                }
-                cap.set(beyond(q.tmax));
-                false
-            },
-            || cap.get(),
-        );
-        q.hit
-    }
-
-    fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
-        let q = AnyHit::new(ray);
-        let cap = beyond(ray.tmax);
-        let mut mailbox = Mailbox::new();
-        let mut found = false;
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                found = refs
-                    .iter()
-                    .any(|&p| !mailbox.seen(p) && q.test(&self.tris.tris[p as usize], c));
-                found
-            },
-            || cap,
-        );
-        found
     }
 
     /// Cells per axis.
@@ -605,25 +539,57 @@ pub(super) fn resolution(bounds: &Aabb, target: f64) -> [u32; 3] {
     res
 }
 
+impl CellWalk for Grid {
+    fn triangles(&self) -> &Triangles {
+        &self.tris
+    }
+
+    /// Walks the cells along the ray in order; `cell` tests one cell's triangles and returns
+    /// true to stop; `cap()` is the distance beyond which no cell can help (the best hit so far,
+    /// widened: `beyond` of it, set when the best changes).
+    #[inline(always)]
+    fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        c: &mut C,
+        mut cell: impl FnMut(&[u32], &mut C) -> bool,
+        cap: impl Fn() -> f32,
+    ) {
+        if self.starts.is_empty() {
+            return;
+        }
+        self.lattice.walk(
+            ray,
+            (self.bounds.min, self.bounds.max),
+            c,
+            |ci, _, c| {
+                let refs = &self.refs[self.starts[ci] as usize..self.starts[ci + 1] as usize];
+                !refs.is_empty() && cell(refs, c)
+            },
+            cap,
+        );
+    }
+}
+
 impl Accel for Grid {
     fn name(&self) -> String {
         "grid".into()
     }
 
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        self.closest(ray, &mut ())
+        self.closest_in_cells(ray, &mut ())
     }
 
     fn any_hit(&self, ray: &Ray) -> bool {
-        self.any(ray, &mut ())
+        self.any_in_cells(ray, &mut ())
     }
 
     fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
-        self.closest(ray, stats)
+        self.closest_in_cells(ray, stats)
     }
 
     fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
-        self.any(ray, stats)
+        self.any_in_cells(ray, stats)
     }
 
     fn validate(&self, mesh: &TriMesh) -> Result<(), String> {

@@ -9,9 +9,8 @@
 
 use super::Accel;
 use super::grid::{Grid, GridParams, Lattice, MAX_REFS_PER_TRIANGLE, resolution};
-use super::interval::beyond;
-use super::mailbox::Mailbox;
-use super::triangles::{AnyHit, Closest, Triangles};
+use super::mailbox::CellWalk;
+use super::triangles::Triangles;
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
 use glam::Vec3;
@@ -178,89 +177,6 @@ impl Grid2 {
         (sub, (b.min - self.margin, b.max + self.margin))
     }
 
-    /// Walks the top cells along the ray and, in each non-empty one, its grid's cells, in
-    /// order; `cell` tests one cell's triangles and returns true to stop; `cap()` as in
-    /// [`Grid`]'s walk.
-    #[inline(always)]
-    fn walk<C: Counters>(
-        &self,
-        ray: &Ray,
-        c: &mut C,
-        mut cell: impl FnMut(&[u32], &mut C) -> bool,
-        cap: impl Fn() -> f32,
-    ) {
-        if self.cells.is_empty() {
-            return;
-        }
-        self.top.walk(
-            ray,
-            (self.bounds.min, self.bounds.max),
-            c,
-            |ci, idx, c| {
-                let tc = self.cells[ci];
-                if tc.res[0] == 0 {
-                    return false;
-                }
-                let (sub, clip) = self.sub(idx, tc);
-                let mut stop = false;
-                sub.walk(
-                    ray,
-                    clip,
-                    c,
-                    |k, _, c| {
-                        let k = tc.first as usize + k;
-                        let refs = &self.refs[self.starts[k] as usize..self.starts[k + 1] as usize];
-                        stop = !refs.is_empty() && cell(refs, c);
-                        stop
-                    },
-                    &cap,
-                );
-                stop
-            },
-            &cap,
-        );
-    }
-
-    fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let mut q = Closest::new(ray);
-        let cap = std::cell::Cell::new(beyond(q.tmax));
-        let mut mailbox = Mailbox::new();
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                for &p in refs {
-                    if !mailbox.seen(p) {
-                        q.test(&self.tris.tris[p as usize], p, c);
-                    }
-                }
-                cap.set(beyond(q.tmax));
-                false
-            },
-            || cap.get(),
-        );
-        q.hit
-    }
-
-    fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
-        let q = AnyHit::new(ray);
-        let cap = beyond(ray.tmax);
-        let mut mailbox = Mailbox::new();
-        let mut found = false;
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                found = refs
-                    .iter()
-                    .any(|&p| !mailbox.seen(p) && q.test(&self.tris.tris[p as usize], c));
-                found
-            },
-            || cap,
-        );
-        found
-    }
-
     /// Top cells per axis.
     #[must_use]
     pub fn resolution(&self) -> [u32; 3] {
@@ -370,25 +286,74 @@ fn for_each_cell(lattice: &Lattice, r: &[u32; 6], mut f: impl FnMut(usize)) {
     }
 }
 
+impl CellWalk for Grid2 {
+    fn triangles(&self) -> &Triangles {
+        &self.tris
+    }
+
+    /// Walks the top cells along the ray and, in each non-empty one, its grid's cells, in
+    /// order; `cell` tests one cell's triangles and returns true to stop; `cap()` as in
+    /// [`Grid`]'s walk.
+    #[inline(always)]
+    fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        c: &mut C,
+        mut cell: impl FnMut(&[u32], &mut C) -> bool,
+        cap: impl Fn() -> f32,
+    ) {
+        if self.cells.is_empty() {
+            return;
+        }
+        self.top.walk(
+            ray,
+            (self.bounds.min, self.bounds.max),
+            c,
+            |ci, idx, c| {
+                let tc = self.cells[ci];
+                if tc.res[0] == 0 {
+                    return false;
+                }
+                let (sub, clip) = self.sub(idx, tc);
+                let mut stop = false;
+                sub.walk(
+                    ray,
+                    clip,
+                    c,
+                    |k, _, c| {
+                        let k = tc.first as usize + k;
+                        let refs = &self.refs[self.starts[k] as usize..self.starts[k + 1] as usize];
+                        stop = !refs.is_empty() && cell(refs, c);
+                        stop
+                    },
+                    &cap,
+                );
+                stop
+            },
+            &cap,
+        );
+    }
+}
+
 impl Accel for Grid2 {
     fn name(&self) -> String {
         "grid2".into()
     }
 
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        self.closest(ray, &mut ())
+        self.closest_in_cells(ray, &mut ())
     }
 
     fn any_hit(&self, ray: &Ray) -> bool {
-        self.any(ray, &mut ())
+        self.any_in_cells(ray, &mut ())
     }
 
     fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
-        self.closest(ray, stats)
+        self.closest_in_cells(ray, stats)
     }
 
     fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
-        self.any(ray, stats)
+        self.any_in_cells(ray, stats)
     }
 
     fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
@@ -414,6 +379,7 @@ impl Accel for Grid2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::triangles::Closest;
 
     /// A floor of two large triangles and, above one corner of it, a dense cluster of small
     /// ones: the uneven scene a uniform grid handles badly.

@@ -6,9 +6,9 @@
 //! pending children on a fixed stack.
 
 use super::Accel;
-use super::interval::{Crossing, beyond, box_interval, cross, lower_is_near, plane_distance};
-use super::mailbox::Mailbox;
-use super::triangles::{AnyHit, Closest, Triangles, bounds_of};
+use super::interval::{Crossing, box_interval, cross, lower_is_near, plane_distance};
+use super::mailbox::CellWalk;
+use super::triangles::{Triangles, bounds_of};
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
 use glam::Vec3;
@@ -289,84 +289,6 @@ impl Octree {
         }
     }
 
-    /// Visits the leaves along the ray, nearest first, calling `leaf` until it returns true;
-    /// `cap()` is the distance beyond which no node can help (the best hit so far, widened:
-    /// `beyond` of it, set when the best changes).
-    #[inline(always)]
-    fn walk<C: Counters>(
-        &self,
-        ray: &Ray,
-        c: &mut C,
-        mut leaf: impl FnMut(&[u32], &mut C) -> bool,
-        cap: impl Fn() -> f32,
-    ) {
-        if self.nodes.is_empty() {
-            return;
-        }
-        let Some((tn, tf)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
-            return;
-        };
-        let mut stack = [Pending::default(); STACK];
-        stack[0] = Pending { node: 0, tn, tf };
-        let mut sp = 1;
-        while sp > 0 {
-            sp -= 1;
-            let p = stack[sp];
-            if p.tn > cap() {
-                continue;
-            }
-            c.node();
-            let n = self.nodes[p.node as usize];
-            if n.is_leaf() {
-                if leaf(&self.refs[n.refs()], c) {
-                    return;
-                }
-            } else {
-                self.push_children(ray, &n, p.tn, p.tf, &mut stack, &mut sp);
-            }
-        }
-    }
-
-    fn closest<C: Counters>(&self, ray: &Ray, c: &mut C) -> Option<Hit> {
-        let mut q = Closest::new(ray);
-        let cap = std::cell::Cell::new(beyond(q.tmax));
-        let mut mailbox = Mailbox::new();
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                for &p in refs {
-                    if !mailbox.seen(p) {
-                        q.test(&self.tris.tris[p as usize], p, c);
-                    }
-                }
-                cap.set(beyond(q.tmax));
-                false
-            },
-            || cap.get(),
-        );
-        q.hit
-    }
-
-    fn any<C: Counters>(&self, ray: &Ray, c: &mut C) -> bool {
-        let q = AnyHit::new(ray);
-        let cap = beyond(ray.tmax);
-        let mut mailbox = Mailbox::new();
-        let mut found = false;
-        self.walk(
-            ray,
-            c,
-            |refs, c| {
-                found = refs
-                    .iter()
-                    .any(|&p| !mailbox.seen(p) && q.test(&self.tris.tris[p as usize], c));
-                found
-            },
-            || cap,
-        );
-        found
-    }
-
     fn check(&self, mesh: &TriMesh) -> Result<(), String> {
         self.tris.check(mesh)?;
         let boxes = self.tris.boxes();
@@ -426,25 +348,69 @@ impl Octree {
     }
 }
 
+impl CellWalk for Octree {
+    fn triangles(&self) -> &Triangles {
+        &self.tris
+    }
+
+    /// Visits the leaves along the ray, nearest first, calling `leaf` until it returns true;
+    /// `cap()` is the distance beyond which no node can help (the best hit so far, widened:
+    /// `beyond` of it, set when the best changes).
+    #[inline(always)]
+    fn walk<C: Counters>(
+        &self,
+        ray: &Ray,
+        c: &mut C,
+        mut leaf: impl FnMut(&[u32], &mut C) -> bool,
+        cap: impl Fn() -> f32,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let Some((tn, tf)) = box_interval(ray, self.bounds.min, self.bounds.max, ray.tmax) else {
+            return;
+        };
+        let mut stack = [Pending::default(); STACK];
+        stack[0] = Pending { node: 0, tn, tf };
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let p = stack[sp];
+            if p.tn > cap() {
+                continue;
+            }
+            c.node();
+            let n = self.nodes[p.node as usize];
+            if n.is_leaf() {
+                if leaf(&self.refs[n.refs()], c) {
+                    return;
+                }
+            } else {
+                self.push_children(ray, &n, p.tn, p.tf, &mut stack, &mut sp);
+            }
+        }
+    }
+}
+
 impl Accel for Octree {
     fn name(&self) -> String {
         "octree".into()
     }
 
     fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        self.closest(ray, &mut ())
+        self.closest_in_cells(ray, &mut ())
     }
 
     fn any_hit(&self, ray: &Ray) -> bool {
-        self.any(ray, &mut ())
+        self.any_in_cells(ray, &mut ())
     }
 
     fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
-        self.closest(ray, stats)
+        self.closest_in_cells(ray, stats)
     }
 
     fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
-        self.any(ray, stats)
+        self.any_in_cells(ray, stats)
     }
 
     fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
