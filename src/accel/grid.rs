@@ -8,7 +8,7 @@
 
 use super::Accel;
 use super::interval::{box_interval, lower};
-use super::mailbox::CellWalk;
+use super::mailbox::{CellWalk, cell_walk_queries};
 use super::triangles::Triangles;
 use crate::bvh::{Counters, TraversalStats};
 use crate::geom::{Aabb, Hit, Ray, TriMesh};
@@ -576,21 +576,7 @@ impl Accel for Grid {
         "grid".into()
     }
 
-    fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
-        self.closest_in_cells(ray, &mut ())
-    }
-
-    fn any_hit(&self, ray: &Ray) -> bool {
-        self.any_in_cells(ray, &mut ())
-    }
-
-    fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
-        self.closest_in_cells(ray, stats)
-    }
-
-    fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
-        self.any_in_cells(ray, stats)
-    }
+    cell_walk_queries!();
 
     fn validate(&self, mesh: &TriMesh) -> Result<(), String> {
         self.check(mesh)

@@ -104,6 +104,29 @@ pub(super) trait CellWalk {
     }
 }
 
+/// The ray queries of [`Accel`](super::Accel) (closest and any hit, plain and counted) for a
+/// [`CellWalk`], written inside its `impl Accel`.
+macro_rules! cell_walk_queries {
+    () => {
+        fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
+            self.closest_in_cells(ray, &mut ())
+        }
+
+        fn any_hit(&self, ray: &Ray) -> bool {
+            self.any_in_cells(ray, &mut ())
+        }
+
+        fn closest_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> Option<Hit> {
+            self.closest_in_cells(ray, stats)
+        }
+
+        fn any_hit_counted(&self, ray: &Ray, stats: &mut TraversalStats) -> bool {
+            self.any_in_cells(ray, stats)
+        }
+    };
+}
+pub(super) use cell_walk_queries;
+
 #[cfg(test)]
 mod tests {
     use super::*;
