@@ -4,7 +4,7 @@
 //! the frames and the policies' rules decide.
 
 mod cli_util;
-use cli_util::{animation, dynbvh};
+use cli_util::{animation, dynbvh, ok};
 use serde_json::Value;
 
 /// Runs `bench` on an animation with `extra` arguments, `--out` a fresh folder and `--json`;
@@ -344,4 +344,58 @@ fn values_not_computed_print_as_a_dash() {
         assert_eq!(cells[cells.len() - 2..], ["\u{2013}", "\u{2013}"], "{row}");
     }
     assert!(!stdout.contains(" 0.000 "), "{stdout}");
+}
+
+/// `build-bench --methods clip-aware[K]` on an animation: a tree built over K poses of the
+/// clip, exact at rest like every other builder, and a different tree from the plain build;
+/// a file without an animation, or a bad pose count, is a clear error.
+#[test]
+fn build_bench_builds_clip_aware_trees_of_an_animation() {
+    let path = animation("tube.glb");
+    let args = [
+        "build-bench",
+        path.as_str(),
+        "--methods",
+        "binned16,clip-aware,clip-aware2",
+        "--runs",
+        "1",
+        "--no-wide",
+        "--ray-budget",
+        "4096",
+        "--json",
+    ];
+    let o = dynbvh(&args);
+    let rows: Value = serde_json::from_slice(ok(&o).as_bytes()).expect("--json prints JSON");
+    let rows = rows.as_array().unwrap();
+    let sah = |method: &str| {
+        let mine: Vec<&Value> = rows.iter().filter(|r| r["method"] == method).collect();
+        assert_eq!(mine.len(), 2, "{method}: a row per ray set");
+        for r in &mine {
+            assert_eq!(r["mismatches"], 0, "{method}: {r}");
+            assert!(r["checked"].as_u64().unwrap() > 0, "{method}: {r}");
+        }
+        mine[0]["sah"].as_f64().unwrap()
+    };
+    let plain = sah("binned16");
+    assert_ne!(
+        sah("clip-aware4"),
+        plain,
+        "the clip's poses change the tree"
+    );
+    sah("clip-aware2");
+    let dir = cli_util::tmp_dir("bench", "clip_aware");
+    let obj = dir.join("one.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    for (file, method, says) in [
+        (
+            obj.to_string_lossy().into_owned(),
+            "clip-aware",
+            "needs an animated glTF",
+        ),
+        (path.clone(), "clip-aware9", "from 1 to 8"),
+    ] {
+        let o = dynbvh(&["build-bench", file.as_str(), "--methods", method]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{method}: {err}");
+    }
 }

@@ -4,6 +4,7 @@ use super::args::{self, MemoryLimit};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use dynbvh::accel::AccelKind;
+use dynbvh::bvh::build::clip::MAX_POSES;
 use dynbvh::bvh::optimize::OptimizeBudget;
 use dynbvh::bvh::{BuildParams, Method};
 use dynbvh::geom::{TriMesh, shapes};
@@ -56,7 +57,8 @@ pub struct BuildBenchArgs {
     /// optionally followed by +opt (then optimised: three passes over a fifth of the interior
     /// nodes, or +optSHARE[xPASSES]), and
     /// the other structures: kdtree, kdtree-naive, bih, grid (gridL: L cells per triangle),
-    /// grid2 (two levels), octree.
+    /// grid2 (two levels), octree; and, for an animated glTF file, clip-aware[K] (a binned
+    /// build over K poses of its first animation, default 4, the boxes of the file at rest).
     #[arg(long, value_delimiter = ',')]
     methods: Vec<String>,
     /// Builds per method; the median is reported.
@@ -101,6 +103,56 @@ fn parse_method(s: &str) -> Result<Builder> {
     Ok(Builder {
         params: parse_build(build)?,
         optimize: Some(optimize),
+        clip: None,
+    })
+}
+
+/// The `clip-aware[K]` method (`k` what follows the name): a binned build over `K` poses (4
+/// when not given) of the file's first animation, evenly spaced over one loop from its start;
+/// the tree's boxes are those of `mesh`, the file at rest.
+fn clip_aware(file: Option<&Path>, mesh: &TriMesh, k: &str) -> Result<Builder> {
+    let poses: usize = if k.is_empty() {
+        4
+    } else {
+        k.parse()
+            .ok()
+            .filter(|p| (1..=MAX_POSES).contains(p))
+            .with_context(|| {
+                format!("method clip-aware{k}: the poses must be a count from 1 to {MAX_POSES}")
+            })?
+    };
+    let path = file
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
+        })
+        .context("method clip-aware needs an animated glTF file")?;
+    let scene = super::load_scene(path, None)?;
+    let anim = args::animation_or_first(&scene, path, None)?.with_context(|| {
+        format!(
+            "{}: no animation, so no clip for method clip-aware",
+            path.display()
+        )
+    })?;
+    let duration = scene.animations[anim].duration;
+    let poses = (0..poses)
+        .map(|i| {
+            let m = scene.flatten_at(Some(anim), duration * i as f32 / poses as f32)?;
+            if m.positions.len() != mesh.positions.len() {
+                bail!(
+                    "{}: a pose of {} vertices, the mesh at rest has {}",
+                    path.display(),
+                    m.positions.len(),
+                    mesh.positions.len()
+                );
+            }
+            Ok(m.positions)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Builder {
+        params: BuildParams::BINNED,
+        optimize: None,
+        clip: Some(poses.into()),
     })
 }
 
@@ -199,6 +251,10 @@ pub fn run(args: BuildBenchArgs) -> Result<()> {
         let mut methods = Vec::new();
         let mut structures = Vec::new();
         for m in &args.methods {
+            if let Some(k) = m.strip_prefix("clip-aware") {
+                methods.push(clip_aware(args.file.as_deref(), &mesh, k)?);
+                continue;
+            }
             match m.parse::<AccelKind>() {
                 Ok(k) => structures.push(k),
                 Err(_) => methods.push(parse_method(m)?),

@@ -6,8 +6,10 @@ use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
 use crate::bvh::topology::RestructureWorkspace;
 use crate::bvh::{BuildParams, MeshBvh, TILE_H, brute_force_closest};
 use crate::geom::{Hit, TriMesh};
+use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// One row of the report: one builder on one ray set.
@@ -47,21 +49,28 @@ pub struct Row {
 }
 
 /// One builder of the comparison: a build, optionally followed by insertion-based
-/// optimisation ([`MeshBvh::optimize`]), its time counted in the build's.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// optimisation ([`MeshBvh::optimize`]), its time counted in the build's; or, with `clip`, a
+/// clip-aware build ([`MeshBvh::build_clip_aware`]) over those poses of the mesh's vertices,
+/// with the mesh's own positions for its boxes.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Builder {
     pub params: BuildParams,
     pub optimize: Option<OptimizeBudget>,
+    pub clip: Option<Arc<[Vec<Vec3>]>>,
 }
 
 impl Builder {
     /// The build's name, with `+opt` (and the budget when it is not [`Builder::OPTIMIZE`]).
     #[must_use]
     pub fn name(&self) -> String {
-        match self.optimize {
+        let build = match &self.clip {
+            Some(poses) => format!("clip-aware{}", poses.len()),
             None => self.params.name(),
-            Some(b) if b == Self::OPTIMIZE => format!("{}+opt", self.params.name()),
-            Some(b) => format!("{}+opt{}x{}", self.params.name(), b.share, b.passes),
+        };
+        match self.optimize {
+            None => build,
+            Some(b) if b == Self::OPTIMIZE => format!("{build}+opt"),
+            Some(b) => format!("{build}+opt{}x{}", b.share, b.passes),
         }
     }
 
@@ -75,7 +84,13 @@ impl Builder {
     /// Builds (and optimises) a tree over `mesh`.
     #[must_use]
     pub fn build(&self, mesh: &TriMesh) -> MeshBvh {
-        let mut bvh = MeshBvh::build(mesh, &self.params);
+        let mut bvh = match &self.clip {
+            Some(poses) => {
+                let poses: Vec<&[Vec3]> = poses.iter().map(Vec::as_slice).collect();
+                MeshBvh::build_clip_aware(&mesh.positions, &mesh.indices, &poses, &self.params)
+            }
+            None => MeshBvh::build(mesh, &self.params),
+        };
         if let Some(budget) = self.optimize {
             bvh.optimize(
                 budget,
@@ -92,6 +107,7 @@ impl From<BuildParams> for Builder {
         Self {
             params,
             optimize: None,
+            clip: None,
         }
     }
 }
