@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{Rng, rays_around, same_closest};
+use common::{Rng, mesh_hit, rays_around, same_closest};
 use dynbvh::accel::{
     Accel, AccelKind, Bih, BihParams, Grid, GridParams, KdBuild, KdParams, KdTree, Octree,
     OctreeParams,
@@ -16,7 +16,7 @@ use dynbvh::accel::{
 use dynbvh::anim::Scene;
 use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
 use dynbvh::engine::{Engine, EngineConfig};
-use dynbvh::geom::{Hit, Ray, TriMesh, shapes};
+use dynbvh::geom::{Ray, TriMesh, shapes};
 use dynbvh::report::rays::{camera_rays, random_rays};
 use glam::{Affine3A, Vec3};
 use std::path::{Path, PathBuf};
@@ -227,12 +227,7 @@ fn extreme_scales_and_far_offsets_match_brute_force() {
             engine.add_instance(id, Affine3A::IDENTITY);
             engine.update();
             for (i, (r, &(closest, any))) in rays.iter().zip(&hits).enumerate() {
-                let got = engine.closest_hit(r).map(|h| Hit {
-                    t: h.t,
-                    u: h.u,
-                    v: h.v,
-                    prim: h.prim,
-                });
+                let got = engine.closest_hit(r).map(mesh_hit);
                 if !same_closest(&moved, r, closest, got) || engine.any_hit(r) != any {
                     bad.push(format!(
                         "{what} engine: ray {i}: brute force {closest:?}, {got:?}"

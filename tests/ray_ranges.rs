@@ -5,11 +5,11 @@
 //! and the plain one), in packets, and for any hit.
 
 mod common;
-use common::same_closest;
+use common::{mesh_hit, same_closest};
 use dynbvh::accel::{Accel, AccelKind};
 use dynbvh::bvh::{BuildParams, MeshBvh, brute_force_any, brute_force_closest};
 use dynbvh::engine::{Engine, EngineConfig};
-use dynbvh::geom::{Hit, Ray, shapes};
+use dynbvh::geom::{Ray, shapes};
 use glam::{Affine3A, Vec3};
 
 #[test]
@@ -50,12 +50,7 @@ fn unusual_ranges_match_brute_force_everywhere() {
                     ));
                 }
             }
-            let got = engine.closest_hit(&r).map(|h| Hit {
-                t: h.t,
-                u: h.u,
-                v: h.v,
-                prim: h.prim,
-            });
+            let got = engine.closest_hit(&r).map(mesh_hit);
             if !same_closest(&mesh, &r, want, got) || engine.any_hit(&r) != any {
                 bad.push(format!(
                     "engine [{tmin},{tmax}) ray {i}: {want:?} vs {got:?}"
@@ -63,7 +58,8 @@ fn unusual_ranges_match_brute_force_everywhere() {
             }
         }
     }
-    // Batches and packets over the same rays.
+    // Batches and packets: a coherent set from one side (packets group neighbouring rays),
+    // ranges scaled to the sphere's distance from it.
     let mut rays = Vec::new();
     for i in 0..256 {
         let a = i as f32 * 0.37;
@@ -104,12 +100,7 @@ fn unusual_ranges_match_brute_force_everywhere() {
         }
         for (i, r) in rays.iter().enumerate() {
             let want = brute_force_closest(&mesh, r);
-            let got = out[i].map(|h| Hit {
-                t: h.t,
-                u: h.u,
-                v: h.v,
-                prim: h.prim,
-            });
+            let got = out[i].map(mesh_hit);
             if !same_closest(&mesh, r, want, got) {
                 bad.push(format!(
                     "batch pass {pass} ray {i} [{}, {}): {want:?} vs {got:?}",

@@ -103,9 +103,10 @@ pub fn intersect_triangle(
     let t = if scaled_t_in_range(t_scaled) {
         t_scaled * rcp
     } else {
-        // The scaled distance is a cube of the coordinates: past about 7e12 it overflows f32,
-        // below about 1e-13 it underflows (to a subnormal of a few bits, or to 0: a hit at
-        // the origin), although the distance does neither. Redone in f64, where it cannot.
+        // The scaled distance is a cube of the coordinates: for coordinates past the cube root
+        // of `f32::MAX` it overflows, below the cube root of the smallest normal f32 it
+        // underflows (to a subnormal of a few bits, or to 0: a hit at the origin), although the
+        // distance does neither. Redone in f64, where it cannot.
         scaled_t_f64(u, v, w, det, [az, bz, cz])
     };
     if !(t >= ray.tmin && t < tmax) {
@@ -124,8 +125,7 @@ pub(crate) fn scaled_t_in_range(t_scaled: f32) -> bool {
 }
 
 /// `(u az + v bz + w cz) / det` in f64, rounded to f32 once: the distance of a hit whose
-/// scaled distance overflows or underflows f32 (coordinates of the order of 1e13 and more, or
-/// 1e-13 and less).
+/// scaled distance overflows or underflows f32 ([`scaled_t_in_range`]).
 #[cold]
 #[inline(never)]
 pub(crate) fn scaled_t_f64(u: f32, v: f32, w: f32, det: f32, z: [f32; 3]) -> f32 {

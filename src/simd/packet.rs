@@ -171,9 +171,9 @@ impl RayLanes {
         let rcp = F::splat(1.0) / det;
         let t = t_scaled * rcp;
         let det_ok = det.simd_ne(zero) & det.is_finite();
-        // A scaled distance that overflows or underflows f32 (coordinates past about 7e12 or
-        // below 1e-13) gives no hit here (its `t` is not finite, or wrong); the scalar test
-        // redoes it in f64 (as `scaled_t_in_range` decides).
+        // A scaled distance that is not a normal f32 (overflowed or underflowed) gives no hit
+        // here (its `t` is not finite, or wrong); the scalar test redoes it in f64, as
+        // `scaled_t_in_range` decides.
         let a = t_scaled.abs();
         let normal = a.simd_ge(F::splat(f32::MIN_POSITIVE)) & a.simd_lt(F::splat(f32::INFINITY));
         let ok = det_ok & normal & t.simd_ge(self.tmin) & t.simd_lt(self.tmax);

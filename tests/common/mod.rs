@@ -4,6 +4,7 @@
 pub mod strategies;
 
 use dynbvh::bvh::{BuildParams, MAX_PACKET, MeshBvh, brute_force_any, brute_force_closest};
+use dynbvh::engine::SceneHit;
 use dynbvh::geom::{Hit, Ray, RayTriPrecomp, TriMesh, intersect_triangle};
 use glam::Vec3;
 
@@ -163,6 +164,17 @@ pub fn aimed(mesh: &TriMesh, from: Vec3) -> Vec<Ray> {
         .map(|&p| Ray::new(from, p - from))
         .filter(|r| r.dir().length() > 0.0)
         .collect()
+}
+
+/// An engine hit as the mesh-level hit [`same_closest`] compares (a one-instance scene placed
+/// by the identity: the same distance, barycentrics and triangle).
+pub fn mesh_hit(h: SceneHit) -> Hit {
+    Hit {
+        t: h.t,
+        u: h.u,
+        v: h.v,
+        prim: h.prim,
+    }
 }
 
 /// Closest hits compare as in `tests/bvh_props.rs`: the same distance, and the same triangle or

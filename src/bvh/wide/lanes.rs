@@ -449,8 +449,8 @@ pub(super) fn intersect4_all(b: &TriBlock, r: &TriLanes, tmax: f32) -> BlockHits
     let rcp = f32x4::splat(1.0) / det;
     let t = t_scaled * rcp;
     let in_range = (t.simd_ge(f32x4::splat(r.tmin)) & t.simd_lt(f32x4::splat(tmax))).to_bitmask();
-    // A scaled distance that overflows or underflows f32 (coordinates past about 7e12 or
-    // below 1e-13) is redone in f64 by the scalar test (as `scaled_t_in_range` decides).
+    // A scaled distance that is not a normal f32 (overflowed or underflowed) is redone in f64
+    // by the scalar test, as `scaled_t_in_range` decides.
     let a = t_scaled.abs();
     let normal =
         a.simd_ge(f32x4::splat(f32::MIN_POSITIVE)) & a.simd_lt(f32x4::splat(f32::INFINITY));
