@@ -4,7 +4,8 @@
 //! share of the frame's first pass its own clock gave the sampling (`FrameStats::sample_ms`
 //! over the pass's wall time):
 //!
-//! `cargo run --release --example prof_sample FILE.glb [frames] [passes]`
+//! `cargo run --release --example prof_sample FILE.glb [frames] [passes]` (`SIDE`: the camera
+//! image's side, default 128)
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{EngineConfig, FrameSource, Timing};
@@ -26,7 +27,8 @@ fn main() {
         timing: Timing::Priced,
         ..EngineConfig::default()
     });
-    let rays = camera_rays(&e.bounds(), 128, 128);
+    let side: usize = std::env::var("SIDE").map_or(128, |s| s.parse().unwrap());
+    let rays = camera_rays(&e.bounds(), side, side);
     let mut hits = vec![None; rays.len()];
     let (mut sampled, mut plain, mut shares) = (Vec::new(), Vec::new(), Vec::new());
     for f in 1..=src.frames() {

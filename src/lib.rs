@@ -90,6 +90,7 @@ pub mod engine;
 pub mod error;
 pub mod geom;
 pub mod io;
+pub mod parallel;
 pub mod render;
 pub mod report;
 mod simd;

@@ -15,6 +15,7 @@
 //! answer.
 
 use crate::geom::{Aabb, Ray};
+use crate::parallel::Probe;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -169,39 +170,45 @@ impl RayBatch {
         if self.parts.len() < parts {
             self.parts.resize_with(parts, RayOrder::default);
         }
-        self.parts[..parts]
-            .par_iter_mut()
-            .zip(rays.par_chunks(size))
-            .zip(out.par_chunks_mut(size))
-            .for_each(|((order, rays), out)| {
-                // Each part ordered as the batch was judged, not judged again.
-                let order = order.by_key(rays, scene);
-                for (j, &i) in order.iter().enumerate() {
-                    // The ray and its answer's slot a few rays ahead, anywhere in the part.
-                    if let Some(&next) = order.get(j + AHEAD) {
-                        crate::simd::prefetch_all(&rays[next as usize]);
-                        crate::simd::prefetch(&out[next as usize]);
-                    }
-                    out[i as usize] = f(&rays[i as usize]);
+        // A few rays spread over the batch, timed, decide whether the parts are worth the
+        // pool; the parts answer them again (a few dozen among thousands).
+        let split = Probe::run(rays.len(), |i| out[i] = f(&rays[i])).split();
+        let part = |((order, rays), out): ((&mut RayOrder, &[Ray]), &mut [T])| {
+            // Each part ordered as the batch was judged, not judged again.
+            let order = order.by_key(rays, scene);
+            for (j, &i) in order.iter().enumerate() {
+                // The ray and its answer's slot a few rays ahead, anywhere in the part.
+                if let Some(&next) = order.get(j + AHEAD) {
+                    crate::simd::prefetch_all(&rays[next as usize]);
+                    crate::simd::prefetch(&out[next as usize]);
                 }
-            });
+                out[i as usize] = f(&rays[i as usize]);
+            }
+        };
+        if split {
+            self.parts[..parts]
+                .par_iter_mut()
+                .zip(rays.par_chunks(size))
+                .zip(out.par_chunks_mut(size))
+                .for_each(part);
+        } else {
+            self.parts[..parts]
+                .iter_mut()
+                .zip(rays.chunks(size))
+                .zip(out.chunks_mut(size))
+                .for_each(part);
+        }
     }
 }
 
-/// `out[i] = f(&rays[i])` on the current rayon pool's threads, in the batch's own order, in
-/// runs small enough to keep the threads evenly busy.
+/// `out[i] = f(&rays[i])` in the batch's own order: on the current rayon pool's threads in runs
+/// small enough to keep them evenly busy, or on the calling thread when the batch is too small
+/// to be worth the pool ([`crate::parallel`]).
 ///
 /// # Panics
 /// When `out` and `rays` differ in length.
 pub fn as_they_come<T: Send>(rays: &[Ray], out: &mut [T], f: impl Fn(&Ray) -> T + Sync) {
-    assert_eq!(rays.len(), out.len(), "one output per ray");
-    out.par_chunks_mut(RUN)
-        .zip(rays.par_chunks(RUN))
-        .for_each(|(o, r)| {
-            for (o, r) in o.iter_mut().zip(r) {
-                *o = f(r);
-            }
-        });
+    crate::parallel::map(rays, out, RUN, f);
 }
 
 /// Digit `pass` of a key, from the least significant.

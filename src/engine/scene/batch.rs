@@ -14,6 +14,7 @@ use crate::bvh::MAX_PACKET;
 use crate::bvh::ray_order::{RayOrder, as_they_come};
 use crate::engine::ray_work::Query;
 use crate::geom::Ray;
+use crate::parallel::Probe;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -122,9 +123,35 @@ impl Engine {
         if RayOrder::reordered(rays, &self.bounds()) {
             batch(self, rays, out);
         } else {
-            out.par_chunks_mut(PACKET_CHUNK)
-                .zip(rays.par_chunks(PACKET_CHUNK))
-                .for_each(|(o, r)| packet(self, r, o));
+            // The packet in the middle of the batch (the first rays of an image are often
+            // its empty corner) on the calling thread, timed: whether the rest is worth the
+            // pool ([`crate::parallel`]). Chunks are whole packets, so the rest's pieces are.
+            let at = rays.len() / 2 / MAX_PACKET * MAX_PACKET;
+            let end = (at + MAX_PACKET).min(rays.len());
+            let probe = Probe::timed(end - at, rays.len(), || {
+                packet(self, &rays[at..end], &mut out[at..end]);
+            });
+            let chunk = |(c, (o, r)): (usize, (&mut [T], &[Ray]))| {
+                let base = c * PACKET_CHUNK;
+                if (base..base + r.len()).contains(&at) {
+                    let (lo, hi) = (at - base, end - base);
+                    packet(self, &r[..lo], &mut o[..lo]);
+                    packet(self, &r[hi..], &mut o[hi..]);
+                } else {
+                    packet(self, r, o);
+                }
+            };
+            if probe.split() {
+                out.par_chunks_mut(PACKET_CHUNK)
+                    .zip(rays.par_chunks(PACKET_CHUNK))
+                    .enumerate()
+                    .for_each(chunk);
+            } else {
+                out.chunks_mut(PACKET_CHUNK)
+                    .zip(rays.chunks(PACKET_CHUNK))
+                    .enumerate()
+                    .for_each(chunk);
+            }
         }
         self.traced(ms_since(t), rays, query)
     }

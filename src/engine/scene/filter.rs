@@ -9,7 +9,6 @@ use super::{Engine, InstanceId, MeshId, SceneHit};
 use crate::engine::ray_work::Query;
 use crate::geom::Ray;
 use glam::Vec3;
-use rayon::prelude::*;
 use std::time::Instant;
 
 /// Which instances a query sees: those whose mask shares a bit with `mask`, except `exclude`.
@@ -119,13 +118,9 @@ impl Engine {
     pub fn trace_any_filtered(&mut self, queries: &[(Ray, QueryFilter)], out: &mut [bool]) -> f64 {
         assert_eq!(queries.len(), out.len(), "one output per query");
         let t = Instant::now();
-        out.par_chunks_mut(super::RAY_CHUNK)
-            .zip(queries.par_chunks(super::RAY_CHUNK))
-            .for_each(|(o, q)| {
-                for (o, (r, f)) in o.iter_mut().zip(q) {
-                    *o = self.any_hit_filtered(r, f);
-                }
-            });
+        crate::parallel::map(queries, out, super::RAY_CHUNK, |(r, f)| {
+            self.any_hit_filtered(r, f)
+        });
         let ms = super::ms_since(t);
         self.record_trace(ms, queries.len() as u64);
         if !self.sample_scratch_is_needed() {

@@ -15,6 +15,7 @@ use crate::engine::ray_work::{
     MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate, splitmix,
 };
 use crate::geom::{Hit, Ray};
+use crate::parallel::Probe;
 use rayon::prelude::*;
 use std::sync::{Mutex, PoisonError};
 use std::time::Instant;
@@ -146,17 +147,23 @@ impl Engine {
         // Rays spanned by one task: about `RAY_CHUNK / 16` of them sampled.
         let span = RAY_CHUNK / 16 * plan.stride() as usize;
         let this = &*self;
-        (0..rays.len().div_ceil(span))
-            .into_par_iter()
-            .for_each(|c| {
-                let mut buf = TaskBuf::new(&log);
-                for j in plan.picks(c * span, (c + 1) * span) {
-                    let t = this.trace_recording(&rays[j], query, &mut |e| {
-                        buf.push(e);
-                    });
-                    buf.sums.add(t.work, t.top);
-                }
-            });
+        let task = |c: usize| {
+            let mut buf = TaskBuf::new(&log);
+            for j in plan.picks(c * span, (c + 1) * span) {
+                let t = this.trace_recording(&rays[j], query, &mut |e| {
+                    buf.push(e);
+                });
+                buf.sums.add(t.work, t.top);
+            }
+        };
+        // The first task on the calling thread, timed: whether the rest is worth the pool
+        // ([`crate::parallel`]).
+        let tasks = rays.len().div_ceil(span);
+        if Probe::run(tasks.min(1), task).split_rest(tasks.saturating_sub(1)) {
+            (1..tasks).into_par_iter().for_each(task);
+        } else {
+            (1..tasks).for_each(task);
+        }
         let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
         // Traced again in full: the sample costs its whole work.
         let model = self.config.prices.trace_ms(log.sums.work());
@@ -199,50 +206,77 @@ impl Engine {
         };
         let (before, log) = self.open_log();
         let this = &*self;
+        // The batch's first rays answered plainly on the calling thread, timed: whether the
+        // rest is worth the pool ([`crate::parallel`]). The first chunk does not answer them
+        // again (a sampled one among them is traced again, recorded).
+        let probe = Probe::run(rays.len(), |i| out[i] = plain(this, &rays[i]));
+        let probe_ns = probe.elapsed().0.as_nanos() as f64;
         // Chunks of up to four times the plain pass's, while each thread still gets four:
         // fewer task buffers to fill and merge, and more sampled rays back to back in each.
         let size =
             (rays.len() / (4 * rayon::current_num_threads())).clamp(RAY_CHUNK, 4 * RAY_CHUNK);
-        out.par_chunks_mut(size)
-            .zip(rays.par_chunks(size))
-            .enumerate()
-            .for_each(|(c, (o, chunk))| {
-                let base = c * size;
-                let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
-                let mut buf = TaskBuf::new(&log);
-                // The plain rays first, then the sampled ones back to back: a sampled ray's
-                // longer walk then runs in code and branch history that are warm, not once
-                // among every `stride` plain ones.
-                let start = Instant::now();
-                let mut skip = picks.clone();
-                let mut next = skip.next().unwrap_or(usize::MAX);
-                for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
-                    if j == next {
-                        next = skip.next().unwrap_or(usize::MAX);
-                        continue;
-                    }
-                    *o = plain(this, r);
+        let chunk_pass = |(c, (o, chunk)): (usize, (&mut [O], &[Ray]))| {
+            let base = c * size;
+            let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
+            let mut buf = TaskBuf::new(&log);
+            // The plain rays first, then the sampled ones back to back: a sampled ray's
+            // longer walk then runs in code and branch history that are warm, not once
+            // among every `stride` plain ones.
+            let start = Instant::now();
+            let mut skip = picks.clone();
+            let mut next = skip.next().unwrap_or(usize::MAX);
+            let mut taken = probe.taken(base, base + chunk.len());
+            let mut next_taken = taken.next().map_or(usize::MAX, |i| i - base);
+            let mut plain_n = 0;
+            for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
+                if j == next {
+                    next = skip.next().unwrap_or(usize::MAX);
+                    continue;
                 }
-                let mid = Instant::now();
-                let mut recorded_n = 0;
-                for j in picks {
-                    let t = this.trace_recording(&chunk[j], query, &mut |e| buf.push(e));
-                    buf.sums.add(t.work, t.top);
-                    o[j] = recorded(&t);
-                    recorded_n += 1;
+                if j == next_taken {
+                    next_taken = taken.next().map_or(usize::MAX, |i| i - base);
+                    continue;
                 }
-                let end = Instant::now();
-                let plain_ns = (mid - start).as_nanos() as f64;
-                let recorded_ns = (end - mid).as_nanos() as f64;
-                buf.clock.merge(&PassClock {
-                    recorded_ns,
-                    recorded: recorded_n,
-                    plain_ns,
-                    plain: (chunk.len() as u64).saturating_sub(recorded_n),
-                    pass_ns: plain_ns + recorded_ns,
-                });
+                *o = plain(this, r);
+                plain_n += 1;
+            }
+            let mid = Instant::now();
+            let mut recorded_n = 0;
+            for j in picks {
+                let t = this.trace_recording(&chunk[j], query, &mut |e| buf.push(e));
+                buf.sums.add(t.work, t.top);
+                o[j] = recorded(&t);
+                recorded_n += 1;
+            }
+            let end = Instant::now();
+            let plain_ns = (mid - start).as_nanos() as f64;
+            let recorded_ns = (end - mid).as_nanos() as f64;
+            buf.clock.merge(&PassClock {
+                recorded_ns,
+                recorded: recorded_n,
+                plain_ns,
+                plain: plain_n,
+                pass_ns: plain_ns + recorded_ns,
             });
-        let log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
+        };
+        if probe.split() {
+            out.par_chunks_mut(size)
+                .zip(rays.par_chunks(size))
+                .enumerate()
+                .for_each(chunk_pass);
+        } else {
+            out.chunks_mut(size)
+                .zip(rays.chunks(size))
+                .enumerate()
+                .for_each(chunk_pass);
+        }
+        let mut log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
+        log.clock.merge(&PassClock {
+            plain_ns: probe_ns,
+            plain: probe.count() as u64,
+            pass_ns: probe_ns,
+            ..PassClock::default()
+        });
         let share = log.clock.share();
         let model = self.config.prices.sample_ms(log.sums.sampled());
         self.close_log(log, before, model);

@@ -1,0 +1,77 @@
+//! The engine's batch queries at a simulator's batch sizes against the same rays answered one
+//! by one on the calling thread: `cargo run --release --example prof_small_batch FILE.glb
+//! [SIDE...]` (default sides 32 64 128: square camera images of 1,024 to 16,384 rays, the scene
+//! posed at its fourth frame). Wall clock on the pool the machine gives (this is about handing
+//! work to the pool), medians of `PASSES` (default 1000) alternations of
+//! `Engine::closest_hit_batch`, a loop of `Engine::closest_hit`, and `Engine::trace_closest`
+//! (the frame's pass, sampling included); the answers are checked to be the loop's.
+use dynbvh::anim::Scene;
+use dynbvh::engine::gltf::{FrameTimes, GltfSource};
+use dynbvh::engine::{EngineConfig, FrameSource};
+use dynbvh::report::rays::camera_rays;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (scene, _) = Scene::load(&args[0]).unwrap();
+    let sides: Vec<usize> = if args.len() > 1 {
+        args[1..]
+            .iter()
+            .map(|s| s.parse().expect("a side"))
+            .collect()
+    } else {
+        vec![32, 64, 128]
+    };
+    let passes: usize = std::env::var("PASSES").map_or(1000, |s| s.parse().expect("PASSES"));
+    let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(30)).unwrap();
+    let mut e = src.engine(EngineConfig::default());
+    src.advance(&mut e, 3);
+    e.update();
+    println!(
+        "{}, {} threads in the pool",
+        args[0],
+        rayon::current_num_threads()
+    );
+    for side in sides {
+        let rays = camera_rays(&e.bounds(), side, side);
+        let mut expected = vec![None; rays.len()];
+        for (o, r) in expected.iter_mut().zip(&rays) {
+            *o = e.closest_hit(r);
+        }
+        let same = |hits: &[Option<dynbvh::engine::SceneHit>]| {
+            let key = |h: &Option<dynbvh::engine::SceneHit>| h.map(|h| (h.t.to_bits(), h.prim));
+            assert!(hits.iter().zip(&expected).all(|(a, b)| key(a) == key(b)));
+        };
+        let mut hits = vec![None; rays.len()];
+        let (mut batch, mut one_by_one, mut frame) = (vec![], vec![], vec![]);
+        for _ in 0..passes {
+            let t = Instant::now();
+            e.closest_hit_batch(&rays, &mut hits);
+            batch.push(t.elapsed().as_secs_f64());
+            same(&hits);
+            let t = Instant::now();
+            for (o, r) in hits.iter_mut().zip(&rays) {
+                *o = e.closest_hit(r);
+            }
+            one_by_one.push(t.elapsed().as_secs_f64());
+            let t = Instant::now();
+            e.trace_closest(&rays, &mut hits);
+            frame.push(t.elapsed().as_secs_f64());
+            same(&hits);
+        }
+        let (b, l, f) = (median(batch), median(one_by_one), median(frame));
+        println!(
+            "{:6} rays: batch {:8.1} us, one by one {:8.1} us, frame pass {:8.1} us; batch / one by one {:.2}",
+            rays.len(),
+            b * 1e6,
+            l * 1e6,
+            f * 1e6,
+            b / l
+        );
+    }
+}

@@ -1,0 +1,231 @@
+//! Whether a batch of queries is worth spreading over the thread pool.
+//!
+//! Handing work to a rayon pool whose threads sleep costs their wake-up: tens of microseconds
+//! on a busy or virtual machine, more than a small batch takes on the calling thread (a
+//! thousand rays through a small scene, a simulator's usual call). So a batch first answers a
+//! few queries on the calling thread, timed ([`Probe`]), and hands the rest to the pool only
+//! when, at that pace, they would take longer than [`SPLIT_MIN`]. Which thread answers a query
+//! never changes its answer. Figures in `docs/engine_frame_loop.md`.
+
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Queries answered on the calling thread before a batch is judged.
+pub const PROBE: usize = 32;
+
+/// The least work, at the probe's pace, worth waking the pool for.
+pub const SPLIT_MIN: Duration = Duration::from_micros(100);
+
+/// A batch's first queries, answered on the calling thread and timed: [`PROBE`] of them spread
+/// evenly over the batch (the `k`-th of them at `k * len / PROBE`), so that a batch whose cost is
+/// uneven along it (a camera image's empty corners first) is judged by its mean.
+#[derive(Clone, Copy, Debug)]
+pub struct Probe {
+    start: Instant,
+    elapsed: Duration,
+    /// Items answered, of `len`.
+    answered: usize,
+    len: usize,
+    /// The items of [`Probe::run`]: `spread` of them, evenly over the batch.
+    spread: usize,
+}
+
+impl Probe {
+    /// Calls `answer(i)` for [`PROBE`] items spread over a batch of `len`, timed.
+    pub fn run(len: usize, mut answer: impl FnMut(usize)) -> Self {
+        let spread = PROBE.min(len);
+        let mut p = Self::timed(spread, len, || {
+            for k in 0..spread {
+                answer(spread_item(k, spread, len));
+            }
+        });
+        p.spread = spread;
+        p
+    }
+
+    /// Times `answer`, which answers `count` items of a batch of `len` (the caller knows
+    /// which: [`Probe::taken`] names none).
+    pub fn timed(count: usize, len: usize, answer: impl FnOnce()) -> Self {
+        let start = Instant::now();
+        answer();
+        Self {
+            start,
+            elapsed: start.elapsed(),
+            answered: count.min(len),
+            len,
+            spread: 0,
+        }
+    }
+
+    /// What the probe's items took, and the time since it began.
+    #[must_use]
+    pub fn elapsed(&self) -> (Duration, Duration) {
+        (self.elapsed, self.start.elapsed())
+    }
+
+    /// How many items the probe answered.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.answered
+    }
+
+    /// The items [`Probe::run`] answered in `from..to`, in order.
+    pub fn taken(&self, from: usize, to: usize) -> impl Iterator<Item = usize> + Clone {
+        let (spread, len) = (self.spread, self.len);
+        // The first `k` whose item is at `from` or after: `k * len / spread >= from`.
+        let first = if spread == 0 {
+            0
+        } else {
+            (from as u128 * spread as u128).div_ceil(len as u128) as usize
+        };
+        (first..spread)
+            .map(move |k| spread_item(k, spread, len))
+            .take_while(move |&i| i < to)
+    }
+
+    /// Whether the rest of the batch is worth the pool ([`Probe::split_rest`]).
+    #[must_use]
+    pub fn split(&self) -> bool {
+        self.split_rest(self.len - self.answered)
+    }
+
+    /// Whether `left` more items are worth the pool: it has more than one thread and they,
+    /// at the probe's pace, would take at least [`SPLIT_MIN`] on one.
+    #[must_use]
+    pub fn split_rest(&self, left: usize) -> bool {
+        if left == 0 || rayon::current_num_threads() < 2 {
+            return false;
+        }
+        let per = self.elapsed.as_secs_f64() / self.answered.max(1) as f64;
+        per * left as f64 >= SPLIT_MIN.as_secs_f64()
+    }
+}
+
+/// The `k`-th of `spread` items evenly over a batch of `len`.
+fn spread_item(k: usize, spread: usize, len: usize) -> usize {
+    (k as u128 * len as u128 / spread as u128) as usize
+}
+
+/// `out[i] = f(&items[i])` for every item: [`PROBE`] of them on the calling thread, the rest
+/// there too or over the pool in runs of `run` (see the module's doc).
+///
+/// # Panics
+/// When `out` and `items` differ in length.
+pub fn map<I: Sync, O: Send>(items: &[I], out: &mut [O], run: usize, f: impl Fn(&I) -> O + Sync) {
+    assert_eq!(items.len(), out.len(), "one output per item");
+    let probe = Probe::run(items.len(), |i| out[i] = f(&items[i]));
+    let rest = |base: usize, o: &mut [O], r: &[I]| {
+        let mut taken = probe.taken(base, base + r.len());
+        let mut next = taken.next().map_or(usize::MAX, |i| i - base);
+        for (j, (o, it)) in o.iter_mut().zip(r).enumerate() {
+            if j == next {
+                next = taken.next().map_or(usize::MAX, |i| i - base);
+                continue;
+            }
+            *o = f(it);
+        }
+    };
+    if probe.split() {
+        let run = run.max(1);
+        out.par_chunks_mut(run)
+            .zip(items.par_chunks(run))
+            .enumerate()
+            .for_each(|(c, (o, r))| rest(c * run, o, r));
+    } else {
+        rest(0, out, items);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn in_pool(threads: usize, f: impl FnOnce() + Send) {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(f);
+    }
+
+    #[test]
+    fn a_small_batch_stays_on_the_calling_thread() {
+        // Cheap items: the whole batch takes far less than the pool's wake-up.
+        let items: Vec<u32> = (0..1000).collect();
+        let mut out = vec![(0, None); items.len()];
+        in_pool(2, || {
+            let here = std::thread::current().id();
+            map(&items, &mut out, 64, |&i| {
+                (i * 2, Some(std::thread::current().id()))
+            });
+            assert!(out.iter().all(|o| o.1 == Some(here)));
+        });
+        assert!(out.iter().enumerate().all(|(i, o)| o.0 == 2 * i as u32));
+    }
+
+    #[test]
+    fn a_long_batch_is_split_over_the_pool_with_the_same_answers() {
+        // Each item sleeps: at the probe's pace the rest takes far more than `SPLIT_MIN`.
+        let items: Vec<u32> = (0..PROBE as u32 + 64).collect();
+        let mut out = vec![(0, None); items.len()];
+        in_pool(2, || {
+            map(&items, &mut out, 4, |&i| {
+                std::thread::sleep(Duration::from_micros(200));
+                (i + 7, rayon::current_thread_index())
+            });
+        });
+        assert!(out.iter().enumerate().all(|(i, o)| o.0 == i as u32 + 7));
+        let threads: std::collections::HashSet<_> = out.iter().map(|o| o.1).collect();
+        assert!(
+            threads.len() >= 2,
+            "the rest ran on one thread: {threads:?}"
+        );
+    }
+
+    #[test]
+    fn one_thread_never_splits_and_empty_batches_are_fine() {
+        let slow = |len| Probe::run(len, |_| std::thread::sleep(Duration::from_millis(1)));
+        in_pool(1, || assert!(!slow(1_000_000).split()));
+        in_pool(2, || {
+            assert!(slow(1_000_000).split() && !slow(PROBE).split())
+        });
+        let mut out: Vec<u8> = vec![];
+        map(&[] as &[u8], &mut out, 8, |&x| x);
+    }
+
+    #[test]
+    fn the_probe_spreads_over_the_batch_and_names_what_it_took() {
+        for len in [
+            0,
+            1,
+            5,
+            PROBE,
+            PROBE + 1,
+            2 * PROBE - 1,
+            3 * PROBE + 2,
+            1000,
+            4099,
+        ] {
+            let mut seen = vec![];
+            let p = Probe::run(len, |i| seen.push(i));
+            assert_eq!(seen.len(), PROBE.min(len));
+            assert!(seen.iter().all(|&i| i < len));
+            assert_eq!(p.taken(0, len).collect::<Vec<_>>(), seen);
+            // Any cut of the batch names the same items.
+            for cut in [0, 1, len / 3, len / 2, len] {
+                let mut both: Vec<_> = p.taken(0, cut).collect();
+                both.extend(p.taken(cut, len));
+                assert_eq!(both, seen, "len {len} cut {cut}");
+            }
+            // Evenly: no gap between items, nor after the last, longer than the batch's share.
+            let gaps = seen
+                .windows(2)
+                .map(|w| w[1] - w[0])
+                .chain(seen.last().map(|l| len - l));
+            assert!(
+                gaps.into_iter().all(|g| g <= len.div_ceil(PROBE)),
+                "len {len}: {seen:?}"
+            );
+        }
+    }
+}
