@@ -4,11 +4,12 @@
 //! posed at its fourth frame). Wall clock on the pool the machine gives (this is about handing
 //! work to the pool), medians of `PASSES` (default 1000) alternations of
 //! `Engine::closest_hit_batch`, a loop of `Engine::closest_hit`, and `Engine::trace_closest`
-//! (the frame's pass, sampling included); the answers are checked to be the loop's.
+//! (the frame's pass, sampling included); the answers are checked to be the loop's. `LIDAR=1`:
+//! SIDE² rays of the bench's rotating lidar fan at the fourth frame instead of a camera image.
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{EngineConfig, FrameSource};
-use dynbvh::report::rays::camera_rays;
+use dynbvh::report::rays::{camera_rays, lidar_rays};
 use std::time::Instant;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -28,6 +29,7 @@ fn main() {
         vec![32, 64, 128]
     };
     let passes: usize = std::env::var("PASSES").map_or(1000, |s| s.parse().expect("PASSES"));
+    let lidar = std::env::var("LIDAR").is_ok();
     let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(30)).unwrap();
     let mut e = src.engine(EngineConfig::default());
     src.advance(&mut e, 3);
@@ -38,7 +40,13 @@ fn main() {
         rayon::current_num_threads()
     );
     for side in sides {
-        let rays = camera_rays(&e.bounds(), side, side);
+        let rays = if lidar {
+            let mut rays = Vec::new();
+            lidar_rays(&e.bounds(), side * side, 3, &mut rays);
+            rays
+        } else {
+            camera_rays(&e.bounds(), side, side)
+        };
         let mut expected = vec![None; rays.len()];
         for (o, r) in expected.iter_mut().zip(&rays) {
             *o = e.closest_hit(r);

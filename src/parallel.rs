@@ -16,9 +16,17 @@ pub const PROBE: usize = 32;
 /// The least work, at the probe's pace, worth waking the pool for.
 pub const SPLIT_MIN: Duration = Duration::from_micros(100);
 
+/// The probe stops early, after at least [`PROBE_FEW`] queries, once the rest at its pace
+/// would take this many times [`SPLIT_MIN`]: its queries run one after the other while the
+/// pool waits, and on a costly batch a few already settle the question.
+const CLEAR_SPLIT: f64 = 4.0;
+/// The fewest queries a probe answers before it may stop early.
+const PROBE_FEW: usize = 4;
+
 /// A batch's first queries, answered on the calling thread and timed: [`PROBE`] of them spread
 /// evenly over the batch (the `k`-th of them at `k * len / PROBE`), so that a batch whose cost is
-/// uneven along it (a camera image's empty corners first) is judged by its mean.
+/// uneven along it (a camera image's empty corners first) is judged by its mean; fewer when the
+/// first few already show a long batch ([`CLEAR_SPLIT`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Probe {
     start: Instant,
@@ -26,21 +34,35 @@ pub struct Probe {
     /// Items answered, of `len`.
     answered: usize,
     len: usize,
-    /// The items of [`Probe::run`]: `spread` of them, evenly over the batch.
+    /// The items of [`Probe::run`]: the first `spread` of `planned` evenly over the batch.
     spread: usize,
+    planned: usize,
 }
 
 impl Probe {
     /// Calls `answer(i)` for [`PROBE`] items spread over a batch of `len`, timed.
     pub fn run(len: usize, mut answer: impl FnMut(usize)) -> Self {
-        let spread = PROBE.min(len);
-        let mut p = Self::timed(spread, len, || {
-            for k in 0..spread {
-                answer(spread_item(k, spread, len));
+        let planned = PROBE.min(len);
+        let start = Instant::now();
+        let mut spread = 0;
+        while spread < planned {
+            answer(spread_item(spread, planned, len));
+            spread += 1;
+            if spread >= PROBE_FEW {
+                let per = start.elapsed().as_secs_f64() / spread as f64;
+                if per * (len - spread) as f64 >= CLEAR_SPLIT * SPLIT_MIN.as_secs_f64() {
+                    break;
+                }
             }
-        });
-        p.spread = spread;
-        p
+        }
+        Self {
+            start,
+            elapsed: start.elapsed(),
+            answered: spread,
+            len,
+            spread,
+            planned,
+        }
     }
 
     /// Times `answer`, which answers `count` items of a batch of `len` (the caller knows
@@ -54,6 +76,7 @@ impl Probe {
             answered: count.min(len),
             len,
             spread: 0,
+            planned: 0,
         }
     }
 
@@ -71,15 +94,15 @@ impl Probe {
 
     /// The items [`Probe::run`] answered in `from..to`, in order.
     pub fn taken(&self, from: usize, to: usize) -> impl Iterator<Item = usize> + Clone {
-        let (spread, len) = (self.spread, self.len);
-        // The first `k` whose item is at `from` or after: `k * len / spread >= from`.
-        let first = if spread == 0 {
+        let (spread, planned, len) = (self.spread, self.planned, self.len);
+        // The first `k` whose item is at `from` or after: `k * len / planned >= from`.
+        let first = if planned == 0 {
             0
         } else {
-            (from as u128 * spread as u128).div_ceil(len as u128) as usize
+            (from as u128 * planned as u128).div_ceil(len as u128) as usize
         };
         (first..spread)
-            .map(move |k| spread_item(k, spread, len))
+            .map(move |k| spread_item(k, planned, len))
             .take_while(move |&i| i < to)
     }
 
@@ -101,9 +124,9 @@ impl Probe {
     }
 }
 
-/// The `k`-th of `spread` items evenly over a batch of `len`.
-fn spread_item(k: usize, spread: usize, len: usize) -> usize {
-    (k as u128 * len as u128 / spread as u128) as usize
+/// The `k`-th of `planned` items evenly over a batch of `len`.
+fn spread_item(k: usize, planned: usize, len: usize) -> usize {
+    (k as u128 * len as u128 / planned as u128) as usize
 }
 
 /// `out[i] = f(&items[i])` for every item: [`PROBE`] of them on the calling thread, the rest
@@ -187,10 +210,23 @@ mod tests {
         let slow = |len| Probe::run(len, |_| std::thread::sleep(Duration::from_millis(1)));
         in_pool(1, || assert!(!slow(1_000_000).split()));
         in_pool(2, || {
-            assert!(slow(1_000_000).split() && !slow(PROBE).split())
+            assert!(slow(1_000_000).split() && !slow(PROBE_FEW - 1).split())
         });
         let mut out: Vec<u8> = vec![];
         map(&[] as &[u8], &mut out, 8, |&x| x);
+    }
+
+    #[test]
+    fn a_probe_of_a_clearly_long_batch_stops_after_a_few() {
+        let mut seen = vec![];
+        let p = Probe::run(1_000_000, |i| {
+            seen.push(i);
+            std::thread::sleep(Duration::from_micros(50));
+        });
+        assert_eq!(seen.len(), PROBE_FEW);
+        assert_eq!(p.count(), PROBE_FEW);
+        assert_eq!(p.taken(0, 1_000_000).collect::<Vec<_>>(), seen);
+        in_pool(2, || assert!(p.split()));
     }
 
     #[test]
