@@ -4,13 +4,31 @@
 //! posed at its fourth frame). Wall clock on the pool the machine gives (this is about handing
 //! work to the pool), medians of `PASSES` (default 1000) alternations of
 //! `Engine::closest_hit_batch`, a loop of `Engine::closest_hit`, and `Engine::trace_closest`
-//! (the frame's pass, sampling included); the answers are checked to be the loop's. `LIDAR=1`:
+//! (the frame's pass, sampling included); the answers are checked to be the loop's. First, what
+//! a parallel call costs once the pool's threads sleep. `LIDAR=1`:
 //! SIDE² rays of the bench's rotating lidar fan at the fourth frame instead of a camera image.
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{EngineConfig, FrameSource};
 use dynbvh::report::rays::{camera_rays, lidar_rays};
 use std::time::Instant;
+
+/// What handing work to the pool costs once its threads have gone to sleep: four empty tasks
+/// after 1 ms of idling (spun on this thread, so that the pool's threads are the ones asleep).
+fn wake_us() -> f64 {
+    use rayon::prelude::*;
+    let mut v = [0u8; 4];
+    let times = (0..200)
+        .map(|_| {
+            let idle = Instant::now();
+            while idle.elapsed().as_micros() < 1000 {}
+            let t = Instant::now();
+            v.par_iter_mut().for_each(|x| *x = x.wrapping_add(1));
+            t.elapsed().as_secs_f64() * 1e6
+        })
+        .collect();
+    median(times)
+}
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -35,9 +53,10 @@ fn main() {
     src.advance(&mut e, 3);
     e.update();
     println!(
-        "{}, {} threads in the pool",
+        "{}, {} threads in the pool; a parallel call of four empty tasks after the pool idled 1 ms: {:.1} us (median of 200)",
         args[0],
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        wake_us()
     );
     for side in sides {
         let rays = if lidar {

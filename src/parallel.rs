@@ -19,7 +19,7 @@ pub const SPLIT_MIN: Duration = Duration::from_micros(100);
 /// The probe stops early, after at least [`PROBE_FEW`] queries, once the rest at its pace
 /// would take this many times [`SPLIT_MIN`]: its queries run one after the other while the
 /// pool waits, and on a costly batch a few already settle the question.
-const CLEAR_SPLIT: f64 = 4.0;
+const CLEAR_SPLIT: f64 = 2.0;
 /// The fewest queries a probe answers before it may stop early.
 const PROBE_FEW: usize = 4;
 
