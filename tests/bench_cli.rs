@@ -399,3 +399,33 @@ fn build_bench_builds_clip_aware_trees_of_an_animation() {
         assert!(!o.status.success() && err.contains(says), "{method}: {err}");
     }
 }
+
+/// `--packets` traces each frame's rays as packets and says so; what the modelled measure
+/// prices does not change with it (the judge counts every ray of a 1,024-ray frame, ray by
+/// ray, on the same trees): always-refit and always-rebuild total the same as ray by ray,
+/// and refitting still degrades on the explosion.
+#[test]
+fn bench_traces_packets_and_models_the_same_work() {
+    let prices = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/prices.json");
+    #[rustfmt::skip]
+    let common = [
+        "--rays", "1024", "--frames", "6", "-p", "refit", "-p", "rebuild", "-p", "amortized",
+        "--no-builders", "--no-tlas-compare", "--repeats", "1", "--prices", prices,
+    ];
+    let (single, _d1) = bench("explode.glb", "single", &common);
+    let mut extra = common.to_vec();
+    extra.push("--packets");
+    let (packets, _d2) = bench("explode.glb", "packets", &extra);
+    assert_eq!(single["packets"], false);
+    assert_eq!(packets["packets"], true);
+    for name in ["refit", "rebuild"] {
+        let (a, b) = (
+            policy(&single, name)["modelled_ms"].as_f64().unwrap(),
+            policy(&packets, name)["modelled_ms"].as_f64().unwrap(),
+        );
+        assert!(a > 0.0 && a == b, "{name}: {a} ray by ray, {b} as packets");
+    }
+    assert!(max_sah_ratio(&packets, "refit") > 1.1);
+    let t = packets["degradation"]["time_ratio"].as_f64().unwrap();
+    assert!(t.is_finite() && t > 0.0, "time ratio {t}");
+}

@@ -122,6 +122,12 @@ pub struct BenchArgs {
     /// Mesh trees the rays walk: binary, or wide (8-wide trees kept beside the binary ones).
     #[arg(long, value_name = "binary|wide", default_value_t = Traversal::DEFAULT)]
     traversal: Traversal,
+    /// Trace each frame's rays as packets of up to 128 (a camera image in 16x8 tiles; the lidar
+    /// fan in its own order), as a renderer does, instead of ray by ray; the ray-work sample
+    /// still walks its rays one by one, so the degradation check then tells how well that
+    /// measure follows the packets' trace time.
+    #[arg(long)]
+    packets: bool,
     /// What the policies decide on: rays (the ray-work sample of the frame's own rays) or sah.
     #[arg(long, value_name = "rays|sah", default_value_t = CostMeasure::default())]
     cost: CostMeasure,
@@ -183,6 +189,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
         tlas_compare: !a.no_tlas_compare,
         known_length: !a.open_ended,
         traversal: a.traversal,
+        packets: a.packets,
         cost: a.cost,
         prices: prices(&a)?,
         worker: a.worker_priority,

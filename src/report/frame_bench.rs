@@ -46,6 +46,26 @@ impl RaySpec {
         }
     }
 
+    /// Reorders a camera image's rays (row-major, whole rows) into 16x8 tiles, so that each run
+    /// of 128 is one packet's square of the image ([`crate::bvh::image_tiles`]); the
+    /// lidar's fan and cut images are left as they are.
+    pub fn in_tiles(self, rays: &mut Vec<Ray>) {
+        let (w, h) = match self {
+            RaySpec::Size(w, h) => (w, h),
+            RaySpec::Count(n) => {
+                let w = (n as f64).sqrt().ceil().max(1.0) as usize;
+                (w, n.div_ceil(w).max(1))
+            }
+            RaySpec::Lidar(_) => return,
+        };
+        if w * h != rays.len() {
+            return;
+        }
+        let mut tiled = Vec::with_capacity(rays.len());
+        crate::bvh::image_tiles(w, h, |idx| tiled.extend(idx.iter().map(|&i| rays[i])));
+        *rays = tiled;
+    }
+
     /// The rays of frame 0 for a scene box.
     #[must_use]
     pub fn rays(self, bounds: &Aabb) -> Vec<Ray> {
@@ -97,6 +117,9 @@ pub struct Options {
     pub tlas_compare: bool,
     /// Which mesh trees the rays walk.
     pub traversal: Traversal,
+    /// Trace the frame's rays as packets ([`Engine::closest_hit_packets`]; a camera image in
+    /// tiles), the ray-work sample taken from them after the pass.
+    pub packets: bool,
     /// What the policies decide on.
     pub cost: CostMeasure,
     /// Unit prices of the modelled measure (every engine decides with them: the schedules do
@@ -136,6 +159,7 @@ impl Default for Options {
             oracle_rungs: false,
             tlas_compare: true,
             traversal: Traversal::DEFAULT,
+            packets: false,
             cost: CostMeasure::default(),
             prices: Prices::default(),
             judge_rays: 16384,
@@ -428,6 +452,8 @@ pub struct Report {
     /// Engines run in lockstep, a frame of each in turn (the policies asked, the oracle's
     /// always-refit and always-rebuild, the top-level tree comparison's).
     pub lockstep: usize,
+    /// Whether the frames' rays were traced as packets (`--packets`).
+    pub packets: bool,
     /// The scheduling class of `async`'s background worker.
     pub worker_priority: WorkerPriority,
     /// What the policies decided on.
@@ -494,6 +520,10 @@ fn run_lockstep(
     }
     let mut frame_rays = Vec::new();
     opts.rays.frame_rays(bounds, 0, &mut frame_rays);
+    if opts.packets {
+        // The camera's rays stay the same every frame: in tiles once.
+        opts.rays.in_tiles(&mut frame_rays);
+    }
     let mut hits: Vec<Option<SceneHit>> = vec![None; frame_rays.len()];
     let step = (frame_rays.len() / opts.counted_rays.max(1)).max(1);
     let mut runs: Vec<Run> = configs
@@ -517,7 +547,7 @@ fn run_lockstep(
     // Warm-up: one untimed pass each over frame 0, sampled as a frame loop's first trace is
     // (the ray-work measure's reference: the fresh trees' work per entry).
     for e in &mut engines {
-        e.closest_hit_batch_sampled(&frame_rays, &mut hits);
+        trace_pass(e, &frame_rays, &mut hits, opts.packets, true);
     }
     let n = engines.len();
     let mut best = vec![f64::INFINITY; n];
@@ -539,11 +569,7 @@ fn run_lockstep(
                 let i = (k + rep + f) % n;
                 let c = CpuClock::now();
                 // The first pass takes the engine's sample, as a frame loop's trace does.
-                if rep == 0 {
-                    engines[i].closest_hit_batch_sampled(rays, &mut hits);
-                } else {
-                    engines[i].closest_hit_batch(rays, &mut hits);
-                }
+                trace_pass(&mut engines[i], rays, &mut hits, opts.packets, rep == 0);
                 let t = c.elapsed_ms();
                 if t.wall_ms < best[i] {
                     best[i] = t.wall_ms;
@@ -566,6 +592,30 @@ fn run_lockstep(
         }
     }
     runs
+}
+
+/// One trace pass of the frame's rays: ray by ray or as packets, the engine's ray-work sample
+/// taken when `sampled` (in the pass's own traversal ray by ray; after the packets, from the
+/// same rays walked one by one).
+fn trace_pass(
+    e: &mut Engine,
+    rays: &[Ray],
+    hits: &mut [Option<SceneHit>],
+    packets: bool,
+    sampled: bool,
+) {
+    match (packets, sampled) {
+        (false, true) => {
+            e.closest_hit_batch_sampled(rays, hits);
+        }
+        (false, false) => e.closest_hit_batch(rays, hits),
+        (true, _) => {
+            e.closest_hit_packets(rays, hits);
+            if sampled {
+                e.sample_rays(rays, Query::Closest);
+            }
+        }
+    }
 }
 
 /// The bench's sample of frame `f`'s rays, traced on engine `e`: what every run shares of it
@@ -1004,6 +1054,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         rays_per_frame,
         threads: rayon::current_num_threads(),
         lockstep: configs.len(),
+        packets: opts.packets,
         worker_priority: opts.worker,
         cost: opts.cost,
         prices: opts.prices,
@@ -1443,8 +1494,14 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 #[must_use]
 pub fn summary_table(r: &Report) -> String {
     let mut s = format!(
-        "{}: {} triangles, {} deforming mesh(es), {} frames, {} rays/frame, {} thread(s)\n",
-        r.source, r.triangles, r.deforming_meshes, r.frames, r.rays_per_frame, r.threads
+        "{}: {} triangles, {} deforming mesh(es), {} frames, {} rays/frame{}, {} thread(s)\n",
+        r.source,
+        r.triangles,
+        r.deforming_meshes,
+        r.frames,
+        r.rays_per_frame,
+        if r.packets { " (as packets)" } else { "" },
+        r.threads
     );
     s.push_str(&modelled_table(r));
     s.push_str(&format!(

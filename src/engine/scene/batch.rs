@@ -108,18 +108,43 @@ impl Engine {
         )
     }
 
-    /// The packets' frame pass of either query: `packet` on runs of consecutive rays in
-    /// parallel, or `batch` (single rays in the planned order) for a batch none of whose
-    /// packets would be coherent; recorded and sampled as this frame's trace.
+    /// Closest hits as packets, as [`Engine::trace_closest_packets`] traces them, without
+    /// telling the policy (for callers that time and sample their trace themselves:
+    /// [`Engine::record_trace`], [`Engine::sample_rays`]).
+    ///
+    /// # Panics
+    /// When the lengths differ.
+    pub fn closest_hit_packets(&self, rays: &[Ray], out: &mut [Option<SceneHit>]) {
+        self.packets_batch(
+            rays,
+            out,
+            (Engine::closest_hit_batch, Engine::closest_hit_packet),
+        );
+    }
+
+    /// The packets' frame pass of either query ([`Engine::packets_batch`]), recorded and
+    /// sampled as this frame's trace.
     fn packets_pass<T: Send>(
         &mut self,
         rays: &[Ray],
         out: &mut [T],
         query: Query,
-        (batch, packet): (Answers<T>, Answers<T>),
+        answers: (Answers<T>, Answers<T>),
     ) -> f64 {
-        assert_eq!(rays.len(), out.len(), "one output per ray");
         let t = Instant::now();
+        self.packets_batch(rays, out, answers);
+        self.traced(ms_since(t), rays, query)
+    }
+
+    /// `packet` on runs of consecutive rays, in parallel when that pays, or `batch` (single
+    /// rays in the planned order) for a batch none of whose packets would be coherent.
+    fn packets_batch<T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        (batch, packet): (Answers<T>, Answers<T>),
+    ) {
+        assert_eq!(rays.len(), out.len(), "one output per ray");
         if RayOrder::reordered(rays, &self.bounds()) {
             batch(self, rays, out);
         } else {
@@ -153,7 +178,6 @@ impl Engine {
                     .for_each(chunk);
             }
         }
-        self.traced(ms_since(t), rays, query)
     }
 
     /// A frame scope for the single-ray and packet queries (`&self`): runs `f` on the engine
