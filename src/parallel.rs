@@ -150,12 +150,33 @@ pub fn map<I: Sync, O: Send>(items: &[I], out: &mut [O], run: usize, f: impl Fn(
     };
     if probe.split() {
         let run = run.max(1);
-        out.par_chunks_mut(run)
-            .zip(items.par_chunks(run))
-            .enumerate()
-            .for_each(|(c, (o, r))| rest(c * run, o, r));
+        chunks(true, items, out, run, |c, o, r| rest(c * run, o, r));
     } else {
         rest(0, out, items);
+    }
+}
+
+/// `f(k, out_chunk, items_chunk)` for the `k`-th chunks of `size` of `out` and `items`: over
+/// the pool when `split`, else in order on the calling thread.
+///
+/// # Panics
+/// When `size` is 0.
+pub fn chunks<I: Sync, O: Send>(
+    split: bool,
+    items: &[I],
+    out: &mut [O],
+    size: usize,
+    f: impl Fn(usize, &mut [O], &[I]) + Sync,
+) {
+    if split {
+        out.par_chunks_mut(size)
+            .zip(items.par_chunks(size))
+            .enumerate()
+            .for_each(|(k, (o, r))| f(k, o, r));
+    } else {
+        for (k, (o, r)) in out.chunks_mut(size).zip(items.chunks(size)).enumerate() {
+            f(k, o, r);
+        }
     }
 }
 

@@ -15,7 +15,6 @@ use crate::bvh::ray_order::{RayOrder, as_they_come};
 use crate::engine::ray_work::Query;
 use crate::geom::Ray;
 use crate::parallel::Probe;
-use rayon::prelude::*;
 use std::time::Instant;
 
 /// A query answering a run of rays on the engine.
@@ -156,7 +155,7 @@ impl Engine {
             let probe = Probe::timed(end - at, rays.len(), || {
                 packet(self, &rays[at..end], &mut out[at..end]);
             });
-            let chunk = |(c, (o, r)): (usize, (&mut [T], &[Ray]))| {
+            let chunk = |c: usize, o: &mut [T], r: &[Ray]| {
                 let base = c * PACKET_CHUNK;
                 if (base..base + r.len()).contains(&at) {
                     let (lo, hi) = (at - base, end - base);
@@ -166,17 +165,7 @@ impl Engine {
                     packet(self, r, o);
                 }
             };
-            if probe.split() {
-                out.par_chunks_mut(PACKET_CHUNK)
-                    .zip(rays.par_chunks(PACKET_CHUNK))
-                    .enumerate()
-                    .for_each(chunk);
-            } else {
-                out.chunks_mut(PACKET_CHUNK)
-                    .zip(rays.chunks(PACKET_CHUNK))
-                    .enumerate()
-                    .for_each(chunk);
-            }
+            crate::parallel::chunks(probe.split(), rays, out, PACKET_CHUNK, chunk);
         }
     }
 

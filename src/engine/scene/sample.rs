@@ -215,7 +215,7 @@ impl Engine {
         // fewer task buffers to fill and merge, and more sampled rays back to back in each.
         let size =
             (rays.len() / (4 * rayon::current_num_threads())).clamp(RAY_CHUNK, 4 * RAY_CHUNK);
-        let chunk_pass = |(c, (o, chunk)): (usize, (&mut [O], &[Ray]))| {
+        let chunk_pass = |c: usize, o: &mut [O], chunk: &[Ray]| {
             let base = c * size;
             let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
             let mut buf = TaskBuf::new(&log);
@@ -259,17 +259,7 @@ impl Engine {
                 pass_ns: plain_ns + recorded_ns,
             });
         };
-        if probe.split() {
-            out.par_chunks_mut(size)
-                .zip(rays.par_chunks(size))
-                .enumerate()
-                .for_each(chunk_pass);
-        } else {
-            out.chunks_mut(size)
-                .zip(rays.chunks(size))
-                .enumerate()
-                .for_each(chunk_pass);
-        }
+        crate::parallel::chunks(probe.split(), rays, out, size, chunk_pass);
         let mut log = log.into_inner().unwrap_or_else(PoisonError::into_inner);
         log.clock.merge(&PassClock {
             plain_ns: probe_ns,
