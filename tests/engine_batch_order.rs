@@ -1,7 +1,7 @@
 //! The engine's batches reorder large incoherent batches before tracing them: on every frame of
 //! the shipped animations (deforming, rigid and shared meshes), each ray's answer from the
-//! batch queries, reordered or not, sampled pass or plain, is bit for bit the one its own
-//! query gives.
+//! batch queries, reordered or not, sampled pass or plain, large or small (split over the
+//! pool or answered on the calling thread), is bit for bit the one its own query gives.
 
 use dynbvh::anim::Scene;
 use dynbvh::bvh::ray_order::RayOrder;
@@ -33,8 +33,9 @@ type Any = fn(&mut Engine, &[Ray], &mut [bool]);
 fn check(e: &mut Engine, rays: &[Ray], what: &str) {
     let want: Vec<_> = rays.iter().map(|r| bits(e.closest_hit(r))).collect();
     let want_any: Vec<bool> = rays.iter().map(|r| e.any_hit(r)).collect();
-    let closest: [(&str, Closest); 3] = [
+    let closest: [(&str, Closest); 4] = [
         ("closest_hit_batch", |e, r, o| e.closest_hit_batch(r, o)),
+        ("closest_hit_packets", |e, r, o| e.closest_hit_packets(r, o)),
         ("trace_closest", |e, r, o| {
             e.trace_closest(r, o);
         }),
@@ -88,11 +89,21 @@ fn reordered_batches_answer_as_single_queries_on_every_frame() {
             "{name}: the scattered batch is reordered"
         );
         let view = camera_rays(&b, 96, 96);
+        // Small batches, answered on the calling thread (`dynbvh::parallel`); one of 1,000
+        // rays, not whole packets, around whose middle packet the packet batches split.
+        let small = camera_rays(&b, 24, 24);
+        let odd = camera_rays(&b, 40, 25);
         for f in 1..=src.frames() {
             src.advance(&mut e, f);
             e.update();
             check(&mut e, &scattered, &format!("{name} frame {f}, scattered"));
             check(&mut e, &view, &format!("{name} frame {f}, camera"));
+            check(&mut e, &small, &format!("{name} frame {f}, small camera"));
+            check(
+                &mut e,
+                &odd,
+                &format!("{name} frame {f}, 1,000 camera rays"),
+            );
         }
         files += 1;
     }
