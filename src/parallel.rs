@@ -29,7 +29,6 @@ const PROBE_FEW: usize = 4;
 /// first few already show a long batch ([`CLEAR_SPLIT`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Probe {
-    start: Instant,
     elapsed: Duration,
     /// Items answered, of `len`.
     answered: usize,
@@ -56,7 +55,6 @@ impl Probe {
             }
         }
         Self {
-            start,
             elapsed: start.elapsed(),
             answered: spread,
             len,
@@ -71,7 +69,6 @@ impl Probe {
         let start = Instant::now();
         answer();
         Self {
-            start,
             elapsed: start.elapsed(),
             answered: count.min(len),
             len,
@@ -80,10 +77,10 @@ impl Probe {
         }
     }
 
-    /// What the probe's items took, and the time since it began.
+    /// What the probe's items took.
     #[must_use]
-    pub fn elapsed(&self) -> (Duration, Duration) {
-        (self.elapsed, self.start.elapsed())
+    pub fn elapsed(&self) -> Duration {
+        self.elapsed
     }
 
     /// How many items the probe answered.
@@ -106,16 +103,11 @@ impl Probe {
             .take_while(move |&i| i < to)
     }
 
-    /// Whether the rest of the batch is worth the pool ([`Probe::split_rest`]).
+    /// Whether the rest of the batch is worth the pool: it has more than one thread and the
+    /// rest, at the probe's pace, would take at least [`SPLIT_MIN`] on one.
     #[must_use]
     pub fn split(&self) -> bool {
-        self.split_rest(self.len - self.answered)
-    }
-
-    /// Whether `left` more items are worth the pool: it has more than one thread and they,
-    /// at the probe's pace, would take at least [`SPLIT_MIN`] on one.
-    #[must_use]
-    pub fn split_rest(&self, left: usize) -> bool {
+        let left = self.len - self.answered;
         if left == 0 || rayon::current_num_threads() < 2 {
             return false;
         }

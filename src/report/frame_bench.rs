@@ -50,13 +50,8 @@ impl RaySpec {
     /// of 128 is one packet's square of the image ([`crate::bvh::image_tiles`]); the
     /// lidar's fan and cut images are left as they are.
     pub fn in_tiles(self, rays: &mut Vec<Ray>) {
-        let (w, h) = match self {
-            RaySpec::Size(w, h) => (w, h),
-            RaySpec::Count(n) => {
-                let w = (n as f64).sqrt().ceil().max(1.0) as usize;
-                (w, n.div_ceil(w).max(1))
-            }
-            RaySpec::Lidar(_) => return,
+        let Some((w, h)) = self.image_size() else {
+            return;
         };
         if w * h != rays.len() {
             return;
@@ -75,14 +70,27 @@ impl RaySpec {
                 crate::report::rays::lidar_rays(bounds, n, 0, &mut out);
                 out
             }
-            RaySpec::Size(w, h) => camera_rays(bounds, w, h),
-            RaySpec::Count(n) => {
-                let w = (n as f64).sqrt().ceil().max(1.0) as usize;
-                let h = n.div_ceil(w).max(1);
+            RaySpec::Size(..) | RaySpec::Count(_) => {
+                let (w, h) = self.image_size().unwrap_or((1, 1));
                 let mut r = camera_rays(bounds, w, h);
-                r.truncate(n.max(1));
+                if let RaySpec::Count(n) = self {
+                    r.truncate(n.max(1));
+                }
                 r
             }
+        }
+    }
+
+    /// The camera image's width and height (a `Count`'s square image, cut to the count in
+    /// [`RaySpec::rays`]); `None` for the lidar's fan.
+    fn image_size(self) -> Option<(usize, usize)> {
+        match self {
+            RaySpec::Size(w, h) => Some((w, h)),
+            RaySpec::Count(n) => {
+                let w = (n as f64).sqrt().ceil().max(1.0) as usize;
+                Some((w, n.div_ceil(w).max(1)))
+            }
+            RaySpec::Lidar(_) => None,
         }
     }
 }

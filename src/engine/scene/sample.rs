@@ -159,7 +159,7 @@ impl Engine {
         // The first task on the calling thread, timed: whether the rest is worth the pool
         // ([`crate::parallel`]).
         let tasks = rays.len().div_ceil(span);
-        if Probe::run(tasks.min(1), task).split_rest(tasks.saturating_sub(1)) {
+        if Probe::timed(1, tasks, || task(0)).split() {
             (1..tasks).into_par_iter().for_each(task);
         } else {
             (1..tasks).for_each(task);
@@ -210,7 +210,7 @@ impl Engine {
         // rest is worth the pool ([`crate::parallel`]). The first chunk does not answer them
         // again (a sampled one among them is traced again, recorded).
         let probe = Probe::run(rays.len(), |i| out[i] = plain(this, &rays[i]));
-        let probe_ns = probe.elapsed().0.as_nanos() as f64;
+        let probe_ns = probe.elapsed().as_nanos() as f64;
         // Chunks of up to four times the plain pass's, while each thread still gets four:
         // fewer task buffers to fill and merge, and more sampled rays back to back in each.
         let size =
