@@ -223,22 +223,26 @@ impl Engine {
             // longer walk then runs in code and branch history that are warm, not once
             // among every `stride` plain ones.
             let start = Instant::now();
+            // The runs of rays between two skipped ones (sampled, or answered by the probe),
+            // each in a loop of its own, with no test per ray.
             let mut skip = picks.clone();
             let mut next = skip.next().unwrap_or(usize::MAX);
             let mut taken = probe.taken(base, base + chunk.len());
             let mut next_taken = taken.next().map_or(usize::MAX, |i| i - base);
-            let mut plain_n = 0;
-            for (j, (o, r)) in o.iter_mut().zip(chunk).enumerate() {
-                if j == next {
+            let (mut from, mut plain_n) = (0, 0);
+            while from < chunk.len() {
+                let to = next.min(next_taken).min(chunk.len());
+                for (o, r) in o[from..to].iter_mut().zip(&chunk[from..to]) {
+                    *o = plain(this, r);
+                }
+                plain_n += (to - from) as u64;
+                if next == to {
                     next = skip.next().unwrap_or(usize::MAX);
-                    continue;
                 }
-                if j == next_taken {
+                if next_taken == to {
                     next_taken = taken.next().map_or(usize::MAX, |i| i - base);
-                    continue;
                 }
-                *o = plain(this, r);
-                plain_n += 1;
+                from = to + 1;
             }
             let mid = Instant::now();
             let mut recorded_n = 0;
