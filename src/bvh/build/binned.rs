@@ -16,6 +16,7 @@
 
 use super::{
     Box3, BuildParams, MAX_BINS, Node, PrimRef, RangeBounds, SAH_DEPTH_LIMIT, Slots, halve,
+    in_id_order,
 };
 use bytemuck::Zeroable;
 use glam::{BVec3A, Vec3A};
@@ -433,9 +434,11 @@ impl Ctx {
         let split = match split {
             Some(sp) => sp,
             None if n <= self.max_leaf_size => {
+                in_id_order(refs);
                 return (Node::leaf(bounds, out.prim_offset, n as u32), 0);
             }
             None => {
+                in_id_order(refs);
                 let h = halve(refs, self.parallel_threshold);
                 let info = |rb: RangeBounds| Info {
                     bounds: rb.bounds,
@@ -708,6 +711,21 @@ impl Ctx {
         if n == 1 {
             return (Node::leaf(bounds.to_aabb(), out.prim_offset, 1), 0);
         }
+        // The primitives taken in the order of their indices (see `in_id_order`): a
+        // permutation of the few, sorted by insertion on their indices alone.
+        let mut perm = [0u8; SMALL];
+        let mut ids = [0u32; SMALL];
+        for (i, r) in refs.iter().enumerate() {
+            let id = r.id();
+            let mut j = i;
+            while j > 0 && ids[j - 1] > id {
+                ids[j] = ids[j - 1];
+                perm[j] = perm[j - 1];
+                j -= 1;
+            }
+            ids[j] = id;
+            perm[j] = i as u8;
+        }
         let mut t = Subsets {
             prims: [EMPTY8; SMALL],
             areas: [0.0; 1 << SMALL],
@@ -715,8 +733,8 @@ impl Ctx {
             order: [0; SMALL],
             len: 0,
         };
-        for (b, r) in t.prims.iter_mut().zip(refs.iter()) {
-            *b = r.packed();
+        for (b, &i) in t.prims.iter_mut().zip(&perm[..n]) {
+            *b = refs[i as usize].packed();
         }
         // The boxes of the subsets of the first three and of the last two primitives; a
         // subset's box is the union of one of each.
@@ -760,7 +778,7 @@ impl Ctx {
         let mut old = [PrimRef::zeroed(); SMALL];
         old[..n].copy_from_slice(refs);
         for (r, &i) in refs.iter_mut().zip(&t.order[..n]) {
-            *r = old[i as usize];
+            *r = old[perm[i as usize] as usize];
         }
         root
     }

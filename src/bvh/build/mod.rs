@@ -629,6 +629,17 @@ impl<S: Splitter> Recursion<'_, S> {
     }
 }
 
+/// Puts `refs` in the order of their primitive indices (at once if they are in it). The binned
+/// builder's parallel partition leaves each side's references in another order than the serial
+/// one; every choice it makes from a node's order (a leaf's triangle order, a small node's
+/// ties, a cut by count) is made from this order, so that the tree does not depend on the
+/// number of threads.
+pub(crate) fn in_id_order(refs: &mut [PrimRef]) {
+    if !refs.is_sorted_by_key(PrimRef::id) {
+        refs.sort_unstable_by_key(PrimRef::id);
+    }
+}
+
 /// Cuts a range in the middle by count, as it is: the fallback when no split by position is
 /// possible (all centroids in one point) or the depth limit is reached.
 fn halve(refs: &[PrimRef], parallel_threshold: usize) -> Split {
