@@ -7,7 +7,7 @@
 mod common;
 
 use common::Rng;
-use dynbvh::bvh::{BuildParams, BuildWorkspace, MeshBvh, MeshBvh8};
+use dynbvh::bvh::{BuildWorkspace, MeshBvh, MeshBvh8};
 use dynbvh::geom::{TriMesh, shapes};
 use glam::Vec3;
 
