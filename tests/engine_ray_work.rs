@@ -68,6 +68,43 @@ fn two_runs_give_identical_modelled_totals_and_schedules() {
     }
 }
 
+/// The modelled totals and schedules do not depend on the number of threads: a mesh large
+/// enough for the builder's parallel partition (a generated swap of 40k triangles), run on one
+/// thread and on two.
+#[test]
+fn the_modelled_totals_are_the_same_on_one_thread_and_on_two() {
+    use dynbvh::anim::LoadOptions;
+    use dynbvh::anim::generate::{Kind, generate};
+    let g = generate(Kind::Swap, 40_000, 7);
+    let (s, _) =
+        Scene::from_slice("gen-swap.glb".as_ref(), &g.glb, &LoadOptions::default()).unwrap();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(8)).unwrap();
+            frame_bench::run(&mut src, &options(CostMeasure::Rays), |_| {})
+        })
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(
+        a.oracle_modelled.total_ms.to_bits(),
+        b.oracle_modelled.total_ms.to_bits(),
+        "oracle"
+    );
+    for (p, q) in a.policies.iter().zip(&b.policies) {
+        assert_eq!(
+            p.modelled_ms.to_bits(),
+            q.modelled_ms.to_bits(),
+            "{}",
+            p.policy
+        );
+        assert_eq!(p.rebuild_frames, q.rebuild_frames, "{}", p.policy);
+    }
+}
+
 /// Every schedule of a short clip run for real (each frame refit or rebuild, by switching the
 /// engine's policy), its modelled cost counted on the same sampled rays: the oracle's total is
 /// the least of them, and its schedule's.
