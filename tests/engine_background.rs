@@ -4,6 +4,8 @@
 //! removed while its build runs does not receive the stale tree. (Every frame against brute
 //! force: `tests/engine_hits.rs`, which runs every policy, this one included.)
 
+mod common;
+
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{Engine, EngineConfig, Policy, Prices, Timing, WorkerPriority};
@@ -43,17 +45,8 @@ fn background_rebuilds_swap_at_fixed_frames_on_every_run() {
     // start, so neither the machine's load nor the worker's class moves the schedule.
     let (a, b) = (run(WorkerPriority::Normal), run(WorkerPriority::Normal));
     let c = run(WorkerPriority::Idle);
-    for other in [&b, &c] {
-        for (p, q) in a.policies.iter().zip(&other.policies) {
-            assert_eq!(
-                p.modelled_ms.to_bits(),
-                q.modelled_ms.to_bits(),
-                "{}",
-                p.policy
-            );
-            assert_eq!(p.rebuild_frames, q.rebuild_frames, "{}", p.policy);
-        }
-    }
+    common::assert_same_modelled(&a, &b, "a second run");
+    common::assert_same_modelled(&a, &c, "the worker in the idle class");
     assert!(frame_bench::summary_table(&a).contains("worker ran at normal priority"));
     assert!(frame_bench::summary_table(&c).contains("worker ran at idle priority"));
     let json = serde_json::to_value(&c).unwrap();

@@ -49,19 +49,8 @@ fn two_runs_give_identical_modelled_totals_and_schedules() {
         };
         let (a, b) = (run(), run());
         assert!(a.oracle_modelled.total_ms > 0.0);
-        assert_eq!(
-            a.oracle_modelled.total_ms.to_bits(),
-            b.oracle_modelled.total_ms.to_bits(),
-            "{file}: oracle"
-        );
-        for (p, q) in a.policies.iter().zip(&b.policies) {
-            assert_eq!(
-                p.modelled_ms.to_bits(),
-                q.modelled_ms.to_bits(),
-                "{file} {}",
-                p.policy
-            );
-            assert_eq!(p.rebuild_frames, q.rebuild_frames, "{file} {}", p.policy);
+        common::assert_same_modelled(&a, &b, file);
+        for p in &a.policies {
             assert!(p.oracle_ratio_modelled >= 1.0 - 1e-9, "{file} {}", p.policy);
         }
         assert!(a.below_oracle.is_empty(), "{file}: {:?}", a.below_oracle);
@@ -88,21 +77,7 @@ fn the_modelled_totals_are_the_same_on_one_thread_and_on_two() {
             frame_bench::run(&mut src, &options(CostMeasure::Rays), |_| {})
         })
     };
-    let (a, b) = (run(1), run(2));
-    assert_eq!(
-        a.oracle_modelled.total_ms.to_bits(),
-        b.oracle_modelled.total_ms.to_bits(),
-        "oracle"
-    );
-    for (p, q) in a.policies.iter().zip(&b.policies) {
-        assert_eq!(
-            p.modelled_ms.to_bits(),
-            q.modelled_ms.to_bits(),
-            "{}",
-            p.policy
-        );
-        assert_eq!(p.rebuild_frames, q.rebuild_frames, "{}", p.policy);
-    }
+    common::assert_same_modelled(&run(1), &run(2), "one thread and two");
 }
 
 /// Every schedule of a short clip run for real (each frame refit or rebuild, by switching the

@@ -237,3 +237,26 @@ pub fn shared_sample(
     }
     sampled
 }
+
+/// Asserts that two bench reports have bit for bit the same modelled totals (the oracle's and
+/// every policy's) and the same schedules; `what` names the comparison.
+pub fn assert_same_modelled(
+    a: &dynbvh::report::frame_bench::Report,
+    b: &dynbvh::report::frame_bench::Report,
+    what: &str,
+) {
+    assert_eq!(
+        a.oracle_modelled.total_ms.to_bits(),
+        b.oracle_modelled.total_ms.to_bits(),
+        "{what}: oracle"
+    );
+    for (p, q) in a.policies.iter().zip(&b.policies) {
+        assert_eq!(
+            p.modelled_ms.to_bits(),
+            q.modelled_ms.to_bits(),
+            "{what}: {}",
+            p.policy
+        );
+        assert_eq!(p.rebuild_frames, q.rebuild_frames, "{what}: {}", p.policy);
+    }
+}
