@@ -250,6 +250,13 @@ pub fn assert_same_modelled(
         b.oracle_modelled.total_ms.to_bits(),
         "{what}: oracle"
     );
+    let names = |r: &dynbvh::report::frame_bench::Report| {
+        r.policies
+            .iter()
+            .map(|p| p.policy.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(a), names(b), "{what}: the policies");
     for (p, q) in a.policies.iter().zip(&b.policies) {
         assert_eq!(
             p.modelled_ms.to_bits(),
