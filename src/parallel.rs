@@ -39,17 +39,34 @@ pub struct Probe {
 }
 
 impl Probe {
-    /// Calls `answer(i)` for [`PROBE`] items spread over a batch of `len`, timed.
-    pub fn run(len: usize, mut answer: impl FnMut(usize)) -> Self {
+    /// Calls `answer(i)` for [`PROBE`] items spread over a batch of `len`, timed; stops early
+    /// once the pace of the first [`PROBE_FEW`] (then 8, 16, ...) shows the rest would take
+    /// [`CLEAR_SPLIT`] times [`SPLIT_MIN`]. The clock is read only at those counts: a read
+    /// after every item (about 30 ns) would count as much as a cheap query does.
+    pub fn run(len: usize, answer: impl FnMut(usize)) -> Self {
+        let clear = CLEAR_SPLIT * SPLIT_MIN.as_secs_f64();
+        Self::run_until(len, answer, |elapsed, answered| {
+            elapsed.as_secs_f64() / answered as f64 * (len - answered) as f64 >= clear
+        })
+    }
+
+    /// [`Probe::run`] with the early stop `stop(elapsed, answered)`, asked after
+    /// [`PROBE_FEW`] items and at every doubling of the count after that.
+    fn run_until(
+        len: usize,
+        mut answer: impl FnMut(usize),
+        stop: impl Fn(Duration, usize) -> bool,
+    ) -> Self {
         let planned = PROBE.min(len);
         let start = Instant::now();
         let mut spread = 0;
+        let mut check = PROBE_FEW;
         while spread < planned {
             answer(spread_item(spread, planned, len));
             spread += 1;
-            if spread >= PROBE_FEW {
-                let per = start.elapsed().as_secs_f64() / spread as f64;
-                if per * (len - spread) as f64 >= CLEAR_SPLIT * SPLIT_MIN.as_secs_f64() {
+            if spread == check {
+                check *= 2;
+                if stop(start.elapsed(), spread) {
                     break;
                 }
             }
@@ -243,6 +260,25 @@ mod tests {
     }
 
     #[test]
+    fn the_early_stop_is_asked_after_a_few_and_at_each_doubling() {
+        let asked = std::cell::RefCell::new(vec![]);
+        let p = Probe::run_until(
+            1000,
+            |_| {},
+            |_, n| {
+                asked.borrow_mut().push(n);
+                false
+            },
+        );
+        assert_eq!(p.count(), PROBE);
+        assert_eq!(*asked.borrow(), vec![PROBE_FEW, 8, 16, 32]);
+        // A stop at the second check ends the probe there.
+        let p = Probe::run_until(1000, |_| {}, |_, n| n >= 8);
+        assert_eq!(p.count(), 8);
+        assert_eq!(p.taken(0, 1000).count(), 8);
+    }
+
+    #[test]
     fn the_probe_spreads_over_the_batch_and_names_what_it_took() {
         for len in [
             0,
@@ -255,8 +291,9 @@ mod tests {
             1000,
             4099,
         ] {
+            // Without the early stop, which depends on the clock (the test is of the spread).
             let mut seen = vec![];
-            let p = Probe::run(len, |i| seen.push(i));
+            let p = Probe::run_until(len, |i| seen.push(i), |_, _| false);
             assert_eq!(seen.len(), PROBE.min(len));
             assert!(seen.iter().all(|&i| i < len));
             assert_eq!(p.taken(0, len).collect::<Vec<_>>(), seen);
