@@ -23,13 +23,6 @@ fn fingerprint(m: &MeshBvh) -> String {
     )
 }
 
-fn pool(threads: usize) -> rayon::ThreadPool {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .expect("a thread pool")
-}
-
 /// A soup of `n` small triangles, and `n` triangles around one centroid (binning cannot
 /// separate them: the builders cut them by count).
 fn inputs(n: usize) -> Vec<(&'static str, TriMesh)> {
@@ -50,7 +43,7 @@ fn inputs(n: usize) -> Vec<(&'static str, TriMesh)> {
 
 #[test]
 fn every_builder_makes_the_same_tree_on_any_number_of_threads() {
-    let pools: Vec<_> = (1..=4).map(pool).collect();
+    let pools: Vec<_> = (1..=4).map(common::pool).collect();
     for (name, mesh) in inputs(40_000) {
         for params in common::builders() {
             let want = pools[0].install(|| fingerprint(&MeshBvh::build(&mesh, &params)));

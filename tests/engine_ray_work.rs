@@ -68,11 +68,7 @@ fn the_modelled_totals_are_the_same_on_one_thread_and_on_two() {
     let (s, _) =
         Scene::from_slice("gen-swap.glb".as_ref(), &g.glb, &LoadOptions::default()).unwrap();
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::pool(threads).install(|| {
             let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(8)).unwrap();
             frame_bench::run(&mut src, &options(CostMeasure::Rays), |_| {})
         })

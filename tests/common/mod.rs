@@ -267,3 +267,11 @@ pub fn assert_same_modelled(
         assert_eq!(p.rebuild_frames, q.rebuild_frames, "{what}: {}", p.policy);
     }
 }
+
+/// A rayon pool of `threads` threads.
+pub fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+}
