@@ -1323,6 +1323,20 @@ fn variants() -> Vec<Variant> {
         },
         #[cfg(feature = "embree")]
         Variant {
+            name: "embree medium robust",
+            make: |i| measured(i, |m| embree_ffi::build(m, embree_ffi::Mode::MediumRobust)),
+        },
+        #[cfg(feature = "embree")]
+        Variant {
+            name: "embree medium robust x16",
+            make: |i| {
+                measured(i, |m| {
+                    embree_ffi::build(m, embree_ffi::Mode::MediumRobustPackets)
+                })
+            },
+        },
+        #[cfg(feature = "embree")]
+        Variant {
             name: "embree low refit",
             make: |i| measured(i, |m| embree_ffi::build(m, embree_ffi::Mode::LowRefit)),
         },

@@ -24,6 +24,7 @@ const RTC_BUILD_QUALITY_MEDIUM: c_uint = 1;
 const RTC_BUILD_QUALITY_REFIT: c_uint = 3;
 const RTC_SCENE_FLAG_NONE: c_uint = 0;
 const RTC_SCENE_FLAG_DYNAMIC: c_uint = 1;
+const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
 const RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT: c_uint = 0;
 const RTC_INTERSECT_CONTEXT_FLAG_COHERENT: c_uint = 1;
 const RTC_INVALID_GEOMETRY_ID: c_uint = c_uint::MAX;
@@ -161,6 +162,11 @@ pub enum Mode {
     Medium,
     /// Default build quality, packets of 16 (`rtcIntersect16`).
     MediumPackets,
+    /// As `Medium` with the scene flag ROBUST: Embree's watertight triangle test and
+    /// conservative box tests, the guarantees dynbvh's own walks always give.
+    MediumRobust,
+    /// As `MediumPackets` with the scene flag ROBUST.
+    MediumRobustPackets,
     /// LOW quality, dynamic scene, geometry REFIT: the setting for deforming meshes, the only
     /// one in which Embree refits rather than rebuilds on a vertex update.
     LowRefit,
@@ -198,6 +204,11 @@ pub fn build(mesh: TriMesh, mode: Mode) -> Embree {
         Mode::Medium | Mode::MediumPackets => (
             RTC_BUILD_QUALITY_MEDIUM,
             RTC_SCENE_FLAG_NONE,
+            RTC_BUILD_QUALITY_MEDIUM,
+        ),
+        Mode::MediumRobust | Mode::MediumRobustPackets => (
+            RTC_BUILD_QUALITY_MEDIUM,
+            RTC_SCENE_FLAG_ROBUST,
             RTC_BUILD_QUALITY_MEDIUM,
         ),
         Mode::LowRefit => (
@@ -287,7 +298,7 @@ impl Accel for Embree {
     }
 
     fn trace_all(&self, rays: &[RTCRayHit]) -> f32 {
-        if !matches!(self.mode, Mode::MediumPackets) {
+        if !matches!(self.mode, Mode::MediumPackets | Mode::MediumRobustPackets) {
             return rays
                 .iter()
                 .filter_map(|r| self.closest(std::hint::black_box(r)))
