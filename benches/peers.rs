@@ -1415,6 +1415,91 @@ fn print_table(input: &Input, rows: &[(&str, Row)]) {
     }
 }
 
+/// Issue 17's side-by-side figures for `input`, from the rows of the run that hold them:
+/// dynbvh's 8-wide tree against Embree at its default flags and with ROBUST (the watertight
+/// mode, dynbvh's own guarantees), each as dynbvh over Embree (for the rates in Mrays/s
+/// higher is better for dynbvh, for the times in ms lower is). A figure whose rows were not
+/// run is left out.
+fn print_embree_summary(input: &Input, rows: &[(&str, Row)]) {
+    let row = |name: &str| rows.iter().find(|(n, _)| *n == name).map(|(_, r)| r);
+    let set = |name: &str| input.sets.iter().position(|s| s.name == name);
+    let rate = |name: &str, s: Option<usize>| Some(row(name)?.mrays[s?]);
+    let (camera, random) = (set("primary"), set("random"));
+    // (what, dynbvh's figure, Embree's at its default flags and with ROBUST)
+    type Figure<'a> = (&'a str, Option<f64>, [Option<f64>; 2]);
+    let figures: [Figure; 6] = [
+        (
+            "camera rays, single (`rtcIntersect1`), Mrays/s",
+            rate("dynbvh bvh8", camera),
+            [
+                rate("embree medium", camera),
+                rate("embree medium robust", camera),
+            ],
+        ),
+        (
+            "random rays, single, ray by ray, Mrays/s",
+            rate("dynbvh bvh8", random),
+            [
+                rate("embree medium", random),
+                rate("embree medium robust", random),
+            ],
+        ),
+        (
+            "random rays, reordered batch (`dynbvh bvh8 batch`), Mrays/s",
+            rate("dynbvh bvh8 batch", random),
+            [
+                rate("embree medium", random),
+                rate("embree medium robust", random),
+            ],
+        ),
+        (
+            "camera rays, packets (`rtcIntersect16`), Mrays/s",
+            rate("dynbvh packets bvh8", camera),
+            [
+                rate("embree medium x16", camera),
+                rate("embree medium robust x16", camera),
+            ],
+        ),
+        (
+            "build: binned16 and the collapse / scene commit, ms",
+            row("dynbvh bvh8").map(|r| r.build_ms),
+            [
+                row("embree medium").map(|r| r.build_ms),
+                row("embree medium robust").map(|r| r.build_ms),
+            ],
+        ),
+        (
+            "refit: the 8-wide tree / LOW + REFIT, ms",
+            row("dynbvh bvh8").and_then(|r| r.refit_ms),
+            [row("embree low refit").and_then(|r| r.refit_ms), None],
+        ),
+    ];
+    let shown: Vec<_> = figures
+        .iter()
+        .filter(|(_, d, e)| d.is_some() && e.iter().any(Option::is_some))
+        .collect();
+    if shown.is_empty() {
+        return;
+    }
+    println!(
+        "\n### {}: dynbvh against Embree (default flags; ROBUST, its watertight mode)\n",
+        input.name
+    );
+    println!("| figure | dynbvh | Embree | dynbvh / Embree | Embree ROBUST | dynbvh / ROBUST |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    for (what, d, e) in shown {
+        let d = d.expect("shown");
+        let cell = |e: Option<f64>| {
+            e.map_or(("-".to_string(), "-".to_string()), |e| {
+                (format!("{e:.2}"), format!("{:.2}x", d / e))
+            })
+        };
+        let (a, ar) = cell(e[0]);
+        let (b, br) = cell(e[1]);
+        println!("| {what} | {d:.2} | {a} | {ar} | {b} | {br} |");
+    }
+}
+
 /// The time now in UTC, `YYYY-MM-DD HH:MM`.
 fn utc_now() -> String {
     // `YYYY-MM-DDTHH:MM:SSZ`
@@ -1506,6 +1591,7 @@ fn main() {
                 .zip(measure_all(&input, &chosen))
                 .collect();
             print_table(&input, &rows);
+            print_embree_summary(&input, &rows);
         }
     });
     let threads_after = threads_in_process();
