@@ -162,8 +162,9 @@ pub enum Mode {
     Medium,
     /// Default build quality, packets of 16 (`rtcIntersect16`).
     MediumPackets,
-    /// As `Medium` with the scene flag ROBUST: Embree's watertight triangle test and
-    /// conservative box tests, the guarantees dynbvh's own walks always give.
+    /// As `Medium` with the scene flag ROBUST: robust traversal and no optimisations that
+    /// reduce arithmetic accuracy (Embree's manual), the nearest Embree comes to the exact
+    /// walks dynbvh always runs.
     MediumRobust,
     /// As `MediumPackets` with the scene flag ROBUST.
     MediumRobustPackets,
