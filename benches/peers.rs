@@ -1415,11 +1415,11 @@ fn print_table(input: &Input, rows: &[(&str, Row)]) {
     }
 }
 
-/// Issue 17's side-by-side figures for `input`, from the rows of the run that hold them:
-/// dynbvh's 8-wide tree against Embree at its default flags and with ROBUST (its robust
-/// mode, the nearest it comes to dynbvh's exact walks), each as dynbvh over Embree (for the rates in Mrays/s
-/// higher is better for dynbvh, for the times in ms lower is). A figure whose rows were not
-/// run is left out.
+/// The side-by-side figures against Embree for `input`, from the rows of the run that hold
+/// them: dynbvh's 8-wide tree against Embree at its default flags and with the scene flag
+/// ROBUST (the nearest Embree comes to dynbvh's exact walks), each as dynbvh over Embree (for
+/// the rates in Mrays/s higher is better for dynbvh, for the times in ms lower is). A figure
+/// whose rows were not run is left out.
 fn print_embree_summary(input: &Input, rows: &[(&str, Row)]) {
     let row = |name: &str| rows.iter().find(|(n, _)| *n == name).map(|(_, r)| r);
     let set = |name: &str| input.sets.iter().position(|s| s.name == name);
@@ -1482,7 +1482,7 @@ fn print_embree_summary(input: &Input, rows: &[(&str, Row)]) {
         return;
     }
     println!(
-        "\n### {}: dynbvh against Embree (default flags; ROBUST, its robust mode)\n",
+        "\n### {}: dynbvh against Embree, at its default flags and with the scene flag ROBUST\n",
         input.name
     );
     println!("| figure | dynbvh | Embree | dynbvh / Embree | Embree ROBUST | dynbvh / ROBUST |");
