@@ -1427,38 +1427,28 @@ fn print_embree_summary(input: &Input, rows: &[(&str, Row)]) {
     let (camera, random) = (set("primary"), set("random"));
     // (what, dynbvh's figure, Embree's at its default flags and with ROBUST)
     type Figure<'a> = (&'a str, Option<f64>, [Option<f64>; 2]);
+    // Embree's figure on a ray set at its default flags and with ROBUST.
+    let embree = |single: &str, robust: &str, s| [rate(single, s), rate(robust, s)];
     let figures: [Figure; 6] = [
         (
             "camera rays, single (`rtcIntersect1`), Mrays/s",
             rate("dynbvh bvh8", camera),
-            [
-                rate("embree medium", camera),
-                rate("embree medium robust", camera),
-            ],
+            embree("embree medium", "embree medium robust", camera),
         ),
         (
             "random rays, single, ray by ray, Mrays/s",
             rate("dynbvh bvh8", random),
-            [
-                rate("embree medium", random),
-                rate("embree medium robust", random),
-            ],
+            embree("embree medium", "embree medium robust", random),
         ),
         (
             "random rays, reordered batch (`dynbvh bvh8 batch`), Mrays/s",
             rate("dynbvh bvh8 batch", random),
-            [
-                rate("embree medium", random),
-                rate("embree medium robust", random),
-            ],
+            embree("embree medium", "embree medium robust", random),
         ),
         (
             "camera rays, packets (`rtcIntersect16`), Mrays/s",
             rate("dynbvh packets bvh8", camera),
-            [
-                rate("embree medium x16", camera),
-                rate("embree medium robust x16", camera),
-            ],
+            embree("embree medium x16", "embree medium robust x16", camera),
         ),
         (
             "build: binned16 and the collapse / scene commit, ms",
