@@ -52,8 +52,8 @@ impl Engine {
     /// ray-work sample in the same pass (as [`Engine::trace_closest`] does), but without
     /// recording the trace time: for callers that time their trace themselves (then call
     /// [`Engine::record_trace`]). Returns the share of the pass's time the sampling took
-    /// beyond tracing those rays plainly (from the tasks' own clocks); that time is added to
-    /// the frame's `sample_ms`.
+    /// beyond tracing those rays plainly, its bookkeeping included (from the pass's own
+    /// clocks); that time is added to the frame's `sample_ms`.
     ///
     /// # Panics
     /// When the lengths differ.
