@@ -113,15 +113,21 @@ impl<'a> TaskBuf<'a> {
         self.len += 1;
     }
 
-    /// Moves the entries into the log, the time it takes counted as bookkeeping.
     fn flush(&mut self) {
-        let t = Instant::now();
+        self.flush_since(None);
+    }
+
+    /// Moves the entries into the log; with `since`, the time from then until they are in is
+    /// counted as the pass's bookkeeping.
+    fn flush_since(&mut self, since: Option<Instant>) {
         let mut log = self.log.lock().unwrap_or_else(PoisonError::into_inner);
         log.entries.extend(self.items[..self.len].iter().flatten());
         log.sums.merge(&self.sums);
-        let ns = t.elapsed().as_nanos() as f64;
-        self.clock.overhead_ns += ns;
-        self.clock.pass_ns += ns;
+        if let Some(t) = since {
+            let ns = t.elapsed().as_nanos() as f64;
+            self.clock.overhead_ns += ns;
+            self.clock.pass_ns += ns;
+        }
         log.clock.merge(&self.clock);
         self.len = 0;
         self.sums = SampleSums::default();
@@ -131,7 +137,9 @@ impl<'a> TaskBuf<'a> {
 
 impl Drop for TaskBuf<'_> {
     fn drop(&mut self) {
-        self.flush();
+        if self.len > 0 || self.sums.sampled() > 0 || self.clock.pass_ns > 0.0 {
+            self.flush();
+        }
     }
 }
 
@@ -217,7 +225,7 @@ impl Engine {
         // again (a sampled one among them is traced again, recorded).
         let probe = Probe::run(rays.len(), |i| out[i] = plain(this, &rays[i]));
         let probe_ns = probe.elapsed().as_nanos() as f64;
-        // On the pool, chunks of up to four times the plain pass's, while each thread still
+        // On the pool, chunks of up to sixteen times the plain pass's, while each thread still
         // gets four, and a small batch one chunk a thread: fewer task buffers to fill and
         // merge, and more sampled rays back to back in each. On the calling thread alone, one
         // chunk: one buffer, every sampled ray in one run.
@@ -228,17 +236,16 @@ impl Engine {
         } else if rays.len() <= 2 * threads * RAY_CHUNK {
             rays.len().div_ceil(threads)
         } else {
-            (rays.len() / (4 * threads)).clamp(RAY_CHUNK, 4 * RAY_CHUNK)
+            (rays.len() / (4 * threads)).clamp(RAY_CHUNK, 16 * RAY_CHUNK)
         };
         let chunk_pass = |c: usize, o: &mut [O], chunk: &[Ray]| {
             let base = c * size;
-            let task = Instant::now();
-            let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
-            let mut buf = TaskBuf::new(&log);
             // The plain rays first, then the sampled ones back to back: a sampled ray's
             // longer walk then runs in code and branch history that are warm, not once
             // among every `stride` plain ones.
             let start = Instant::now();
+            let picks = plan.picks(base, base + chunk.len()).map(|i| i - base);
+            let mut buf = TaskBuf::new(&log);
             // The runs of rays between two skipped ones (sampled, or answered by the probe),
             // each in a loop of its own, with no test per ray.
             let mut skip = picks.clone();
@@ -276,9 +283,10 @@ impl Engine {
                 recorded: recorded_n,
                 plain_ns,
                 plain: plain_n,
-                overhead_ns: (start - task).as_nanos() as f64,
-                pass_ns: (end - task).as_nanos() as f64,
+                overhead_ns: 0.0,
+                pass_ns: plain_ns + recorded_ns,
             });
+            buf.flush_since(Some(end));
         };
         crate::parallel::chunks(split, rays, out, size, chunk_pass);
         let closing = Instant::now();
