@@ -47,9 +47,8 @@ struct SampleLog {
 /// after them, its sampled rays traced with counters back to back; a sampled ray's extra is its
 /// time over the plain rays' mean (the sample is systematic, so the rays it takes cost the
 /// mean plainly, in expectation). The sampling's own bookkeeping (the frame's plan, the task
-/// buffers and the log, merging the entries into the meshes' samples) is extra in full: at a
-/// thousand rays a frame it costs several times the sampled rays' walks. Summed over the
-/// tasks and the pass's serial parts, with their whole time.
+/// buffers and the log, merging the entries into the meshes' samples) is extra in full.
+/// Summed over the tasks and the pass's serial parts, with their whole time.
 #[derive(Clone, Copy, Debug, Default)]
 struct PassClock {
     recorded_ns: f64,
