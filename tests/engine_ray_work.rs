@@ -207,6 +207,7 @@ fn sampling_in_the_trace_pass_takes_the_same_sample_as_tracing_again() {
         policy: Policy::Refit,
         cost: CostMeasure::Rays,
         timing: Timing::Priced,
+        always_sample: true,
         ..EngineConfig::default()
     };
     let mut src = GltfSource::new(&s, Some(0), FrameTimes::Count(6)).unwrap();
@@ -301,6 +302,54 @@ fn a_meshs_first_trace_is_sampled_and_later_unmoved_frames_are_not() {
         0,
         "an unmoved frame was sampled"
     );
+}
+
+/// The fixed schedules never read the ray-work sample: their frames take none, unless the
+/// configuration asks for it (as `bench` does, for its statistics).
+#[test]
+fn fixed_policies_take_no_sample_unless_asked() {
+    use dynbvh::geom::shapes;
+    use dynbvh::glam::Affine3A;
+    let rays = grid_rays(64, 64);
+    let mut hits = vec![None; rays.len()];
+    for policy in [
+        Policy::Refit,
+        Policy::Rebuild,
+        Policy::Periodic(2),
+        Policy::DEFAULT,
+    ] {
+        for always_sample in [false, true] {
+            let mut e = dynbvh::engine::Engine::new(EngineConfig {
+                policy,
+                always_sample,
+                ..EngineConfig::default()
+            });
+            let ball = shapes::icosphere(3);
+            let m = e.add_mesh(ball.positions, ball.indices);
+            e.add_instance(m, Affine3A::IDENTITY);
+            e.update();
+            for frame in 1..=3 {
+                for p in e.positions_mut(m) {
+                    *p *= 1.01;
+                }
+                e.update();
+                e.trace_closest(&rays, &mut hits);
+                let sampled = e.sampled_mesh_work(m).nodes > 0;
+                let wants = always_sample || policy == Policy::DEFAULT;
+                // The default samples the frames its watch asks for: the first ones after a
+                // build are among them.
+                if wants {
+                    assert!(
+                        sampled || frame > 1,
+                        "{policy:?}, frame {frame}: not sampled"
+                    );
+                } else {
+                    assert!(!sampled, "{policy:?}, frame {frame}: sampled");
+                    assert_eq!(e.frame_stats().sample_ms, 0.0, "{policy:?}");
+                }
+            }
+        }
+    }
 }
 
 /// A mesh whose tree is one leaf cannot degrade (its refit is the tree a rebuild makes): the

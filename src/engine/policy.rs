@@ -492,6 +492,16 @@ impl PolicyState {
         )
     }
 
+    /// True when the policy reads the ray-work sample (its ratios, or the meshes' shares of the
+    /// trace it weighs an action's cost against); the fixed schedules do not.
+    #[must_use]
+    pub fn reads_sample(policy: Policy) -> bool {
+        !matches!(
+            policy,
+            Policy::Refit | Policy::Rebuild | Policy::Periodic(_)
+        )
+    }
+
     /// True when the policy keeps the tree a rebuild replaced and refits it alongside until
     /// the rebuild has paid for itself, going back to it if it turns out better (and learning
     /// from it: [`PolicyState::rebuild_failed`]).

@@ -95,6 +95,11 @@ pub struct EngineConfig {
     pub prices: Prices,
     /// The scheduling class of the background rebuild's worker ([`Policy::Async`]).
     pub worker: WorkerPriority,
+    /// Take the ray-work sample under a policy that does not read it too (`refit`, `rebuild`,
+    /// `periodic`: [`PolicyState::reads_sample`]), for the statistics it feeds (the frame's
+    /// sampled work, [`Engine::mesh_trace_share`]), as `bench` does to compare its runs. Off by
+    /// default: those policies' frames then pay nothing for it.
+    pub always_sample: bool,
 }
 
 /// The scheduling class of the background rebuild's worker thread.
@@ -189,6 +194,7 @@ impl Default for EngineConfig {
             cost: CostMeasure::default(),
             prices: Prices::default(),
             worker: WorkerPriority::Normal,
+            always_sample: false,
         }
     }
 }

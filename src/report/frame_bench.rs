@@ -4,7 +4,7 @@
 use crate::bvh::BuildParams;
 use crate::cputime::{CpuClock, Elapsed};
 use crate::engine::oracle::{MeshCosts, SceneCosts};
-use crate::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL};
+use crate::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL, PolicyState};
 use crate::engine::ray_work::{SAMPLE_MAX, SAMPLE_STRIDE};
 use crate::engine::source::FrameSource;
 use crate::engine::{
@@ -747,9 +747,6 @@ fn record_frame(
 
 /// True for the policies that read the ray sample (the trace cost, or the degradation): they
 /// are charged for it.
-fn reads_sample(p: Policy) -> bool {
-    !matches!(p, Policy::Refit | Policy::Rebuild | Policy::Periodic(_))
-}
 
 fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySummary {
     let n = rows.len().max(1) as f64;
@@ -762,7 +759,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         .map(|r| {
             r.model_update_ms
                 + r.model_trace_ms
-                + if reads_sample(policy) {
+                + if PolicyState::reads_sample(policy) {
                     r.model_sample_ms
                 } else {
                     0.0
@@ -826,7 +823,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         sample_share_modelled: {
             let t: f64 = rows.iter().map(|r| r.model_trace_ms).sum();
             let s: f64 = rows.iter().map(|r| r.model_sample_ms).sum();
-            if t > 0.0 && reads_sample(policy) {
+            if t > 0.0 && PolicyState::reads_sample(policy) {
                 s / t
             } else {
                 0.0
@@ -865,6 +862,9 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
         prices: opts.prices,
         timing: Timing::Priced,
         worker: opts.worker,
+        // Every run keeps its sample: the always-rebuild run's shares of the trace weigh the
+        // degradation check and the wall-clock oracle, and every run's wall clock includes it.
+        always_sample: true,
     };
     // The first frame's box, less far outliers: what the camera and the lidar look at.
     let (bounds, _) = src.build(0, config(Policy::Refit)).view_bounds();

@@ -11,6 +11,7 @@
 use super::{Engine, RAY_CHUNK, SceneHit, local_ray};
 use crate::bvh::{Counters, MeshBvh, MeshBvh8, TraversalStats};
 use crate::engine::MeshId;
+use crate::engine::policy::PolicyState;
 use crate::engine::ray_work::{
     MeshSample, Query, RaySample, SampleEntry, SamplePlan, SampleSums, WorkEstimate, splitmix,
 };
@@ -312,6 +313,9 @@ impl Engine {
     /// `None` (nothing sampled) when no mesh of more than one leaf was refitted or rebuilt
     /// whose policy wants this frame's sample.
     fn begin_sample(&mut self, n: usize) -> Option<SamplePlan> {
+        if !(self.config.always_sample || PolicyState::reads_sample(self.config.policy)) {
+            return None;
+        }
         if self.sample.frame != self.frame {
             // Nothing was refitted or rebuilt (or only trees of one leaf, which cannot
             // degrade), or no policy can act before a later sample
