@@ -745,9 +745,6 @@ fn record_frame(
     });
 }
 
-/// True for the policies that read the ray sample (the trace cost, or the degradation): they
-/// are charged for it.
-
 fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySummary {
     let n = rows.len().max(1) as f64;
     let update: f64 = rows.iter().map(|r| r.update_ms).sum();
@@ -757,6 +754,8 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
     let modelled: f64 = rows
         .iter()
         .map(|r| {
+            // Only the policies that read the ray sample are charged for it (the bench has
+            // every run take one, for its statistics).
             r.model_update_ms
                 + r.model_trace_ms
                 + if PolicyState::reads_sample(policy) {
