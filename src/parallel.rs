@@ -26,7 +26,7 @@ const PROBE_FEW: usize = 4;
 /// A batch's first queries, answered on the calling thread and timed: [`PROBE`] of them spread
 /// evenly over the batch (the `k`-th of them at `k * len / PROBE`), so that a batch whose cost is
 /// uneven along it (a camera image's empty corners first) is judged by its mean; fewer when the
-/// first few already show a long batch ([`CLEAR_SPLIT`]).
+/// first few already show a long batch (`CLEAR_SPLIT`).
 #[derive(Clone, Copy, Debug)]
 pub struct Probe {
     elapsed: Duration,
@@ -40,8 +40,8 @@ pub struct Probe {
 
 impl Probe {
     /// Calls `answer(i)` for [`PROBE`] items spread over a batch of `len`, timed; stops early
-    /// once the pace of the first [`PROBE_FEW`] (then 8, 16, ...) shows the rest would take
-    /// [`CLEAR_SPLIT`] times [`SPLIT_MIN`]. The clock is read only at those counts: a read
+    /// once the pace of the first `PROBE_FEW` (then 8, 16, ...) shows the rest would take
+    /// `CLEAR_SPLIT` times [`SPLIT_MIN`]. The clock is read only at those counts: a read
     /// after every item costs about what a cheap query does, and would count as one.
     pub fn run(len: usize, answer: impl FnMut(usize)) -> Self {
         let clear = CLEAR_SPLIT * SPLIT_MIN.as_secs_f64();
