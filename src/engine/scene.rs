@@ -356,6 +356,12 @@ struct Probe {
     rebuild_ms: f64,
     /// Frames since the rebuild.
     frames: u32,
+    /// Frames since the rebuild at which the next comparison is due (ray-work measure).
+    next: u32,
+    /// Frames since the rebuild at the last comparison.
+    last: u32,
+    /// The replaced tree's ray-work degradation, restored with it (ray-work measure).
+    degradation: Degradation,
 }
 
 #[derive(Clone, Copy)]

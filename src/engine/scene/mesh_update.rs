@@ -132,11 +132,13 @@ impl MeshEntry {
             None if self.one_leaf() => Some(Decision::Refit),
             d => d,
         };
+        // The wide tree is collapsed again after going back to a binary tree without its own.
+        let mut recollapse = false;
         let (decision, raw_work_ratio) = match early {
             Some(Decision::Rebuild) => (Decision::Rebuild, 0.0),
             _ => {
                 let t = Instant::now();
-                out.reverted = self.refit(cx);
+                (out.reverted, recollapse) = self.refit(id, cx);
                 let (decision, raw) = self.observe_and_decide(id, cx, early, gap, ms_since(t));
                 self.stats.refit_ms = ms_since(t);
                 (decision, raw)
@@ -145,11 +147,11 @@ impl MeshEntry {
         let refitted = early != Some(Decision::Rebuild);
         let mut action = Action::from(decision);
         match decision {
-            Decision::Refit => self.follow_wide(out.reverted, cx),
+            Decision::Refit => self.follow_wide(recollapse, cx),
             Decision::Rebuild => out.reverted |= self.rebuild(id, refitted, raw_work_ratio, cx),
             Decision::Optimize(_) | Decision::Partial(_) => self.restructure(id, decision, cx),
             Decision::Background => {
-                self.follow_wide(out.reverted, cx);
+                self.follow_wide(recollapse, cx);
                 let wide = self.wide.is_some();
                 // The lag the policy weighed, computed before it decided.
                 let due = cx.frame + self.state.background.lag as u64;
@@ -231,16 +233,90 @@ impl MeshEntry {
 
     /// Refits the tree (and a replaced tree on probation); true when the probation went back
     /// to the replaced tree.
-    fn refit(&mut self, cx: &FrameContext<'_>) -> bool {
+    fn refit(&mut self, id: MeshId, cx: &FrameContext<'_>) -> (bool, bool) {
         let tris = self.indices.len();
         self.bvh.refit_indexed(&self.positions, &self.indices);
         self.sah = super::tree_sah(self.bvh.bvh());
         self.state.since_build += 1;
         self.stats.model_ms += cx.prices.refit_ms(tris);
         match self.probe.take() {
-            Some(p) => probe_step(self, p, cx.timing, &cx.prices),
-            None => false,
+            Some(p) if cx.trials => (self.ray_probe_step(id, p, cx), false),
+            Some(p) => {
+                let back = probe_step(self, p, cx.timing, &cx.prices);
+                (back, back)
+            }
+            None => (false, false),
         }
+    }
+
+    /// One frame of a kept trial's probation under the ray-work measure: the replaced tree
+    /// (in the spare) refitted and both trees replayed on the last frame's sampled rays; back
+    /// to the replaced tree when it costs them less. True when it went back.
+    fn ray_probe_step(&mut self, id: MeshId, mut p: Probe, cx: &FrameContext<'_>) -> bool {
+        p.frames += 1;
+        let gap: f64 = std::env::var("PROBE_GAP").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+        let sah_ratio = f64::from(ratio(self.sah, self.state.build_sah));
+        let est = self.degradation.ratio().unwrap_or(1.0);
+        let due = p.frames >= p.next && sah_ratio - est > gap;
+        if !due || cx.entries.is_empty() || self.wide.is_some() != self.prev_wide.is_some() {
+            // Nothing to weigh this frame.
+            self.probe = Some(p);
+            return false;
+        }
+        p.next = 2 * p.frames;
+        let tris = self.indices.len();
+        self.prev.refit_indexed(&self.positions, &self.indices);
+        if let Some(w) = &mut self.prev_wide {
+            w.refit_indexed(&self.positions, &self.indices);
+        }
+        if let Some(w) = &mut self.wide {
+            w.refit_indexed(&self.positions, &self.indices);
+        }
+        let old = sample::replay_work(&self.prev, self.prev_wide.as_ref(), id, cx.entries);
+        let new = sample::replay_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
+        let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
+        let cost = cx.prices.refit_ms(tris) + old + new;
+        self.stats.model_ms += cost;
+        p.cost_ms += cost;
+        if new <= 0.0 {
+            self.probe = Some(p);
+            return false;
+        }
+        // Since the last comparison, as if each frame had gained as this one.
+        let span = f64::from(p.frames - p.last);
+        p.last = p.frames;
+        p.saved_ms += self.state.trace_share_ms * (old / new - 1.0) * span;
+        let margin: f64 = std::env::var("PROBE_MARGIN").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+        if old < new * (1.0 - margin) {
+            std::mem::swap(&mut self.bvh, &mut self.prev);
+            if let (Some(w), Some(spare)) = (&mut self.wide, &mut self.prev_wide) {
+                std::mem::swap(w, spare);
+            }
+            self.sah = super::tree_sah(self.bvh.bvh());
+            let learnt = self.state;
+            self.state = crate::engine::policy::PolicyState {
+                since_build: p.state.since_build + p.frames,
+                extra_ms: 0.0,
+                ..p.state
+            };
+            self.state.rebuild_ms = learnt.rebuild_ms;
+            self.state.trace_share_ms = learnt.trace_share_ms;
+            self.state.traced_ratio = learnt.traced_ratio;
+            self.state.estimate_gain = learnt.estimate_gain;
+            self.state.rebuild_scale = learnt.rebuild_scale;
+            self.state.ray_calibrations = learnt.ray_calibrations;
+            self.degradation = p.degradation;
+            if p.saved_ms < 0.5 * p.rebuild_ms {
+                self.state.rebuild_failed();
+            }
+            return true;
+        }
+        if p.saved_ms >= p.rebuild_ms {
+            self.state.rebuild_paid();
+        } else if p.cost_ms < super::PROBE_SHARE * p.rebuild_ms {
+            self.probe = Some(p);
+        }
+        false
     }
 
     /// Measures the refitted tree's degradation (SAH ratio, fresh-build estimate, ray-work
@@ -494,6 +570,30 @@ impl MeshEntry {
                     cost_ms: 0.0,
                     rebuild_ms: rebuild_cost,
                     frames: 0,
+                    next: 1,
+                    last: 0,
+                    degradation: self.degradation,
+                });
+            }
+        } else if trial
+            && std::env::var_os("RAY_PROBE").is_some()
+            && f64::from(self.stats.measured_work_ratio)
+                < std::env::var("PROBE_BAR").ok().and_then(|v| v.parse().ok()).unwrap_or(f64::INFINITY)
+        {
+            // A kept trial: the replaced tree stays in the spare and is compared with the new
+            // one on the next frames' sampled rays.
+            let saved =
+                self.state.trace_share_ms * f64::from(self.stats.measured_work_ratio - 1.0);
+            if saved < rebuild_cost {
+                self.probe = Some(Probe {
+                    state: replaced,
+                    saved_ms: saved,
+                    cost_ms: 0.0,
+                    rebuild_ms: rebuild_cost,
+                    frames: 0,
+                    next: 1,
+                    last: 0,
+                    degradation: self.degradation,
                 });
             }
         }
