@@ -14,9 +14,12 @@
 //! [`SceneCosts::calibrate`]), kept beside it for comparison: it follows the machine's load,
 //! so policies can come out slightly below it (`docs/internals.md`, the benchmark).
 //! [`WorkCosts::best_with_rungs`] (`oracle/rungs.rs`) adds the rungs between refit and
-//! rebuild to the moves.
+//! rebuild to the moves, [`WorkCosts::best_going_back`] (`oracle/back.rs`) going back to the
+//! tree the last rebuild replaced.
 
+mod back;
 mod rungs;
+pub use back::{BackMove, BackSchedule};
 pub use rungs::{Move, RungCosts, RungSchedule};
 
 /// The measured and recorded costs of one mesh over frames `0 ..= F` (index 0, the initial

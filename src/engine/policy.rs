@@ -294,6 +294,9 @@ pub enum Action {
     /// The background rebuild's tree swapped in and refitted.
     #[serde(rename = "async-swap")]
     AsyncSwap,
+    /// Back to the tree the last rebuild replaced, refitted (a rebuild on probation that did
+    /// not pay).
+    Back,
 }
 
 impl From<Decision> for Action {
@@ -320,6 +323,7 @@ impl Action {
             Action::Rebuild => "rebuild",
             Action::AsyncStart => "async-start",
             Action::AsyncSwap => "async-swap",
+            Action::Back => "back",
         }
     }
 }

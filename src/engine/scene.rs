@@ -342,7 +342,9 @@ struct MeshEntry {
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
 /// saved what the rebuild cost (it paid), the old one is better again (back to it: it did not
-/// pay), or refitting the old one has cost [`PROBE_SHARE`] of the rebuild (undecided).
+/// pay), or refitting the old one has cost [`PROBE_SHARE`] of the rebuild (undecided). Under
+/// the SAH measure every probed rebuild, compared by the SAH each frame; under the ray-work
+/// measure a kept trial, compared on the sampled rays at some frames ([`ray_probe_step`]).
 #[derive(Clone, Copy)]
 struct Probe {
     /// Policy state of the replaced tree, restored if it wins.
@@ -1276,37 +1278,117 @@ fn probe_step(m: &mut MeshEntry, mut p: Probe, timing: Timing, prices: &Prices) 
     // the new tree degraded).
     p.saved_ms += m.state.trace_share_ms * f64::from(ratio(old_sah, m.sah) - 1.0);
     if old_sah < m.sah {
-        std::mem::swap(&mut m.bvh, &mut m.prev);
-        m.sah = old_sah;
-        // The old tree's build figures and age; what was learnt since stays, and the extra
-        // trace time counts afresh.
-        let learnt = m.state;
-        m.state = PolicyState {
-            since_build: p.state.since_build + p.frames,
-            extra_ms: 0.0,
-            ..p.state
-        };
-        m.state.rebuild_ms = learnt.rebuild_ms;
-        m.state.trace_share_ms = learnt.trace_share_ms;
-        m.state.traced_ratio = learnt.traced_ratio;
-        m.state.estimate_gain = learnt.estimate_gain;
-        m.state.rebuild_scale = learnt.rebuild_scale;
-        // A rebuild that earned back less than half its cost before the old tree won was a
-        // mistake to learn from (a tree built mid-way through a motion that swings back is
-        // soon worse than the old one); one that earned more was worth about what it cost (a
-        // morph that returns to where the old tree was built), and penalising those returns
-        // would keep the mesh from the rebuilds it needs.
-        if p.saved_ms < 0.5 * p.rebuild_ms {
-            m.state.rebuild_failed();
-        }
+        go_back(m, &p, old_sah);
         return true;
     }
+    probation_goes_on(m, p);
+    false
+}
+
+/// SAH ratio of the tree in use to its build over its sampled degradation (ratio less 1)
+/// from which a kept trial's replaced tree is compared with it ([`ray_probe_step`]): where
+/// the SAH rises and the sampled ratio does not, the sample may be blind to the tree's
+/// degradation (a lidar fan sweeping other parts of a cloth each frame, `docs/ray_work.md`);
+/// where both rise (an explosion), the estimate is not in doubt.
+const BACK_DISAGREEMENT: f64 = 0.15;
+
+/// One frame of a kept trial's probation under the ray-work measure, after `m`'s tree was
+/// refitted: at 1, 2, 4, .. frames after the rebuild, and only while the SAH ratio of the tree
+/// in use to its build exceeds its sampled ratio by more than [`BACK_DISAGREEMENT`], the
+/// replaced tree (and its wide tree) is refitted and both trees are replayed on the last
+/// frame's sampled `entries`; the replaced one comes back when it costs them less. Returns
+/// true when it went back (the wide trees swapped with the binary ones, both current).
+fn ray_probe_step(
+    m: &mut MeshEntry,
+    id: MeshId,
+    mut p: Probe,
+    entries: &[SampleEntry],
+    timing: Timing,
+    prices: &Prices,
+) -> bool {
+    p.frames += 1;
+    let doubt = f64::from(ratio(m.sah, m.state.build_sah)) - m.degradation.ratio().unwrap_or(1.0);
+    if p.frames < p.next
+        || doubt <= BACK_DISAGREEMENT
+        || entries.is_empty()
+        || m.wide.is_some() != m.prev_wide.is_some()
+    {
+        m.probe = Some(p);
+        return false;
+    }
+    p.next = 2 * p.frames;
+    let t = Instant::now();
+    m.prev.refit_indexed(&m.positions, &m.indices);
+    for w in [&mut m.prev_wide, &mut m.wide].into_iter().flatten() {
+        w.refit_indexed(&m.positions, &m.indices);
+    }
+    let tris = m.indices.len();
+    let refit_ms = timing.refit_ms(ms_since(t), tris, prices);
+    let old = prices.trace_ms(sample::replay_work(
+        &m.prev,
+        m.prev_wide.as_ref(),
+        id,
+        entries,
+    ));
+    let new = prices.trace_ms(sample::replay_work(&m.bvh, m.wide.as_ref(), id, entries));
+    m.stats.model_ms += prices.refit_ms(tris) + old + new;
+    p.cost_ms += refit_ms + old + new;
+    if new <= 0.0 {
+        m.probe = Some(p);
+        return false;
+    }
+    // Since the last comparison, as if each frame had gained as this one.
+    p.saved_ms += m.state.trace_share_ms * (old / new - 1.0) * f64::from(p.frames - p.last);
+    p.last = p.frames;
+    if old < new {
+        if let (Some(w), Some(spare)) = (&mut m.wide, &mut m.prev_wide) {
+            std::mem::swap(w, spare);
+        }
+        let sah = tree_sah(m.prev.bvh());
+        go_back(m, &p, sah);
+        return true;
+    }
+    probation_goes_on(m, p);
+    false
+}
+
+/// Back to the tree a rebuild on probation replaced (in `m.prev`, refitted to the frame, of
+/// SAH cost `sah`): its build figures, age and degradation reference; what was learnt since
+/// stays, and the extra trace time counts afresh.
+fn go_back(m: &mut MeshEntry, p: &Probe, sah: f32) {
+    std::mem::swap(&mut m.bvh, &mut m.prev);
+    m.sah = sah;
+    let learnt = m.state;
+    m.state = PolicyState {
+        since_build: p.state.since_build + p.frames,
+        extra_ms: 0.0,
+        ..p.state
+    };
+    m.state.rebuild_ms = learnt.rebuild_ms;
+    m.state.trace_share_ms = learnt.trace_share_ms;
+    m.state.traced_ratio = learnt.traced_ratio;
+    m.state.estimate_gain = learnt.estimate_gain;
+    m.state.rebuild_scale = learnt.rebuild_scale;
+    m.state.ray_calibrations = learnt.ray_calibrations;
+    m.degradation = p.degradation;
+    // A rebuild that earned back less than half its cost before the old tree won was a
+    // mistake to learn from (a tree built mid-way through a motion that swings back is soon
+    // worse than the old one); one that earned more was worth about what it cost (a morph
+    // that returns to where the old tree was built), and penalising those returns would keep
+    // the mesh from the rebuilds it needs.
+    if p.saved_ms < 0.5 * p.rebuild_ms {
+        m.state.rebuild_failed();
+    }
+}
+
+/// The new tree stays this frame: its rebuild has paid once it saved its cost; otherwise the
+/// probation goes on while it has cost less than [`PROBE_SHARE`] of the rebuild.
+fn probation_goes_on(m: &mut MeshEntry, p: Probe) {
     if p.saved_ms >= p.rebuild_ms {
         m.state.rebuild_paid();
     } else if p.cost_ms < PROBE_SHARE * p.rebuild_ms {
         m.probe = Some(p);
     }
-    false
 }
 
 fn set_transform(inst: &mut InstanceEntry, transform: Affine3A) {

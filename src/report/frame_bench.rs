@@ -403,6 +403,8 @@ pub struct ModelledOracle {
     pub rebuilds: usize,
     /// For each deforming mesh, the frames it is rebuilt at.
     pub rebuild_frames: Vec<Vec<usize>>,
+    /// For each deforming mesh, the frames it goes back to the tree its last rebuild replaced.
+    pub back_frames: Vec<Vec<usize>>,
     /// Modelled totals of always refitting and always rebuilding (no sampling overhead), ms.
     pub refit_ms: f64,
     /// See `refit_ms`.
@@ -1093,7 +1095,8 @@ fn number_frames(r: &mut Report, first: usize) {
         .iter_mut()
         .map(|p| &mut p.rebuild_frames)
         .chain(r.oracle.rebuild_frames.iter_mut())
-        .chain(r.oracle_modelled.rebuild_frames.iter_mut());
+        .chain(r.oracle_modelled.rebuild_frames.iter_mut())
+        .chain(r.oracle_modelled.back_frames.iter_mut());
     for list in frame_lists {
         for f in list {
             *f += first;
@@ -1106,27 +1109,30 @@ fn modelled_oracle(
     work: &[crate::engine::oracle::WorkCosts],
     sampled: &[SampledFrame],
 ) -> ModelledOracle {
+    use crate::engine::oracle::BackMove;
     let fixed: f64 = sampled.iter().skip(1).map(|s| s.fixed_ms).sum();
     let mut o = ModelledOracle {
         total_ms: fixed,
         refit_ms: fixed,
         rebuild_ms: fixed,
-        moves: "per deforming mesh and frame: refit the current tree or rebuild it (the \
-            engine's moves under the ray-work measure, which never goes back to an earlier \
-            tree); charged for refits, rebuilds and tracing at the same prices as the \
-            policies, not for the ray sample nor for estimates, which it does not need"
+        moves: "per deforming mesh and frame: refit the tree in use, rebuild it, or go back \
+            to the tree the last rebuild replaced, refitted (the engine's moves under the \
+            ray-work measure); charged for refits, rebuilds and tracing at the same prices as \
+            the policies, not for the ray sample, estimates or the comparisons that decide \
+            going back, which it does not need"
             .into(),
         ..ModelledOracle::default()
     };
     for w in work {
-        let s = w.best();
+        let s = w.best_going_back();
         let n = w.frames() + 1;
         o.total_ms += s.cost_ms;
         o.refit_ms += w.cost_of(&vec![false; n]);
         o.rebuild_ms += w.cost_of(&vec![true; n]);
-        o.rebuilds += s.rebuilds();
-        o.rebuild_frames
-            .push((1..n).filter(|&f| s.rebuild[f]).collect());
+        let rebuilt = s.frames_with(BackMove::Rebuild);
+        o.rebuilds += rebuilt.len();
+        o.rebuild_frames.push(rebuilt);
+        o.back_frames.push(s.frames_with(BackMove::Back));
     }
     o
 }
@@ -1214,7 +1220,8 @@ fn within_rung_moves(p: Policy, r: &Run) -> bool {
                 true
             }
             Action::Optimize | Action::Partial => !std::mem::replace(&mut restructured, true),
-            Action::AsyncStart | Action::AsyncSwap => false,
+            // The rung oracle does not go back to an earlier tree.
+            Action::AsyncStart | Action::AsyncSwap | Action::Back => false,
             Action::None | Action::Refit => true,
         })
     })

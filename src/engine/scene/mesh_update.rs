@@ -3,7 +3,9 @@
 //! along. What the policy weighs is in [`crate::engine::policy`]; this file only runs it.
 
 use super::background::Background;
-use super::{ESTIMATE_SHARE, MeshEntry, Probe, Timing, ms_since, probe_step, ratio, sample};
+use super::{
+    ESTIMATE_SHARE, MeshEntry, Probe, Timing, ms_since, probe_step, ratio, ray_probe_step, sample,
+};
 use crate::bvh::optimize::{OptimizeBudget, OptimizeScratch};
 pub(super) use crate::bvh::partial::PartialCut;
 use crate::bvh::partial::PartialScratch;
@@ -170,6 +172,9 @@ impl MeshEntry {
         if swapped && action == Action::Refit {
             action = Action::AsyncSwap;
         }
+        if out.reverted && action == Action::Refit {
+            action = Action::Back;
+        }
         self.watch(cx, gap);
         self.stats.action = action;
         self.stats.sah = self.sah;
@@ -240,83 +245,16 @@ impl MeshEntry {
         self.state.since_build += 1;
         self.stats.model_ms += cx.prices.refit_ms(tris);
         match self.probe.take() {
-            Some(p) if cx.trials => (self.ray_probe_step(id, p, cx), false),
+            Some(p) if cx.trials => {
+                let back = ray_probe_step(self, id, p, cx.entries, cx.timing, &cx.prices);
+                (back, false)
+            }
             Some(p) => {
                 let back = probe_step(self, p, cx.timing, &cx.prices);
                 (back, back)
             }
             None => (false, false),
         }
-    }
-
-    /// One frame of a kept trial's probation under the ray-work measure: the replaced tree
-    /// (in the spare) refitted and both trees replayed on the last frame's sampled rays; back
-    /// to the replaced tree when it costs them less. True when it went back.
-    fn ray_probe_step(&mut self, id: MeshId, mut p: Probe, cx: &FrameContext<'_>) -> bool {
-        p.frames += 1;
-        let gap: f64 = std::env::var("PROBE_GAP").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-        let sah_ratio = f64::from(ratio(self.sah, self.state.build_sah));
-        let est = self.degradation.ratio().unwrap_or(1.0);
-        let due = p.frames >= p.next && sah_ratio - est > gap;
-        if !due || cx.entries.is_empty() || self.wide.is_some() != self.prev_wide.is_some() {
-            // Nothing to weigh this frame.
-            self.probe = Some(p);
-            return false;
-        }
-        p.next = 2 * p.frames;
-        let tris = self.indices.len();
-        self.prev.refit_indexed(&self.positions, &self.indices);
-        if let Some(w) = &mut self.prev_wide {
-            w.refit_indexed(&self.positions, &self.indices);
-        }
-        if let Some(w) = &mut self.wide {
-            w.refit_indexed(&self.positions, &self.indices);
-        }
-        let old = sample::replay_work(&self.prev, self.prev_wide.as_ref(), id, cx.entries);
-        let new = sample::replay_work(&self.bvh, self.wide.as_ref(), id, cx.entries);
-        let (old, new) = (cx.prices.trace_ms(old), cx.prices.trace_ms(new));
-        let cost = cx.prices.refit_ms(tris) + old + new;
-        self.stats.model_ms += cost;
-        p.cost_ms += cost;
-        if new <= 0.0 {
-            self.probe = Some(p);
-            return false;
-        }
-        // Since the last comparison, as if each frame had gained as this one.
-        let span = f64::from(p.frames - p.last);
-        p.last = p.frames;
-        p.saved_ms += self.state.trace_share_ms * (old / new - 1.0) * span;
-        let margin: f64 = std::env::var("PROBE_MARGIN").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-        if old < new * (1.0 - margin) {
-            std::mem::swap(&mut self.bvh, &mut self.prev);
-            if let (Some(w), Some(spare)) = (&mut self.wide, &mut self.prev_wide) {
-                std::mem::swap(w, spare);
-            }
-            self.sah = super::tree_sah(self.bvh.bvh());
-            let learnt = self.state;
-            self.state = crate::engine::policy::PolicyState {
-                since_build: p.state.since_build + p.frames,
-                extra_ms: 0.0,
-                ..p.state
-            };
-            self.state.rebuild_ms = learnt.rebuild_ms;
-            self.state.trace_share_ms = learnt.trace_share_ms;
-            self.state.traced_ratio = learnt.traced_ratio;
-            self.state.estimate_gain = learnt.estimate_gain;
-            self.state.rebuild_scale = learnt.rebuild_scale;
-            self.state.ray_calibrations = learnt.ray_calibrations;
-            self.degradation = p.degradation;
-            if p.saved_ms < 0.5 * p.rebuild_ms {
-                self.state.rebuild_failed();
-            }
-            return true;
-        }
-        if p.saved_ms >= p.rebuild_ms {
-            self.state.rebuild_paid();
-        } else if p.cost_ms < super::PROBE_SHARE * p.rebuild_ms {
-            self.probe = Some(p);
-        }
-        false
     }
 
     /// Measures the refitted tree's degradation (SAH ratio, fresh-build estimate, ray-work
@@ -575,15 +513,10 @@ impl MeshEntry {
                     degradation: self.degradation,
                 });
             }
-        } else if trial
-            && std::env::var_os("RAY_PROBE").is_some()
-            && f64::from(self.stats.measured_work_ratio)
-                < std::env::var("PROBE_BAR").ok().and_then(|v| v.parse().ok()).unwrap_or(f64::INFINITY)
-        {
-            // A kept trial: the replaced tree stays in the spare and is compared with the new
-            // one on the next frames' sampled rays.
-            let saved =
-                self.state.trace_share_ms * f64::from(self.stats.measured_work_ratio - 1.0);
+        } else if trial {
+            // A kept trial: the replaced tree stays in the spare, on probation against the
+            // new one ([`super::ray_probe_step`]); the replay has shown this frame's gain.
+            let saved = self.state.trace_share_ms * f64::from(self.stats.measured_work_ratio - 1.0);
             if saved < rebuild_cost {
                 self.probe = Some(Probe {
                     state: replaced,
