@@ -9,6 +9,7 @@
 //! counter is global).
 
 use dynbvh::anim::Scene;
+use dynbvh::bvh::{MeshBvh, MeshBvh8};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{Action, EngineConfig, FrameSource, Policy, Timing};
 use dynbvh::report::rays::camera_rays;
@@ -19,8 +20,8 @@ use std::alloc::System;
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 /// Runs `file` under the default configuration beside an always-refit engine; returns the
-/// rebuilds and the rejected trials.
-fn run(file: &str) -> (u32, u32) {
+/// rebuilds, the rejected trials and the returns to a replaced tree.
+fn run(file: &str) -> (u32, u32, u32) {
     let path = format!("{}/animations/{file}", env!("CARGO_MANIFEST_DIR"));
     let (scene, _) = Scene::load(&path).unwrap();
     let mut src = GltfSource::new(&scene, Some(0), FrameTimes::Count(30)).unwrap();
@@ -35,7 +36,9 @@ fn run(file: &str) -> (u32, u32) {
     // At 200x200 rays, explode and swap make rebuilds the replay finds worse.
     let rays = camera_rays(&e.bounds(), 200, 200);
     let mut hits = vec![None; rays.len()];
-    let (mut rebuilds, mut rejected) = (0, 0);
+    let (mut rebuilds, mut rejected, mut backs) = (0, 0, 0);
+    // Per deforming mesh, the tree the last kept rebuild replaced: what going back must bring.
+    let mut replaced: Vec<Option<_>> = vec![None; src.deforming().len()];
     for f in 1..=src.frames() {
         // The trees as they stand, refitted here to the new pose: what a rejected trial
         // must leave.
@@ -55,9 +58,30 @@ fn run(file: &str) -> (u32, u32) {
         );
         refit.update();
         rebuilds += s.rebuilds;
-        for (&m, (mut bvh, mut wide)) in src.deforming().iter().zip(before) {
+        for (k, (&m, (mut bvh, mut wide))) in src.deforming().iter().zip(before).enumerate() {
             let ms = e.mesh_stats(m);
+            if ms.action == Action::Back {
+                // The replaced tree, refitted to this pose, binary and wide; the one left
+                // becomes the spare.
+                backs += 1;
+                let (mut old, mut old_wide): (MeshBvh, Option<MeshBvh8>) =
+                    replaced[k].take().expect("a replaced tree to go back to");
+                old.refit_indexed(e.positions(m), e.indices(m));
+                assert_eq!(e.mesh_bvh(m).bvh().nodes(), old.bvh().nodes(), "{file} {f}");
+                assert_eq!(e.mesh_bvh(m).bvh().prim_indices(), old.bvh().prim_indices());
+                if let Some(w) = &mut old_wide {
+                    w.refit_indexed(e.positions(m), e.indices(m));
+                    let got = e.mesh_bvh8(m).expect("wide tree");
+                    assert_eq!(got.nodes(), w.nodes(), "{file} {f}: wide nodes");
+                }
+                replaced[k] = Some((bvh, wide));
+                continue;
+            }
             // One deforming mesh a file: the frame's reverts are its own.
+            if ms.action == Action::Rebuild && s.reverts == 0 {
+                replaced[k] = Some((bvh, wide));
+                continue;
+            }
             if !(ms.action == Action::Rebuild && s.reverts > 0) {
                 continue;
             }
@@ -83,7 +107,7 @@ fn run(file: &str) -> (u32, u32) {
             assert_eq!(h.map(|h| h.t), want.map(|h| h.t), "{file} frame {f}");
         }
     }
-    (rebuilds, rejected)
+    (rebuilds, rejected, backs)
 }
 
 #[test]
@@ -98,7 +122,7 @@ fn a_rejected_trial_rebuild_leaves_the_refitted_trees() {
 }
 
 fn all_files() {
-    let mut total = 0;
+    let (mut total, mut backs) = (0, 0);
     for file in [
         "explode.glb",
         "lidar_cloth.glb",
@@ -106,9 +130,11 @@ fn all_files() {
         "tube.glb",
         "wave.glb",
     ] {
-        let (rebuilds, rejected) = run(file);
-        eprintln!("{file}: {rebuilds} rebuilds, {rejected} rejected");
+        let (rebuilds, rejected, back) = run(file);
+        eprintln!("{file}: {rebuilds} rebuilds, {rejected} rejected, {back} back");
         total += rejected;
+        backs += back;
     }
     assert!(total >= 2, "{total} trials rejected: too little checked");
+    assert!(backs >= 1, "{backs} returns to a replaced tree: too little checked");
 }

@@ -494,9 +494,9 @@ impl Engine {
     }
 
     /// True when rebuilds are probed (the replaced tree kept and refitted alongside): the
-    /// amortized policy under the SAH measure. Under the ray-work measure the degradation is
-    /// learnt from the rays at each rebuild instead, and the engine never goes back to an
-    /// earlier tree, so that the oracle's moves are the engine's.
+    /// amortized policy under the SAH measure. Under the ray-work measure rebuilds are trials
+    /// instead, and a kept trial is on probation only where its estimate is in doubt
+    /// ([`ray_probe_step`]).
     fn probes(&self) -> bool {
         PolicyState::probes_rebuilds(self.config.policy) && self.config.cost == CostMeasure::Sah
     }
