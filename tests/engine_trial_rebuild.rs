@@ -136,5 +136,8 @@ fn all_files() {
         backs += back;
     }
     assert!(total >= 2, "{total} trials rejected: too little checked");
-    assert!(backs >= 1, "{backs} returns to a replaced tree: too little checked");
+    assert!(
+        backs >= 1,
+        "{backs} returns to a replaced tree: too little checked"
+    );
 }
