@@ -2,7 +2,8 @@
 //! sampled rays are replayed on the refitted tree and the new one, and a new tree that does
 //! worse is dropped in the same frame. What must hold when that happens: the mesh keeps
 //! exactly the refitted trees (binary and wide, bit for bit), the replay did read worse, every
-//! hit stays right, and the update allocates nothing (the spares were reserved when the mesh
+//! hit stays right, and the update allocates nothing; and when a kept trial's probation goes
+//! back to the tree it replaced, the mesh holds exactly that tree, refitted (the spares were reserved when the mesh
 //! was added). Costs are priced from work counts (`Timing::Priced`), so the decisions are the
 //! same on every run. The frames run in a one-thread pool, as in `engine_alloc.rs` (from
 //! outside a pool rayon's queue allocates), and this binary holds one test (the allocation
@@ -11,7 +12,7 @@
 use dynbvh::anim::Scene;
 use dynbvh::bvh::{MeshBvh, MeshBvh8};
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
-use dynbvh::engine::{Action, EngineConfig, FrameSource, Policy, Timing};
+use dynbvh::engine::{Action, Engine, EngineConfig, FrameSource, MeshId, Policy, Timing};
 use dynbvh::report::rays::camera_rays;
 use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
 use std::alloc::System;
@@ -58,22 +59,14 @@ fn run(file: &str) -> (u32, u32, u32) {
         );
         refit.update();
         rebuilds += s.rebuilds;
-        for (k, (&m, (mut bvh, mut wide))) in src.deforming().iter().zip(before).enumerate() {
+        for (k, (&m, (bvh, wide))) in src.deforming().iter().zip(before).enumerate() {
             let ms = e.mesh_stats(m);
             if ms.action == Action::Back {
                 // The replaced tree, refitted to this pose, binary and wide; the one left
                 // becomes the spare.
                 backs += 1;
-                let (mut old, mut old_wide): (MeshBvh, Option<MeshBvh8>) =
-                    replaced[k].take().expect("a replaced tree to go back to");
-                old.refit_indexed(e.positions(m), e.indices(m));
-                assert_eq!(e.mesh_bvh(m).bvh().nodes(), old.bvh().nodes(), "{file} {f}");
-                assert_eq!(e.mesh_bvh(m).bvh().prim_indices(), old.bvh().prim_indices());
-                if let Some(w) = &mut old_wide {
-                    w.refit_indexed(e.positions(m), e.indices(m));
-                    let got = e.mesh_bvh8(m).expect("wide tree");
-                    assert_eq!(got.nodes(), w.nodes(), "{file} {f}: wide nodes");
-                }
+                let old = replaced[k].take().expect("a replaced tree to go back to");
+                assert_holds(&e, m, old, &format!("{file} frame {f}, back"));
                 replaced[k] = Some((bvh, wide));
                 continue;
             }
@@ -91,15 +84,7 @@ fn run(file: &str) -> (u32, u32, u32) {
                 "{file} frame {f}: rejected at replay ratio {}",
                 ms.measured_work_ratio
             );
-            bvh.refit_indexed(e.positions(m), e.indices(m));
-            assert_eq!(e.mesh_bvh(m).bvh().nodes(), bvh.bvh().nodes(), "{file} {f}");
-            assert_eq!(e.mesh_bvh(m).bvh().prim_indices(), bvh.bvh().prim_indices());
-            if let Some(w) = &mut wide {
-                w.refit_indexed(e.positions(m), e.indices(m));
-                let got = e.mesh_bvh8(m).expect("wide tree");
-                assert_eq!(got.nodes(), w.nodes(), "{file} {f}: wide nodes");
-                assert_eq!(got.blocks().len(), w.blocks().len(), "{file} {f}: blocks");
-            }
+            assert_holds(&e, m, (bvh, wide), &format!("{file} frame {f}, rejected"));
         }
         e.trace_closest(&rays, &mut hits);
         for (r, h) in rays.iter().zip(&hits).step_by(7) {
@@ -108,6 +93,23 @@ fn run(file: &str) -> (u32, u32, u32) {
         }
     }
     (rebuilds, rejected, backs)
+}
+
+/// Asserts that mesh `m` holds `trees` (binary and wide), refitted to its pose.
+fn assert_holds(e: &Engine, m: MeshId, (mut bvh, mut wide): (MeshBvh, Option<MeshBvh8>), at: &str) {
+    bvh.refit_indexed(e.positions(m), e.indices(m));
+    assert_eq!(e.mesh_bvh(m).bvh().nodes(), bvh.bvh().nodes(), "{at}");
+    assert_eq!(
+        e.mesh_bvh(m).bvh().prim_indices(),
+        bvh.bvh().prim_indices(),
+        "{at}"
+    );
+    if let Some(w) = &mut wide {
+        w.refit_indexed(e.positions(m), e.indices(m));
+        let got = e.mesh_bvh8(m).expect("wide tree");
+        assert_eq!(got.nodes(), w.nodes(), "{at}: wide nodes");
+        assert_eq!(got.blocks().len(), w.blocks().len(), "{at}: blocks");
+    }
 }
 
 #[test]

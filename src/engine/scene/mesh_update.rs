@@ -496,27 +496,16 @@ impl MeshEntry {
             self.state.judge_rebuild(level, rebuild_cost);
         }
         self.probe = None;
-        if let (true, Some(refit_sah)) = (probe, refit_sah) {
-            // This frame's trace already gains from the new tree.
-            let saved = self.state.trace_share_ms * f64::from(ratio(refit_sah, self.sah) - 1.0);
-            if saved >= rebuild_cost {
-                self.state.rebuild_paid();
-            } else {
-                self.probe = Some(Probe {
-                    state: replaced,
-                    saved_ms: saved,
-                    cost_ms: 0.0,
-                    rebuild_ms: rebuild_cost,
-                    frames: 0,
-                    next: 1,
-                    last: 0,
-                    degradation: self.degradation,
-                });
-            }
-        } else if trial {
-            // A kept trial: the replaced tree stays in the spare, on probation against the
-            // new one ([`super::ray_probe_step`]); the replay has shown this frame's gain.
-            let saved = self.state.trace_share_ms * f64::from(self.stats.measured_work_ratio - 1.0);
+        // A probed rebuild (SAH measure) or a kept trial (ray-work measure,
+        // [`super::ray_probe_step`]) goes on probation, the replaced tree in the spare; this
+        // frame's trace already gains from the new tree, by the SAH's ratio or the replay's.
+        let gain = match (probe, refit_sah) {
+            (true, Some(refit_sah)) => Some(ratio(refit_sah, self.sah)),
+            _ if trial => Some(self.stats.measured_work_ratio),
+            _ => None,
+        };
+        if let Some(gain) = gain {
+            let saved = self.state.trace_share_ms * f64::from(gain - 1.0);
             if saved < rebuild_cost {
                 self.probe = Some(Probe {
                     state: replaced,
@@ -528,6 +517,8 @@ impl MeshEntry {
                     last: 0,
                     degradation: self.degradation,
                 });
+            } else if probe {
+                self.state.rebuild_paid();
             }
         }
         self.stats.sah_ratio = 1.0;
