@@ -2,9 +2,9 @@
 //! sampled rays are replayed on the refitted tree and the new one, and a new tree that does
 //! worse is dropped in the same frame. What must hold when that happens: the mesh keeps
 //! exactly the refitted trees (binary and wide, bit for bit), the replay did read worse, every
-//! hit stays right, and the update allocates nothing; and when a kept trial's probation goes
-//! back to the tree it replaced, the mesh holds exactly that tree, refitted (the spares were reserved when the mesh
-//! was added). Costs are priced from work counts (`Timing::Priced`), so the decisions are the
+//! hit stays right, and the update allocates nothing (the spares were reserved when the mesh
+//! was added). When a kept trial's probation goes back to the tree it replaced, the mesh holds
+//! exactly that tree, refitted. Costs are priced from work counts (`Timing::Priced`), so the decisions are the
 //! same on every run. The frames run in a one-thread pool, as in `engine_alloc.rs` (from
 //! outside a pool rayon's queue allocates), and this binary holds one test (the allocation
 //! counter is global).
