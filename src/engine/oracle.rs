@@ -19,7 +19,7 @@
 
 mod back;
 mod rungs;
-pub use back::{BackMove, BackSchedule};
+pub use back::{BACK_MAX_FRAMES, BackMove, BackSchedule};
 pub use rungs::{Move, RungCosts, RungSchedule};
 
 /// The measured and recorded costs of one mesh over frames `0 ..= F` (index 0, the initial

@@ -1109,18 +1109,20 @@ fn modelled_oracle(
     work: &[crate::engine::oracle::WorkCosts],
     sampled: &[SampledFrame],
 ) -> ModelledOracle {
-    use crate::engine::oracle::BackMove;
+    use crate::engine::oracle::{BACK_MAX_FRAMES, BackMove};
     let fixed: f64 = sampled.iter().skip(1).map(|s| s.fixed_ms).sum();
     let mut o = ModelledOracle {
         total_ms: fixed,
         refit_ms: fixed,
         rebuild_ms: fixed,
-        moves: "per deforming mesh and frame: refit the tree in use, rebuild it, or go back \
-            to the tree the last rebuild replaced, refitted (the engine's moves under the \
-            ray-work measure); charged for refits, rebuilds and tracing at the same prices as \
-            the policies, not for the ray sample, estimates or the comparisons that decide \
-            going back, which it does not need"
-            .into(),
+        moves: format!(
+            "per deforming mesh and frame: refit the tree in use, rebuild it, or go back to the \
+            tree the last rebuild replaced, refitted (the engine's moves under the ray-work \
+            measure); charged for refits, rebuilds and tracing at the same prices as the \
+            policies, not for the ray sample, estimates or the comparisons that decide going \
+            back, which it does not need; over more than {BACK_MAX_FRAMES} frames it does not \
+            go back"
+        ),
         ..ModelledOracle::default()
     };
     for w in work {

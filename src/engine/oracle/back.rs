@@ -10,6 +10,9 @@
 
 use super::WorkCosts;
 
+/// Most frames the oracle goes back over: its table of moves takes `F^3` bytes (64 MB here).
+pub const BACK_MAX_FRAMES: usize = 400;
+
 /// One frame's move for one mesh.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BackMove {
@@ -66,10 +69,29 @@ impl WorkCosts {
         Some(total)
     }
 
-    /// The least-cost schedule when the moves include going back to the spare tree.
+    /// The least-cost schedule when the moves include going back to the spare tree; over
+    /// more than [`BACK_MAX_FRAMES`] frames, [`WorkCosts::best`]'s (refits and rebuilds only).
     #[must_use]
     pub fn best_going_back(&self) -> BackSchedule {
         let n = self.frames();
+        if n > BACK_MAX_FRAMES {
+            let s = self.best();
+            let moves = s
+                .rebuild
+                .iter()
+                .map(|&r| {
+                    if r {
+                        BackMove::Rebuild
+                    } else {
+                        BackMove::Refit
+                    }
+                })
+                .collect();
+            return BackSchedule {
+                cost_ms: s.cost_ms,
+                moves,
+            };
+        }
         // State (b, s): index b * w + s1, s1 = 0 for no spare, else the spare's frame + 1.
         let w = n + 2;
         let states = (n + 1) * w;
@@ -197,6 +219,15 @@ mod tests {
         }
         // The move is used where it pays.
         assert!(went_back > 5, "{went_back}");
+    }
+
+    #[test]
+    fn past_the_frame_bound_the_oracle_does_not_go_back() {
+        let c = costs(BACK_MAX_FRAMES + 1, 3);
+        let s = c.best_going_back();
+        assert!(!s.moves.contains(&BackMove::Back));
+        assert_eq!(s.cost_ms, c.best().cost_ms);
+        assert_eq!(c.cost_going_back(&s.moves), Some(s.cost_ms));
     }
 
     #[test]

@@ -236,8 +236,9 @@ impl MeshEntry {
         true
     }
 
-    /// Refits the tree (and a replaced tree on probation); true when the probation went back
-    /// to the replaced tree.
+    /// Refits the tree (and a replaced tree on probation). Returns whether the probation went
+    /// back to the replaced tree, and whether the wide tree must then be collapsed again (the
+    /// SAH measure's probation keeps no wide spare).
     fn refit(&mut self, id: MeshId, cx: &FrameContext<'_>) -> (bool, bool) {
         let tris = self.indices.len();
         self.bvh.refit_indexed(&self.positions, &self.indices);
