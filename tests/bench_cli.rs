@@ -113,6 +113,46 @@ fn bench_writes_csv_json_and_charts() {
     for f in FRAME_FIELDS {
         assert!(json["per_frame"][0].get(f).is_some(), "per_frame lacks {f}");
     }
+    // The sample's share is over the passes it is taken in, each frame's first, which is
+    // never faster than the fastest pass the trace time counts.
+    for p in policies {
+        let name = p["policy"].as_str().unwrap();
+        let frames: Vec<&Value> = json["per_frame"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["policy"] == name)
+            .collect();
+        let sum = |k: &str| frames.iter().map(|r| r[k].as_f64().unwrap()).sum::<f64>();
+        for r in &frames {
+            let (first, best) = (
+                r["first_pass_ms"].as_f64().unwrap(),
+                r["trace_ms"].as_f64().unwrap(),
+            );
+            assert!(
+                first >= best,
+                "{name} frame {}: first pass {first} < fastest {best}",
+                r["frame"]
+            );
+        }
+        let (sample, first) = (sum("sample_ms"), sum("first_pass_ms"));
+        let share = p["sample_share"].as_f64().unwrap();
+        let want = if first > sample {
+            sample / (first - sample)
+        } else {
+            0.0
+        };
+        assert!(
+            (share - want).abs() <= 1e-9 * want.max(1.0),
+            "{name}: {share} against {want}"
+        );
+    }
+    assert!(
+        policies
+            .iter()
+            .any(|p| p["sample_share"].as_f64().unwrap() > 0.0),
+        "the default samples"
+    );
 
     // The four charts, as SVG and as PNG that decodes to more than one colour.
     for stem in [

@@ -1505,7 +1505,8 @@ fn modelled_table(r: &Report) -> String {
             "ray sample: 1 ray in {SAMPLE_STRIDE}, at most {SAMPLE_MAX} a frame, taken in the \
              trace's own pass (the default \
              policy's on {sampled} of {all} frames): {:.2}% of the wall-clock time of the passes \
-             it was taken in, the frames' first (largest over the policies; {:.2}% modelled); mean work per ray known to +-{:.1}% (95%)\n",
+             it was taken in, the frames' first (largest over the policies; {:.2}% modelled); \
+             mean work per ray known to +-{:.1}% (95%)\n",
             100.0 * share.iter().copied().fold(0.0, f64::max),
             100.0 * modelled,
             100.0 * mean_ci
