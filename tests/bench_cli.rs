@@ -286,6 +286,67 @@ fn sweep_lists_failures_and_exits_non_zero() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The sweep's conclusion judges by the modelled totals: its mean and worst per policy are
+/// those of the rows' modelled ratios, and it reports the default's ray sample.
+#[test]
+fn the_sweep_concludes_on_the_modelled_totals() {
+    let dir = cli_util::tmp_dir("bench", "sweep_modelled");
+    std::fs::copy(animation("swap.glb"), dir.join("swap.glb")).unwrap();
+    std::fs::copy(animation("tube.glb"), dir.join("tube.glb")).unwrap();
+    let dir_s = dir.to_string_lossy().into_owned();
+    let prices = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/prices.json");
+    let o = dynbvh(&[
+        "bench",
+        "--all",
+        "--dir",
+        &dir_s,
+        "--generated",
+        "none",
+        "--frames",
+        "12",
+        "--size",
+        "48x48",
+        "--prices",
+        prices,
+        "--no-tlas-compare",
+        "--no-builders",
+        "--json",
+    ]);
+    let sweep: Value = serde_json::from_slice(ok(&o).as_bytes()).expect("--json prints JSON");
+    let c = &sweep["conclusion"];
+    assert_eq!(c["modelled"], true, "{c}");
+    let reports = sweep["reports"].as_array().unwrap();
+    assert_eq!(reports.len(), 2);
+    for v in c["policies"].as_array().unwrap() {
+        let name = v["policy"].as_str().unwrap();
+        let ratios: Vec<f64> = reports
+            .iter()
+            .map(|r| {
+                let p = r["policies"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .find(|p| p["policy"] == name)
+                    .unwrap();
+                p["oracle_ratio_modelled"].as_f64().unwrap()
+            })
+            .collect();
+        let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+        let worst = ratios.iter().copied().fold(0.0, f64::max);
+        assert!(
+            (v["mean_ratio"].as_f64().unwrap() - mean).abs() < 1e-12,
+            "{name}: {v}"
+        );
+        assert_eq!(v["worst_ratio"].as_f64().unwrap(), worst, "{name}");
+        let over = ratios.iter().filter(|&&r| r > 1.05).count();
+        assert_eq!(v["over_margin"].as_array().unwrap().len(), over, "{name}");
+    }
+    let sample = &c["default_sample"];
+    assert!(sample["rows"].as_u64().unwrap() >= 1, "{c}");
+    assert!(sample["worst_share"].as_f64().unwrap() >= sample["mean_share"].as_f64().unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `bench --frames A..B` runs the frames of a range as `render --frames A..B` does (built at
 /// A, updated through B - 1), numbers them as render does, and `--out` keeps the printed table
 /// as summary.txt.

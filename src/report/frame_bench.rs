@@ -1795,6 +1795,19 @@ pub struct SweepFailure {
     pub error: String,
 }
 
+/// A policy's total over the oracle's on one row, as the sweep judges it: the modelled totals
+/// (deterministic) where the row has the modelled oracle, else the wall-clock ones.
+fn verdict_ratio(p: &PolicySummary) -> f64 {
+    if p.oracle_ratio_modelled > 0.0 {
+        p.oracle_ratio_modelled
+    } else {
+        p.oracle_ratio
+    }
+}
+
+/// How far above the oracle a row may be for the default's verdict.
+pub const VERDICT_MARGIN: f64 = 0.05;
+
 /// One policy over the sweep's rows (only rows with an oracle count).
 #[derive(Clone, Debug, Serialize)]
 pub struct PolicyVerdict {
@@ -1804,14 +1817,14 @@ pub struct PolicyVerdict {
     pub default: bool,
     /// Rows (file and animation) counted.
     pub rows: usize,
-    /// Mean total time over the oracle's.
+    /// Mean total over the oracle's ([`verdict_ratio`]).
     pub mean_ratio: f64,
-    /// Largest total time over the oracle's.
+    /// Largest total over the oracle's.
     pub worst_ratio: f64,
     /// The row of the largest ratio.
     pub worst_source: String,
-    /// Rows more than 10% above the oracle.
-    pub over_10pct: Vec<String>,
+    /// Rows more than [`VERDICT_MARGIN`] above the oracle.
+    pub over_margin: Vec<String>,
     /// Largest ratio over the rows with a deforming mesh (the others run the same trees under
     /// every policy: their ratios are timing noise); 0 without such rows.
     pub worst_deforming_ratio: f64,
@@ -1822,15 +1835,39 @@ pub struct PolicyVerdict {
 /// What a sweep's table says, computed from it.
 #[derive(Clone, Debug, Serialize)]
 pub struct SweepConclusion {
+    /// True when every row was judged by its modelled totals (deterministic), false when some
+    /// had only wall-clock ones (run without the oracle's modelled measure).
+    pub modelled: bool,
     /// Per policy, in the table's order.
     pub policies: Vec<PolicyVerdict>,
     /// The policy with the lowest worst ratio (none without rows).
     pub lowest_worst: Option<String>,
-    /// The default policy's verdict: within 10% of the oracle on every row (false without
-    /// rows).
-    pub default_within_10pct: bool,
+    /// The default policy's verdict: within [`VERDICT_MARGIN`] of the oracle on every row
+    /// (false without rows).
+    pub default_within_margin: bool,
+    /// The default policy's sample: its measured share of the trace passes it was taken in
+    /// ([`PolicySummary::sample_share`]), mean over the rows that sampled and the largest,
+    /// with its row, and the largest modelled share; `None` when no row sampled.
+    pub default_sample: Option<SampleVerdict>,
     /// Rows that gave no report (load or run failures).
     pub failures: usize,
+}
+
+/// The default policy's sample over a sweep's rows.
+#[derive(Clone, Debug, Serialize)]
+pub struct SampleVerdict {
+    /// Rows on which it sampled.
+    pub rows: usize,
+    /// Mean measured share.
+    pub mean_share: f64,
+    /// Largest measured share.
+    pub worst_share: f64,
+    /// The row of `worst_share`.
+    pub worst_source: String,
+    /// Rows whose measured share is above 2% (the ray-work measure's budget).
+    pub over_budget: usize,
+    /// Largest modelled share.
+    pub worst_modelled_share: f64,
 }
 
 /// Everything `bench --all` produced.
@@ -1860,13 +1897,36 @@ impl Sweep {
     }
 }
 
-/// Per policy, the mean and worst ratio to the oracle over the reports that have one; which
-/// policy's worst is lowest; whether the default stays within 10% everywhere.
+/// Per policy, the mean and worst ratio to the oracle over the reports that have one
+/// ([`verdict_ratio`]); which policy's worst is lowest; whether the default stays within
+/// [`VERDICT_MARGIN`] everywhere; what its sample cost.
 #[must_use]
 pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion {
     let mut policies: Vec<PolicyVerdict> = Vec::new();
+    let mut modelled = true;
+    let mut sample: Option<SampleVerdict> = None;
     for r in reports.iter().filter(|r| r.oracle.total_ms > 0.0) {
         for p in &r.policies {
+            modelled &= p.oracle_ratio_modelled > 0.0;
+            let ratio = verdict_ratio(p);
+            if p.default && p.sample_share > 0.0 {
+                let v = sample.get_or_insert(SampleVerdict {
+                    rows: 0,
+                    mean_share: 0.0,
+                    worst_share: 0.0,
+                    worst_source: String::new(),
+                    over_budget: 0,
+                    worst_modelled_share: 0.0,
+                });
+                v.rows += 1;
+                v.mean_share += p.sample_share;
+                if p.sample_share > v.worst_share {
+                    v.worst_share = p.sample_share;
+                    v.worst_source.clone_from(&r.source);
+                }
+                v.over_budget += usize::from(p.sample_share > 0.02);
+                v.worst_modelled_share = v.worst_modelled_share.max(p.sample_share_modelled);
+            }
             let k = match policies.iter().position(|v| v.policy == p.policy) {
                 Some(k) => k,
                 None => {
@@ -1877,7 +1937,7 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
                         mean_ratio: 0.0,
                         worst_ratio: 0.0,
                         worst_source: String::new(),
-                        over_10pct: Vec::new(),
+                        over_margin: Vec::new(),
                         worst_deforming_ratio: 0.0,
                         worst_deforming_source: String::new(),
                     });
@@ -1886,16 +1946,16 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
             };
             let v = &mut policies[k];
             v.rows += 1;
-            v.mean_ratio += p.oracle_ratio;
-            if p.oracle_ratio > v.worst_ratio {
-                v.worst_ratio = p.oracle_ratio;
+            v.mean_ratio += ratio;
+            if ratio > v.worst_ratio {
+                v.worst_ratio = ratio;
                 v.worst_source.clone_from(&r.source);
             }
-            if p.oracle_ratio > 1.10 {
-                v.over_10pct.push(r.source.clone());
+            if ratio > 1.0 + VERDICT_MARGIN {
+                v.over_margin.push(r.source.clone());
             }
-            if r.deforming_meshes > 0 && p.oracle_ratio > v.worst_deforming_ratio {
-                v.worst_deforming_ratio = p.oracle_ratio;
+            if r.deforming_meshes > 0 && ratio > v.worst_deforming_ratio {
+                v.worst_deforming_ratio = ratio;
                 v.worst_deforming_source.clone_from(&r.source);
             }
         }
@@ -1903,18 +1963,23 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
     for v in &mut policies {
         v.mean_ratio /= v.rows.max(1) as f64;
     }
+    if let Some(v) = &mut sample {
+        v.mean_share /= v.rows.max(1) as f64;
+    }
     let lowest_worst = policies
         .iter()
         .min_by(|a, b| a.worst_ratio.total_cmp(&b.worst_ratio))
         .map(|v| v.policy.clone());
-    let default_within_10pct = policies
+    let default_within_margin = policies
         .iter()
         .find(|v| v.default)
-        .is_some_and(|v| v.rows > 0 && v.over_10pct.is_empty());
+        .is_some_and(|v| v.rows > 0 && v.over_margin.is_empty());
     SweepConclusion {
+        modelled: modelled && !policies.is_empty(),
         policies,
         lowest_worst,
-        default_within_10pct,
+        default_within_margin,
+        default_sample: sample,
         failures,
     }
 }
@@ -1922,7 +1987,14 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
 /// The conclusion as text.
 #[must_use]
 pub fn conclusion_text(c: &SweepConclusion) -> String {
-    let mut s = String::from("Conclusion (computed from the rows above):\n");
+    let mut s = format!(
+        "Conclusion (computed from the rows above, {}):\n",
+        if c.modelled {
+            "modelled totals over the oracle's, deterministic"
+        } else {
+            "wall-clock totals over the oracle's where a row has no modelled measure"
+        }
+    );
     if c.policies.is_empty() {
         s.push_str("  no row has an oracle: nothing to conclude\n");
     }
@@ -1950,21 +2022,38 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
             v.policy, v.worst_ratio
         ));
     }
+    let margin = 100.0 * VERDICT_MARGIN;
     if let Some(d) = c.policies.iter().find(|v| v.default) {
-        if c.default_within_10pct {
+        if c.default_within_margin {
             s.push_str(&format!(
-                "  default {}: within 10% of the oracle on every row ({} rows; worst {:.3}, {})\n",
-                d.policy, d.rows, d.worst_ratio, d.worst_source
+                "  default {}: within {margin:.0}% of the oracle on every row ({} rows; mean {:.4}, \
+                 worst {:.4}, {})\n",
+                d.policy, d.rows, d.mean_ratio, d.worst_ratio, d.worst_source
             ));
         } else {
             s.push_str(&format!(
-                "  default {}: NOT within 10% of the oracle on {} of {} rows ({}); worst {:.3}, {}\n",
+                "  default {}: NOT within {margin:.0}% of the oracle on {} of {} rows ({}); mean \
+                 {:.4}, worst {:.4}, {}\n",
                 d.policy,
-                d.over_10pct.len(),
+                d.over_margin.len(),
                 d.rows,
-                d.over_10pct.join(", "),
+                d.over_margin.join(", "),
+                d.mean_ratio,
                 d.worst_ratio,
                 d.worst_source
+            ));
+        }
+        if let Some(v) = &c.default_sample {
+            s.push_str(&format!(
+                "  default {}'s ray sample, {} rows: {:.2}% of the trace passes it was taken in \
+                 on average, at most {:.2}% ({}); rows above 2%: {}; modelled at most {:.2}%\n",
+                d.policy,
+                v.rows,
+                100.0 * v.mean_share,
+                100.0 * v.worst_share,
+                v.worst_source,
+                v.over_budget,
+                100.0 * v.worst_modelled_share
             ));
         }
     } else if !c.policies.is_empty() {
@@ -1976,13 +2065,14 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
             c.failures
         ));
     }
-    s.push_str(
+    s.push_str(if c.modelled {
+        "  (modelled totals repeat exactly on every run with the same prices, whatever the \
+         machine's load; the sample's share is wall-clock time and moves between runs)\n"
+    } else {
         "  (rows without a deforming mesh run the same trees under every policy: their spread \
          around 1 shows the run's timing noise. Ratios within a few percent of 1, either side, \
-         are timing noise on a shared machine; \
-         the oracle's schedules refit or rebuild only, so a policy that goes back to an older \
-         tree can come out below 1)\n",
-    );
+         are timing noise on a shared machine)\n"
+    });
     s
 }
 
@@ -2018,9 +2108,20 @@ fn sweep_rows(reports: &[Report]) -> String {
         .iter()
         .map(|t| format!("tlas {}{}", t.tlas, if t.default { "*" } else { "" }))
         .collect();
+    let modelled = reports
+        .iter()
+        .filter(|r| r.oracle.total_ms > 0.0)
+        .all(|r| r.policies.iter().all(|p| p.oracle_ratio_modelled > 0.0));
     let mut s = format!(
-        "total time / oracle ({} frames, {} rays/frame, {} thread(s); * default)\n",
-        first.frames, first.rays_per_frame, first.threads
+        "{} / oracle ({} frames, {} rays/frame, {} thread(s); * default)\n",
+        if modelled {
+            "modelled total"
+        } else {
+            "total time (modelled where the row has it)"
+        },
+        first.frames,
+        first.rays_per_frame,
+        first.threads
     );
     // The name column fits the longest name, so that no file name is cut.
     let width = reports
@@ -2045,7 +2146,7 @@ fn sweep_rows(reports: &[Report]) -> String {
             r.source, r.triangles, r.deforming_meshes
         ));
         for (k, n) in names.iter().enumerate() {
-            let v = r.policies.get(k).map_or(0.0, |p| p.oracle_ratio);
+            let v = r.policies.get(k).map_or(0.0, verdict_ratio);
             worst[k] = worst[k].max(v);
             s.push_str(&format!(
                 " {:>w$}",
