@@ -1797,7 +1797,8 @@ pub struct SweepFailure {
 
 /// A policy's total over the oracle's on one row, as the sweep judges it: the modelled totals
 /// (deterministic) where the row has the modelled oracle, else the wall-clock ones.
-fn verdict_ratio(p: &PolicySummary) -> f64 {
+#[must_use]
+pub fn verdict_ratio(p: &PolicySummary) -> f64 {
     if p.oracle_ratio_modelled > 0.0 {
         p.oracle_ratio_modelled
     } else {
