@@ -247,6 +247,13 @@ fn refit_degrades_and_policies_rebuild_on_explode_and_swap() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// `bench --all` over the files of `dir`, no generated animations, with `extra` arguments.
+fn sweep(dir: &str, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["bench", "--all", "--dir", dir, "--generated", "none"];
+    args.extend_from_slice(extra);
+    dynbvh(&args)
+}
+
 /// `bench --all` runs every animation of every file, lists a file that does not load with the
 /// reason, prints a conclusion computed from its rows, and exits non-zero.
 #[test]
@@ -255,18 +262,7 @@ fn sweep_lists_failures_and_exits_non_zero() {
     std::fs::write(dir.join("broken.glb"), b"glTF not really").unwrap();
     std::fs::copy(animation("swap.glb"), dir.join("swap.glb")).unwrap();
     let dir_s = dir.to_string_lossy().into_owned();
-    let o = dynbvh(&[
-        "bench",
-        "--all",
-        "--dir",
-        &dir_s,
-        "--generated",
-        "none",
-        "--frames",
-        "4",
-        "--size",
-        "16x16",
-    ]);
+    let o = sweep(&dir_s, &["--frames", "4", "--size", "16x16"]);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(!o.status.success(), "a failed file must fail the sweep");
     assert!(
@@ -295,27 +291,24 @@ fn the_sweep_concludes_on_the_modelled_totals() {
     std::fs::copy(animation("tube.glb"), dir.join("tube.glb")).unwrap();
     let dir_s = dir.to_string_lossy().into_owned();
     let prices = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/prices.json");
-    let o = dynbvh(&[
-        "bench",
-        "--all",
-        "--dir",
+    let o = sweep(
         &dir_s,
-        "--generated",
-        "none",
-        "--frames",
-        "12",
-        "--size",
-        "48x48",
-        "--prices",
-        prices,
-        "--no-tlas-compare",
-        "--no-builders",
-        "--json",
-    ]);
-    let sweep: Value = serde_json::from_slice(ok(&o).as_bytes()).expect("--json prints JSON");
-    let c = &sweep["conclusion"];
+        &[
+            "--frames",
+            "12",
+            "--size",
+            "48x48",
+            "--prices",
+            prices,
+            "--no-tlas-compare",
+            "--no-builders",
+            "--json",
+        ],
+    );
+    let json: Value = serde_json::from_slice(ok(&o).as_bytes()).expect("--json prints JSON");
+    let c = &json["conclusion"];
     assert_eq!(c["modelled"], true, "{c}");
-    let reports = sweep["reports"].as_array().unwrap();
+    let reports = json["reports"].as_array().unwrap();
     assert_eq!(reports.len(), 2);
     for v in c["policies"].as_array().unwrap() {
         let name = v["policy"].as_str().unwrap();

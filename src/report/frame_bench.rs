@@ -1809,6 +1809,10 @@ pub fn verdict_ratio(p: &PolicySummary) -> f64 {
 /// How far above the oracle a row may be for the default's verdict.
 pub const VERDICT_MARGIN: f64 = 0.05;
 
+/// The share of the trace passes it is taken in that the default's ray sample may cost on a
+/// row (the ray-work measure's budget).
+pub const SAMPLE_BUDGET: f64 = 0.02;
+
 /// One policy over the sweep's rows (only rows with an oracle count).
 #[derive(Clone, Debug, Serialize)]
 pub struct PolicyVerdict {
@@ -1865,7 +1869,7 @@ pub struct SampleVerdict {
     pub worst_share: f64,
     /// The row of `worst_share`.
     pub worst_source: String,
-    /// Rows whose measured share is above 2% (the ray-work measure's budget).
+    /// Rows whose measured share is above [`SAMPLE_BUDGET`].
     pub over_budget: usize,
     /// Largest modelled share.
     pub worst_modelled_share: f64,
@@ -1925,7 +1929,7 @@ pub fn sweep_conclusion(reports: &[Report], failures: usize) -> SweepConclusion 
                     v.worst_share = p.sample_share;
                     v.worst_source.clone_from(&r.source);
                 }
-                v.over_budget += usize::from(p.sample_share > 0.02);
+                v.over_budget += usize::from(p.sample_share > SAMPLE_BUDGET);
                 v.worst_modelled_share = v.worst_modelled_share.max(p.sample_share_modelled);
             }
             let k = match policies.iter().position(|v| v.policy == p.policy) {
@@ -2047,12 +2051,13 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
         if let Some(v) = &c.default_sample {
             s.push_str(&format!(
                 "  default {}'s ray sample, {} rows: {:.2}% of the trace passes it was taken in \
-                 on average, at most {:.2}% ({}); rows above 2%: {}; modelled at most {:.2}%\n",
+                 on average, at most {:.2}% ({}); rows above {:.0}%: {}; modelled at most {:.2}%\n",
                 d.policy,
                 v.rows,
                 100.0 * v.mean_share,
                 100.0 * v.worst_share,
                 v.worst_source,
+                100.0 * SAMPLE_BUDGET,
                 v.over_budget,
                 100.0 * v.worst_modelled_share
             ));
@@ -2083,7 +2088,7 @@ pub fn conclusion_text(c: &SweepConclusion) -> String {
 /// rows ([`sweep_conclusion`]).
 #[must_use]
 pub fn sweep_table(sweep: &Sweep) -> String {
-    let mut s = sweep_rows(&sweep.reports);
+    let mut s = sweep_rows(&sweep.reports, sweep.conclusion.modelled);
     for f in &sweep.failed {
         s.push_str(&format!("FAILED {}: {}\n", f.source, f.error));
     }
@@ -2095,7 +2100,9 @@ pub fn sweep_table(sweep: &Sweep) -> String {
     s
 }
 
-fn sweep_rows(reports: &[Report]) -> String {
+/// The sweep's table; `modelled` when every row has its modelled ratios
+/// ([`SweepConclusion::modelled`]).
+fn sweep_rows(reports: &[Report], modelled: bool) -> String {
     let Some(first) = reports.first() else {
         return "no animated files\n".into();
     };
@@ -2109,10 +2116,6 @@ fn sweep_rows(reports: &[Report]) -> String {
         .iter()
         .map(|t| format!("tlas {}{}", t.tlas, if t.default { "*" } else { "" }))
         .collect();
-    let modelled = reports
-        .iter()
-        .filter(|r| r.oracle.total_ms > 0.0)
-        .all(|r| r.policies.iter().all(|p| p.oracle_ratio_modelled > 0.0));
     let mut s = format!(
         "{} / oracle ({} frames, {} rays/frame, {} thread(s); * default)\n",
         if modelled {
