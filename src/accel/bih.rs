@@ -7,6 +7,8 @@
 //! halves the candidate box again when one side would be empty (the global heuristic); where
 //! that empty side leaves a wide gap between the triangles and the box traversal knows, a node
 //! with an empty child cuts the gap off (without it, rays through the gap reach the subtree).
+//! Before each split the same is done on every axis, from the triangles' box that the parent's
+//! partition gathered for each side, so that rays missing the triangles leave the subtree early.
 //! Traversal clips the ray's interval by both planes; the children may overlap, so both are
 //! visited, nearer first. In a leaf a triangle is tested only when the ray's interval there
 //! meets its box (it lies within the leaf's planes, so its hits do too). A refit keeps the
@@ -48,6 +50,11 @@ const MAX_EMPTY_SPLITS: usize = 32;
 /// An empty side whose gap to the node's box (as traversal knows it) is wider than this
 /// fraction of the box on that axis is cut off by a node with an empty child.
 const EMPTY_CUT: f32 = 0.1;
+
+/// Before a node is split, a gap on any axis between its triangles' box and the box
+/// traversal knows it by that is wider than this fraction of the latter is cut off by a node
+/// with an empty child (0.2-0.3 traced fastest, `docs/accel.md`).
+const GAP_CUT: f32 = 0.3;
 
 /// A node: an interior node's two planes and axis (children adjacent, stored after it), or a
 /// leaf's range of triangle slots.
@@ -133,20 +140,55 @@ struct Builder {
 impl Builder {
     /// Builds node `index` over `items[begin..end]` with candidate box `cand`, halved `level`
     /// times from the root's; `seen` is the box traversal knows the node by (its ancestors'
-    /// planes).
+    /// planes), `tight` the box of its triangles.
     fn node(
         &mut self,
-        index: usize,
+        mut index: usize,
         (begin, end): (usize, usize),
         (mut cand, mut level): (Aabb, usize),
-        seen: Aabb,
-        depth: usize,
+        mut seen: Aabb,
+        tight: Aabb,
+        mut depth: usize,
     ) {
         self.depth = self.depth.max(depth);
         let n = end - begin;
         if n <= self.max_leaf || depth + 1 >= MAX_BIH_DEPTH {
             self.nodes[index] = BihNode::leaf(begin, n);
             return;
+        }
+        // Gaps between the triangles' box and the box traversal knows the node by, on any
+        // axis, cut off widest first by nodes with an empty child: a ray through such a gap
+        // then leaves at the cut instead of walking down to the triangles' planes.
+        while depth + 2 < MAX_BIH_DEPTH {
+            let ext = seen.extent();
+            let mut best: Option<(f32, usize, bool)> = None;
+            for a in 0..3 {
+                if ext[a].is_nan() || ext[a] <= 0.0 {
+                    continue;
+                }
+                let lo = (tight.min[a] - seen.min[a]) / ext[a];
+                let hi = (seen.max[a] - tight.max[a]) / ext[a];
+                for (g, low) in [(lo, true), (hi, false)] {
+                    if g > GAP_CUT && best.is_none_or(|b| g > b.0) {
+                        best = Some((g, a, low));
+                    }
+                }
+            }
+            let Some((_, a, low)) = best else { break };
+            let first = self.nodes.len();
+            self.nodes.push(BihNode::leaf(begin, 0));
+            self.nodes.push(BihNode::leaf(end, 0));
+            if low {
+                self.nodes[index] = BihNode::interior(a, [f32::NEG_INFINITY, tight.min[a]], first);
+                seen.min[a] = tight.min[a];
+                index = first + 1;
+            } else {
+                self.nodes[index] = BihNode::interior(a, [tight.max[a], f32::INFINITY], first);
+                seen.max[a] = tight.max[a];
+                index = first;
+            }
+            depth += 1;
+            self.depth = self.depth.max(depth);
         }
         for _ in 0..MAX_EMPTY_SPLITS {
             let axis = if level < PRESORTED {
@@ -158,15 +200,16 @@ impl Builder {
             if !(cand.min[axis] < mid && mid < cand.max[axis]) {
                 break;
             }
-            let (below, planes) = if level < PRESORTED {
+            let (below, [lbox, rbox]) = if level < PRESORTED {
                 // The items are in the order of their codes: those in the lower half come
                 // first (the code's grid cell decides, which is `mid`'s side up to rounding).
                 let bit = 1 << (PRESORTED - 1 - level);
                 let below = self.codes[begin..end].partition_point(|&c| c & bit == 0);
-                (below, side_planes(&self.items[begin..end], below, axis))
+                (below, side_boxes(&self.items[begin..end], below))
             } else {
                 partition(&mut self.items[begin..end], axis, mid)
             };
+            let planes = [lbox.max[axis], rbox.min[axis]];
             level += 1;
             let split = begin + below;
             let (mut left_cand, mut right_cand) = (cand, cand);
@@ -200,10 +243,24 @@ impl Builder {
                     let mut tighter = seen;
                     if left_empty {
                         tighter.min[axis] = planes[1];
-                        self.node(first + 1, (begin, end), (cand, level), tighter, depth + 1);
+                        self.node(
+                            first + 1,
+                            (begin, end),
+                            (cand, level),
+                            tighter,
+                            tight,
+                            depth + 1,
+                        );
                     } else {
                         tighter.max[axis] = planes[0];
-                        self.node(first, (begin, end), (cand, level), tighter, depth + 1);
+                        self.node(
+                            first,
+                            (begin, end),
+                            (cand, level),
+                            tighter,
+                            tight,
+                            depth + 1,
+                        );
                     }
                     return;
                 }
@@ -221,6 +278,7 @@ impl Builder {
                 (begin, split),
                 (left_cand, level),
                 left_seen,
+                lbox,
                 depth + 1,
             );
             self.node(
@@ -228,6 +286,7 @@ impl Builder {
                 (split, end),
                 (right_cand, level),
                 right_seen,
+                rbox,
                 depth + 1,
             );
             return;
@@ -237,19 +296,17 @@ impl Builder {
 }
 
 /// Moves the items whose box centre lies below `mid` on `axis` to the front; returns how many,
-/// and the planes of the two sides (the largest upper bound on `axis` of the items moved to
-/// the front, the smallest lower bound of the others), gathered in the same pass: each item is
-/// tested once, and goes to its side's plane then.
-fn partition(items: &mut [Item], axis: usize, mid: f32) -> (usize, [f32; 2]) {
+/// and the boxes of the two sides, gathered in the same pass.
+fn partition(items: &mut [Item], axis: usize, mid: f32) -> (usize, [Aabb; 2]) {
     let (mut i, mut j) = (0, items.len());
-    let (mut left, mut right) = (f32::NEG_INFINITY, f32::INFINITY);
+    let (mut left, mut right) = (Aabb::EMPTY, Aabb::EMPTY);
     while i < j {
-        let (lo, hi) = (items[i].bounds.min[axis], items[i].bounds.max[axis]);
-        if (lo + hi) * 0.5 < mid {
-            left = left.max(hi);
+        let b = items[i].bounds;
+        if (b.min[axis] + b.max[axis]) * 0.5 < mid {
+            left = grow(left, &b);
             i += 1;
         } else {
-            right = right.min(lo);
+            right = grow(right, &b);
             j -= 1;
             items.swap(i, j);
         }
@@ -257,17 +314,48 @@ fn partition(items: &mut [Item], axis: usize, mid: f32) -> (usize, [f32; 2]) {
     (i, [left, right])
 }
 
-/// The planes of `items` split after the first `below`: the largest upper bound on `axis` of
-/// those, the smallest lower bound of the rest.
-fn side_planes(items: &[Item], below: usize, axis: usize) -> [f32; 2] {
+#[inline(always)]
+fn grow(a: Aabb, b: &Aabb) -> Aabb {
+    Aabb {
+        min: a.min.min(b.min),
+        max: a.max.max(b.max),
+    }
+}
+
+/// The boxes of `items` split after the first `below`.
+fn side_boxes(items: &[Item], below: usize) -> [Aabb; 2] {
     let (left, right) = items.split_at(below);
-    [
-        left.iter()
-            .fold(f32::NEG_INFINITY, |m, it| m.max(it.bounds.max[axis])),
-        right
-            .iter()
-            .fold(f32::INFINITY, |m, it| m.min(it.bounds.min[axis])),
-    ]
+    [box_of(left), box_of(right)]
+}
+
+/// The box of `items` (NaN coordinates left out, as `f32::min` and `f32::max` leave them),
+/// in four running boxes: their bounds are independent chains, where one box would make each
+/// item wait for the last.
+fn box_of(items: &[Item]) -> Aabb {
+    use glam::Vec3A;
+    // A lane of `v` replaces the bound only where it compares below (above) it: never a NaN.
+    let lower = |lo: Vec3A, v: Vec3A| Vec3A::select(v.cmplt(lo), v, lo);
+    let upper = |hi: Vec3A, v: Vec3A| Vec3A::select(v.cmpgt(hi), v, hi);
+    let mut lo = [Vec3A::INFINITY; 4];
+    let mut hi = [Vec3A::NEG_INFINITY; 4];
+    let chunks = items.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for k in 0..4 {
+            lo[k] = lower(lo[k], c[k].bounds.min.into());
+            hi[k] = upper(hi[k], c[k].bounds.max.into());
+        }
+    }
+    for (k, it) in rest.iter().enumerate() {
+        lo[k] = lower(lo[k], it.bounds.min.into());
+        hi[k] = upper(hi[k], it.bounds.max.into());
+    }
+    let l = lower(lower(lo[0], lo[1]), lower(lo[2], lo[3]));
+    let h = upper(upper(hi[0], hi[1]), upper(hi[2], hi[3]));
+    Aabb {
+        min: l.into(),
+        max: h.into(),
+    }
 }
 
 /// Halvings of the candidate box decided for every triangle before the build, as bits.
@@ -394,7 +482,7 @@ impl Bih {
         if !b.items.is_empty() {
             b.nodes.push(BihNode::leaf(0, 0));
             let n = b.items.len();
-            b.node(0, (0, n), (bounds, 0), bounds, 0);
+            b.node(0, (0, n), (bounds, 0), bounds, bounds, 0);
         }
         let prims: Vec<u32> = b.items.iter().map(|it| it.prim).collect();
         let tris = prims.iter().map(|&p| mesh.triangle(p as usize)).collect();
