@@ -303,23 +303,15 @@ fn partition(items: &mut [Item], axis: usize, mid: f32) -> (usize, [Aabb; 2]) {
     while i < j {
         let b = items[i].bounds;
         if (b.min[axis] + b.max[axis]) * 0.5 < mid {
-            left = grow(left, &b);
+            left = left.union(b);
             i += 1;
         } else {
-            right = grow(right, &b);
+            right = right.union(b);
             j -= 1;
             items.swap(i, j);
         }
     }
     (i, [left, right])
-}
-
-#[inline(always)]
-fn grow(a: Aabb, b: &Aabb) -> Aabb {
-    Aabb {
-        min: a.min.min(b.min),
-        max: a.max.max(b.max),
-    }
 }
 
 /// The boxes of `items` split after the first `below`.
@@ -937,5 +929,81 @@ mod tests {
         }
         let bih = Bih::build(&mesh, &BihParams::default());
         assert_eq!(bih.validate(&mesh), Ok(()));
+    }
+
+    #[test]
+    fn a_box_of_items_is_their_union_with_nan_left_out() {
+        let mut seed = 0x9e37_79b9_u64;
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
+        };
+        for n in [0usize, 1, 3, 4, 5, 8, 13, 100] {
+            let mut items: Vec<Item> = (0..n)
+                .map(|i| item(Vec3::new(next(), next(), next()), i as u32))
+                .collect();
+            if n > 2 {
+                items[1].bounds.min.y = f32::NAN;
+                items[n - 1].bounds.max.x = f32::NAN;
+            }
+            // `f32::min` and `f32::max` leave a NaN out, as the box must.
+            let mut expected = Aabb::EMPTY;
+            for it in &items {
+                for a in 0..3 {
+                    expected.min[a] = expected.min[a].min(it.bounds.min[a]);
+                    expected.max[a] = expected.max[a].max(it.bounds.max[a]);
+                }
+            }
+            let got = box_of(&items);
+            assert_eq!(
+                (got.min, got.max),
+                (expected.min, expected.max),
+                "{n} items"
+            );
+            for below in [0, n / 3, n] {
+                let [l, r] = side_boxes(&items, below);
+                assert_eq!(l, box_of(&items[..below]));
+                assert_eq!(r, box_of(&items[below..]));
+            }
+        }
+    }
+
+    #[test]
+    fn rays_through_the_empty_space_beside_the_triangles_leave_early() {
+        // A long thin strip of triangles along x at the floor of a tall box (one triangle in
+        // the far top corner makes the box tall): the first halvings are all on x, and each
+        // half's triangles leave 90% of its height empty. Rays along x through that space
+        // hit nothing, and a node with an empty child cuts it off under every half.
+        let mut tris = Vec::new();
+        for i in 0..4000 {
+            let x = i as f32 * 0.025;
+            let (y, z) = ((i % 7) as f32 * 0.1, (i % 5) as f32 * 0.15);
+            tris.push([
+                Vec3::new(x, y, z),
+                Vec3::new(x + 0.03, y, z + 0.1),
+                Vec3::new(x, y + 0.1, z + 0.05),
+            ]);
+        }
+        tris.push([
+            Vec3::new(99.0, 9.9, 9.9),
+            Vec3::new(100.0, 10.0, 9.9),
+            Vec3::new(99.0, 10.0, 10.0),
+        ]);
+        let mesh = TriMesh::from_soup(&tris);
+        let bih = Bih::build(&mesh, &BihParams::default());
+        assert_eq!(bih.validate(&mesh), Ok(()));
+        let mut stats = TraversalStats::default();
+        let rays: Vec<Ray> = (0..64)
+            .map(|k| {
+                let (y, z) = (2.0 + (k % 8) as f32, 2.0 + (k / 8) as f32);
+                Ray::new(Vec3::new(-1.0, y, z), Vec3::new(1.0, 0.01, -0.01))
+            })
+            .collect();
+        for r in &rays {
+            assert!(Accel::closest_hit_counted(&bih, r, &mut stats).is_none());
+        }
+        // About 9 nodes a ray; 31 with the gaps cut on the split axis only.
+        let per_ray = stats.nodes as f64 / rays.len() as f64;
+        assert!(per_ray < 16.0, "{per_ray} nodes a ray");
     }
 }
