@@ -53,7 +53,9 @@ const EMPTY_CUT: f32 = 0.1;
 
 /// Before a node is split, a gap on any axis between its triangles' box and the box
 /// traversal knows it by that is wider than this fraction of the latter is cut off by a node
-/// with an empty child (0.2-0.3 traced fastest, `docs/accel.md`).
+/// with an empty child: wide enough that the cut nodes do not lengthen the walks of rays that
+/// reach the triangles more than they shorten those of rays through the gap (the sweep is in
+/// `docs/accel.md`).
 const GAP_CUT: f32 = 0.3;
 
 /// A node: an interior node's two planes and axis (children adjacent, stored after it), or a
@@ -175,18 +177,8 @@ impl Builder {
                 }
             }
             let Some((_, a, low)) = best else { break };
-            let first = self.nodes.len();
-            self.nodes.push(BihNode::leaf(begin, 0));
-            self.nodes.push(BihNode::leaf(end, 0));
-            if low {
-                self.nodes[index] = BihNode::interior(a, [f32::NEG_INFINITY, tight.min[a]], first);
-                seen.min[a] = tight.min[a];
-                index = first + 1;
-            } else {
-                self.nodes[index] = BihNode::interior(a, [tight.max[a], f32::INFINITY], first);
-                seen.max[a] = tight.max[a];
-                index = first;
-            }
+            let bound = if low { tight.min[a] } else { tight.max[a] };
+            index = self.cut_off(index, (begin, end), (a, low, bound), &mut seen);
             depth += 1;
             self.depth = self.depth.max(depth);
         }
@@ -223,45 +215,20 @@ impl Builder {
                 // All the triangles on one side: that side's plane is their bound.
                 let cut = if split == begin {
                     let lo = planes[1];
-                    (lo - seen.min[axis] > gap).then_some((true, [f32::NEG_INFINITY, lo]))
+                    (lo - seen.min[axis] > gap).then_some((true, lo))
                 } else {
                     let hi = planes[0];
-                    (seen.max[axis] - hi > gap).then_some((false, [hi, f32::INFINITY]))
+                    (seen.max[axis] - hi > gap).then_some((false, hi))
                 };
                 cand = if split == begin {
                     right_cand
                 } else {
                     left_cand
                 };
-                if let Some((left_empty, planes)) = cut {
-                    let first = self.nodes.len();
-                    // The empty child is a leaf of no slots where its sibling's slots begin
-                    // (left) or end (right), so the leaves still cover the slots in order.
-                    self.nodes.push(BihNode::leaf(begin, 0));
-                    self.nodes.push(BihNode::leaf(end, 0));
-                    self.nodes[index] = BihNode::interior(axis, planes, first);
+                if let Some((low, bound)) = cut {
                     let mut tighter = seen;
-                    if left_empty {
-                        tighter.min[axis] = planes[1];
-                        self.node(
-                            first + 1,
-                            (begin, end),
-                            (cand, level),
-                            tighter,
-                            tight,
-                            depth + 1,
-                        );
-                    } else {
-                        tighter.max[axis] = planes[0];
-                        self.node(
-                            first,
-                            (begin, end),
-                            (cand, level),
-                            tighter,
-                            tight,
-                            depth + 1,
-                        );
-                    }
+                    let next = self.cut_off(index, (begin, end), (axis, low, bound), &mut tighter);
+                    self.node(next, (begin, end), (cand, level), tighter, tight, depth + 1);
                     return;
                 }
                 continue;
@@ -292,6 +259,34 @@ impl Builder {
             return;
         }
         self.nodes[index] = BihNode::leaf(begin, n);
+    }
+}
+
+impl Builder {
+    /// Makes node `index` (over `items[begin..end]`) cut off the empty space below `bound`
+    /// on `axis` (`low`) or above it: an interior node with an empty child, a leaf of no slots
+    /// where its sibling's slots begin (left) or end (right), so that the leaves still cover
+    /// the slots in order. Tightens `seen` to the cut; returns the sibling's index, where the
+    /// node's triangles go on.
+    fn cut_off(
+        &mut self,
+        index: usize,
+        (begin, end): (usize, usize),
+        (axis, low, bound): (usize, bool, f32),
+        seen: &mut Aabb,
+    ) -> usize {
+        let first = self.nodes.len();
+        self.nodes.push(BihNode::leaf(begin, 0));
+        self.nodes.push(BihNode::leaf(end, 0));
+        if low {
+            self.nodes[index] = BihNode::interior(axis, [f32::NEG_INFINITY, bound], first);
+            seen.min[axis] = bound;
+            first + 1
+        } else {
+            self.nodes[index] = BihNode::interior(axis, [bound, f32::INFINITY], first);
+            seen.max[axis] = bound;
+            first
+        }
     }
 }
 
@@ -1002,7 +997,8 @@ mod tests {
         for r in &rays {
             assert!(Accel::closest_hit_counted(&bih, r, &mut stats).is_none());
         }
-        // About 9 nodes a ray; 31 with the gaps cut on the split axis only.
+        // Cut on the split axis only, each ray walks down every x-half of the strip: about
+        // twice the bound below.
         let per_ray = stats.nodes as f64 / rays.len() as f64;
         assert!(per_ray < 16.0, "{per_ray} nodes a ray");
     }
