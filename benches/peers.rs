@@ -1197,10 +1197,7 @@ fn variants() -> Vec<Variant> {
             name: "dynbvh bvh8",
             make: |i| {
                 measured(i, |m: TriMesh| {
-                    DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(&MeshBvh::build(
-                        &m,
-                        &BuildParams::BINNED,
-                    )))
+                    DynWide(dynbvh::bvh::MeshBvh8::build(&m, &BuildParams::BINNED))
                 })
             },
         },
@@ -1259,8 +1256,9 @@ fn variants() -> Vec<Variant> {
             name: "dynbvh bvh8 batch",
             make: |i| {
                 measured(i, |m: TriMesh| {
-                    DynWideBatch(DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(
-                        &MeshBvh::build(&m, &BuildParams::BINNED),
+                    DynWideBatch(DynWide(dynbvh::bvh::MeshBvh8::build(
+                        &m,
+                        &BuildParams::BINNED,
                     )))
                 })
             },
@@ -1269,8 +1267,9 @@ fn variants() -> Vec<Variant> {
             name: "dynbvh packets bvh8",
             make: |i| {
                 measured(i, |m: TriMesh| {
-                    DynWidePackets(DynWide(dynbvh::bvh::MeshBvh8::from_mesh_bvh(
-                        &MeshBvh::build(&m, &BuildParams::BINNED),
+                    DynWidePackets(DynWide(dynbvh::bvh::MeshBvh8::build(
+                        &m,
+                        &BuildParams::BINNED,
                     )))
                 })
             },

@@ -60,6 +60,21 @@ impl MeshBvh {
         m
     }
 
+    /// The tree over the triangles alone, with no leaf-ordered copy of them (for a wide tree
+    /// that copies them into its own blocks).
+    pub(super) fn tree_only(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Bvh {
+        let mesh = Indexed { positions, indices };
+        let mut bvh = Bvh::empty(params.max_leaf_size);
+        bvh.rebuild_split::<super::build::clip::ClipAware<'_>>(
+            mesh.len(),
+            |refs, base| super::build::refs_from_corners(refs, base, |i| mesh.triangle_corners(i)),
+            None,
+            params,
+            &mut BuildWorkspace::one_shot(),
+        );
+        bvh
+    }
+
     /// Rebuilds the tree for new positions (and possibly other triangles), reusing its storage
     /// and `ws`'s: once they have grown to the mesh's size, a binned or median rebuild allocates
     /// nothing.

@@ -5,8 +5,7 @@
 //! same result as one pass.
 
 use super::refit::bound;
-use super::{Child, TriBlock, UNUSED, WideNode, encode_leaf};
-use crate::bvh::MeshBvh;
+use super::{Child, TriBlock, TriSlots, UNUSED, WideNode, encode_leaf};
 
 /// Trees with at least this many nodes fill their blocks in parallel.
 const PARALLEL_NODES: usize = 1 << 11;
@@ -29,7 +28,7 @@ pub(super) fn fill_leaves<const K: usize>(
     nodes: &mut [WideNode<K>],
     blocks: &mut [TriBlock],
     indices: &mut [[[u32; 3]; 4]],
-    m: &MeshBvh,
+    m: TriSlots<'_>,
 ) {
     let threads = rayon::current_num_threads();
     let chunk = if threads > 1 && nodes.len() >= PARALLEL_NODES {
@@ -46,7 +45,7 @@ fn fill_part<const K: usize>(
     blocks: &mut [TriBlock],
     indices: &mut [[[u32; 3]; 4]],
     base: u32,
-    m: &MeshBvh,
+    m: TriSlots<'_>,
     chunk: usize,
 ) {
     if nodes.len() <= chunk {
@@ -70,11 +69,30 @@ fn fill_run<const K: usize>(
     blocks: &mut [TriBlock],
     indices: &mut [[[u32; 3]; 4]],
     base: u32,
-    m: &MeshBvh,
+    m: TriSlots<'_>,
 ) {
-    let prims = m.bvh.prim_indices();
     let mut next = 0usize;
-    for n in nodes {
+    // Slots are looked up in the mesh at random: the vertex indices of the leaves two nodes
+    // ahead and the vertices of the next node's are asked for first.
+    let ask = |n: Option<&WideNode<K>>, f: &dyn Fn(u32)| {
+        for k in 0..K {
+            if let Some(Child::Leaf { first, count }) = n.map(|n| n.child(k)) {
+                (first..first + count).for_each(f);
+            }
+        }
+    };
+    let lookup = matches!(m, TriSlots::Mesh { .. });
+    if lookup {
+        ask(nodes.first(), &|s| m.prefetch_indices(s));
+        ask(nodes.get(1), &|s| m.prefetch_indices(s));
+        ask(nodes.first(), &|s| m.prefetch_corners(s));
+    }
+    for i in 0..nodes.len() {
+        if lookup {
+            ask(nodes.get(i + 2), &|s| m.prefetch_indices(s));
+            ask(nodes.get(i + 1), &|s| m.prefetch_corners(s));
+        }
+        let n = &mut nodes[i];
         for k in 0..K {
             let Child::Leaf { first, count } = n.child(k) else {
                 continue;
@@ -84,9 +102,10 @@ fn fill_run<const K: usize>(
                 let mut b = TriBlock::EMPTY;
                 let mut idx = [[UNUSED; 3]; 4];
                 for (l, slot) in (s..(first + count).min(s + 4)).enumerate() {
-                    b.set(l, &m.tris[slot as usize]);
-                    b.prims[l] = prims[slot as usize];
-                    idx[l] = m.leaf_indices[slot as usize];
+                    let (t, vi) = m.corners(slot);
+                    b.set(l, &t);
+                    b.prims[l] = m.prim(slot);
+                    idx[l] = vi;
                 }
                 blocks[next] = b;
                 indices[next] = idx;

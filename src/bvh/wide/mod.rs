@@ -182,7 +182,8 @@ impl CollapseMethod {
 }
 
 /// A wide BVH (`K` = 4 or 8 children per node) over a triangle mesh, with the triangles copied
-/// into blocks of four ([`TriBlock`]) in leaf order. Built by collapsing a binary [`MeshBvh`];
+/// into blocks of four ([`TriBlock`]) in leaf order. Built by collapsing a binary [`MeshBvh`]
+/// (or, in [`WideBvh::build`], the binary tree alone, the triangles read from the mesh);
 /// refitted in place.
 #[derive(Clone, Debug, Default)]
 pub struct WideBvh<const K: usize> {
@@ -222,6 +223,79 @@ pub const NO_PRIM: u32 = u32::MAX;
 /// The vertex indices of an unused block lane.
 const UNUSED: u32 = u32::MAX;
 
+/// Where the collapse reads each triangle slot's corners, vertex indices and triangle index.
+#[derive(Clone, Copy)]
+enum TriSlots<'a> {
+    /// A [`MeshBvh`]'s copies in leaf order.
+    Copied {
+        tris: &'a [[Vec3; 3]],
+        indices: &'a [[u32; 3]],
+        prims: &'a [u32],
+    },
+    /// Looked up in the mesh through the tree's primitive order.
+    Mesh {
+        positions: &'a [Vec3],
+        indices: &'a [[u32; 3]],
+        prims: &'a [u32],
+    },
+}
+
+impl TriSlots<'_> {
+    /// Slot `s`'s corners and vertex indices.
+    #[inline(always)]
+    fn corners(&self, s: u32) -> ([Vec3; 3], [u32; 3]) {
+        let s = s as usize;
+        match *self {
+            TriSlots::Copied { tris, indices, .. } => (tris[s], indices[s]),
+            TriSlots::Mesh {
+                positions,
+                indices,
+                prims,
+            } => {
+                let idx = indices[prims[s] as usize];
+                (idx.map(|v| positions[v as usize]), idx)
+            }
+        }
+    }
+
+    /// Asks for what [`TriSlots::corners`] of slot `s` reads first: its vertex indices in the
+    /// mesh (the copies are read in order and need no hint).
+    #[inline(always)]
+    fn prefetch_indices(&self, s: u32) {
+        if let TriSlots::Mesh { indices, prims, .. } = *self
+            && let Some(i) = indices.get(prims[s as usize] as usize)
+        {
+            crate::simd::prefetch(i);
+        }
+    }
+
+    /// Asks for slot `s`'s vertices (its vertex indices asked for earlier).
+    #[inline(always)]
+    fn prefetch_corners(&self, s: u32) {
+        if let TriSlots::Mesh {
+            positions,
+            indices,
+            prims,
+        } = *self
+            && let Some(idx) = indices.get(prims[s as usize] as usize)
+        {
+            for &v in idx {
+                if let Some(p) = positions.get(v as usize) {
+                    crate::simd::prefetch(p);
+                }
+            }
+        }
+    }
+
+    /// The triangle index in slot `s`.
+    #[inline(always)]
+    fn prim(&self, s: u32) -> u32 {
+        match *self {
+            TriSlots::Copied { prims, .. } | TriSlots::Mesh { prims, .. } => prims[s as usize],
+        }
+    }
+}
+
 /// A collapse candidate: a binary node, or a range of triangle slots (a piece of a binary leaf
 /// too large for one wide leaf).
 #[derive(Clone, Copy, Debug)]
@@ -233,7 +307,9 @@ enum Item {
 impl<const K: usize> WideBvh<K> {
     const WIDTH_OK: () = assert!(K == 4 || K == 8, "wide BVHs have 4 or 8 children per node");
 
-    /// Builds the binary tree with `params` and collapses it.
+    /// Builds the binary tree with `params` and collapses it, with no leaf-ordered copy of the
+    /// triangles beside the tree: the collapse reads them from the mesh (the same tree as
+    /// [`WideBvh::from_mesh_bvh`] of [`MeshBvh::build`], in less memory and time).
     ///
     /// # Panics
     /// When a triangle's vertex index is out of range, or the mesh has more than
@@ -249,7 +325,17 @@ impl<const K: usize> WideBvh<K> {
     /// As [`WideBvh::build`].
     #[must_use]
     pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
-        Self::from_mesh_bvh(&MeshBvh::build_indexed(positions, indices, params))
+        let bvh = MeshBvh::tree_only(positions, indices, params);
+        let mut w = Self::default();
+        w.collapse_tree(
+            &bvh,
+            TriSlots::Mesh {
+                positions,
+                indices,
+                prims: bvh.prim_indices(),
+            },
+        );
+        w
     }
 
     /// Collapses a binary tree into a wide one (the binary tree is left as it is).
@@ -313,8 +399,19 @@ impl<const K: usize> WideBvh<K> {
     /// # Panics
     /// As [`WideBvh::from_mesh_bvh`].
     pub fn collapse_from(&mut self, m: &MeshBvh) {
+        self.collapse_tree(
+            &m.bvh,
+            TriSlots::Copied {
+                tris: &m.tris,
+                indices: &m.leaf_indices,
+                prims: m.bvh.prim_indices(),
+            },
+        );
+    }
+
+    /// [`WideBvh::collapse_from`] of the tree `bvh` whose triangle slots `tris` gives.
+    fn collapse_tree(&mut self, bvh: &Bvh, tris: TriSlots<'_>) {
         let () = Self::WIDTH_OK;
-        let bvh = &m.bvh;
         assert!(
             bvh.prim_count() <= MAX_WIDE_PRIMS,
             "a wide BVH holds at most {MAX_WIDE_PRIMS} triangles"
@@ -337,7 +434,7 @@ impl<const K: usize> WideBvh<K> {
             crate::simd::reserve_huge(&mut self.nodes, est, est / 4);
         }
         let mut ranges = std::mem::take(&mut self.ranges);
-        let c = Collapse::new(bvh, &m.tris, MERGE, &mut ranges);
+        let c = Collapse::new(bvh, tris, MERGE, &mut ranges);
         let root = Item::Node(0);
         match self.method {
             CollapseMethod::Sah(cost) if !c.binary(0).is_leaf() => {
@@ -387,7 +484,7 @@ impl<const K: usize> WideBvh<K> {
             &mut self.nodes,
             &mut self.blocks,
             &mut self.block_indices,
-            m,
+            tris,
         );
         headroom(&mut self.nodes, caps.0);
         headroom(&mut self.blocks, caps.1);
@@ -744,7 +841,7 @@ fn subtree_ranges(nodes: &[Node], block: &mut [(u32, u32)], base: usize, splits:
 /// The collapse of a binary tree.
 struct Collapse<'a> {
     bvh: &'a Bvh,
-    tris: &'a [[Vec3; 3]],
+    tris: TriSlots<'a>,
     /// Triangle slots `(first, count)` under each binary node.
     ranges: &'a [(u32, u32)],
     /// Binary subtrees with at most this many triangles may become one leaf lane.
@@ -752,12 +849,7 @@ struct Collapse<'a> {
 }
 
 impl<'a> Collapse<'a> {
-    fn new(
-        bvh: &'a Bvh,
-        tris: &'a [[Vec3; 3]],
-        merge: u32,
-        ranges: &'a mut Vec<(u32, u32)>,
-    ) -> Self {
+    fn new(bvh: &'a Bvh, tris: TriSlots<'a>, merge: u32, ranges: &'a mut Vec<(u32, u32)>) -> Self {
         let nodes = bvh.nodes();
         ranges.clear();
         // Room for the most nodes a binary tree over these triangles has (2n - 1), so that the
@@ -833,9 +925,10 @@ impl<'a> Collapse<'a> {
     fn area(&self, it: Item) -> f32 {
         match it {
             Item::Node(i) => self.binary(i).bounds().half_area(),
-            Item::Range(first, count) => self.tris[first as usize..(first + count) as usize]
-                .iter()
-                .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)))
+            Item::Range(first, count) => (first..first + count)
+                .fold(Aabb::EMPTY, |b, s| {
+                    b.union(Aabb::of_triangle(&self.tris.corners(s).0))
+                })
                 .half_area(),
         }
     }
@@ -960,6 +1053,91 @@ impl<'a> Collapse<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Bit-for-bit equality of two wide trees (blocks compared by their bits: unused lanes
+    /// are NaN).
+    fn assert_same<const K: usize>(a: &WideBvh<K>, b: &WideBvh<K>, what: &str) {
+        assert_eq!(a.nodes, b.nodes, "{what}: nodes");
+        assert_eq!(a.blocks.len(), b.blocks.len(), "{what}: blocks");
+        for (i, (x, y)) in a.blocks.iter().zip(&b.blocks).enumerate() {
+            let bits = |t: &TriBlock| t.rows.map(|r| r.map(f32::to_bits));
+            assert_eq!(bits(x), bits(y), "{what}: block {i}");
+            assert_eq!(x.prims, y.prims, "{what}: block {i}");
+        }
+        assert_eq!(a.block_indices, b.block_indices, "{what}: vertex indices");
+        assert_eq!(a.prim_count, b.prim_count, "{what}");
+        assert_eq!(a.stack_need, b.stack_need, "{what}");
+        assert_eq!(a.coord_max.to_bits(), b.coord_max.to_bits(), "{what}");
+    }
+
+    #[test]
+    fn a_tree_built_from_the_mesh_is_the_collapse_of_the_mesh_bvh() {
+        // A sphere large enough for the parallel collapse and fill, a soup, a pile of
+        // triangles around one centroid (binary leaves that large leaf sizes leave over 16
+        // triangles: pieces of leaves), one triangle and none.
+        let sphere = crate::geom::shapes::icosphere(7);
+        assert!(sphere.len() > 2 * PARALLEL_PRIMS);
+        let mut soup = TriMesh::default();
+        let mut pile = TriMesh::default();
+        for i in 0..3000u32 {
+            let f = |k: u32| ((i * 7 + k * 13) % 101) as f32 / 101.0;
+            let c = Vec3::new(f(1), f(2), f(3)) * 10.0;
+            let base = soup.positions.len() as u32;
+            soup.positions.extend([
+                c,
+                c + Vec3::new(f(4), 0.1, 0.0),
+                c + Vec3::new(0.0, f(5), 0.2),
+            ]);
+            soup.indices.push([base, base + 1, base + 2]);
+            let d = Vec3::splat(0.01 * f(6) + 0.001);
+            let base = pile.positions.len() as u32;
+            pile.positions.extend([-d, d, Vec3::new(d.x, -d.y, 0.0)]);
+            pile.indices.push([base, base + 2, base + 1]);
+        }
+        let one = TriMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            indices: vec![[0, 1, 2]],
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("pool");
+        for (name, mesh) in [
+            ("sphere", &sphere),
+            ("soup", &soup),
+            ("pile", &pile),
+            ("one", &one),
+            ("none", &TriMesh::default()),
+        ] {
+            for leaf in [4, 8, 40] {
+                let params = BuildParams {
+                    max_leaf_size: leaf,
+                    ..BuildParams::BINNED
+                };
+                for threads in [1, 2] {
+                    let what = format!("{name}, leaves of {leaf}, {threads} threads");
+                    let run = || {
+                        let binary = MeshBvh::build(mesh, &params);
+                        assert_same(
+                            &MeshBvh8::build(mesh, &params),
+                            &MeshBvh8::from_mesh_bvh(&binary),
+                            &what,
+                        );
+                        assert_same(
+                            &MeshBvh4::build(mesh, &params),
+                            &MeshBvh4::from_mesh_bvh(&binary),
+                            &what,
+                        );
+                    };
+                    if threads == 1 {
+                        run();
+                    } else {
+                        pool.install(run);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn the_slot_ranges_filled_by_subtrees_in_parallel_are_the_reverse_passs() {

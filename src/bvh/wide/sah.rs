@@ -266,7 +266,16 @@ mod tests {
             let (g, d) = (greedy.sah_cost(cost), dp.sah_cost(cost));
             assert!(d <= g * (1.0 + 1e-5), "BVH{K} {cost:?}: dp {d} greedy {g}");
             let mut ranges = Vec::new();
-            let c = Collapse::new(bvh, &bin.tris, MERGE, &mut ranges);
+            let c = Collapse::new(
+                bvh,
+                super::super::TriSlots::Copied {
+                    tris: &bin.tris,
+                    indices: &bin.leaf_indices,
+                    prims: bvh.prim_indices(),
+                },
+                MERGE,
+                &mut ranges,
+            );
             let mut choice = vec![0; bvh.nodes().len()];
             let a = bvh.nodes()[0].bounds().half_area_f64();
             let mut dp_run = Dp {
