@@ -1121,11 +1121,20 @@ fn measure_all(input: &Input, variants: &[&Variant]) -> Vec<Row> {
         m.build();
     }
     let mut builds = vec![Vec::new(); n];
+    let mut order: Vec<usize> = (0..n).collect();
+    let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
     for run in 0..BUILD_RUNS {
-        // Each round starts one variant later, so that no variant always builds right after
-        // the same other one (what a build leaves in memory can change the next one's time).
-        for k in 0..n {
-            let i = (run + k) % n;
+        // Each round builds the variants in another order (a fixed pseudo-random shuffle), so
+        // that no variant always builds right after the same other one: what a build leaves
+        // in memory changes the next one's time (a rotation of one order would keep every
+        // variant after the same neighbour in all but one round).
+        for k in (1..n).rev() {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            order.swap(k, (seed % (k as u64 + 1)) as usize);
+        }
+        for &i in &order {
             let times = &mut builds[i];
             // Three builds are enough for multi-second builders.
             if run < 3 || median(times.clone()) < 1000.0 {
