@@ -288,7 +288,7 @@ pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
 /// per triangle, and each lane's triangle index. Unused lanes hold NaN, which the triangle test
 /// never hits, and the index [`NO_PRIM`](super::NO_PRIM).
 #[repr(C, align(16))]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Zeroable)]
 pub struct TriBlock {
     /// The nine coordinate rows.
     pub rows: [[f32; 4]; 9],

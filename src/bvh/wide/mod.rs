@@ -218,6 +218,16 @@ fn headroom<T>(v: &mut Vec<T>, before: usize) {
     }
 }
 
+/// `len` zeroed items, every one of which the caller overwrites, in fresh storage with a
+/// quarter of headroom (see [`headroom`]) and the huge-page hint: zeroed pages the system backs
+/// when a thread first writes them.
+fn fresh_huge<T: bytemuck::Zeroable + Clone>(len: usize) -> Vec<T> {
+    let mut v = bytemuck::zeroed_vec(len + len / 4);
+    crate::simd::advise_huge_vec(&mut v);
+    v.truncate(len);
+    v
+}
+
 /// The triangle index of an unused block lane.
 pub const NO_PRIM: u32 = u32::MAX;
 /// The vertex indices of an unused block lane.
@@ -473,13 +483,14 @@ impl<const K: usize> WideBvh<K> {
         // a rebuild's collapse writes its blocks once.
         let need = fill::blocks_needed(&self.nodes);
         if self.blocks.capacity() < need {
-            self.blocks.clear();
-            self.block_indices.clear();
-            crate::simd::reserve_huge(&mut self.blocks, need, need / 4);
-            crate::simd::reserve_huge(&mut self.block_indices, need, need / 4);
+            // New storage comes zeroed from the system and untouched: the fill's threads fault
+            // its pages in parallel instead of one thread writing all of it first.
+            self.blocks = fresh_huge(need);
+            self.block_indices = fresh_huge(need);
+        } else {
+            self.blocks.resize(need, TriBlock::EMPTY);
+            self.block_indices.resize(need, [[UNUSED; 3]; 4]);
         }
-        self.blocks.resize(need, TriBlock::EMPTY);
-        self.block_indices.resize(need, [[UNUSED; 3]; 4]);
         fill::fill_leaves(
             &mut self.nodes,
             &mut self.blocks,
