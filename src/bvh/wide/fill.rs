@@ -6,6 +6,7 @@
 
 use super::refit::bound;
 use super::{Child, TriBlock, TriSlots, UNUSED, WideNode, encode_leaf};
+use glam::Vec3;
 
 /// Trees with at least this many nodes fill their blocks in parallel.
 const PARALLEL_NODES: usize = 1 << 11;
@@ -71,27 +72,64 @@ fn fill_run<const K: usize>(
     base: u32,
     m: TriSlots<'_>,
 ) {
-    let mut next = 0usize;
-    // Slots are looked up in the mesh at random: the vertex indices of the leaves two nodes
-    // ahead and the vertices of the next node's are asked for first.
-    let ask = |n: Option<&WideNode<K>>, f: &dyn Fn(u32)| {
-        for k in 0..K {
-            if let Some(Child::Leaf { first, count }) = n.map(|n| n.child(k)) {
-                (first..first + count).for_each(f);
-            }
+    match m {
+        // The copies are read in order and need no hint.
+        TriSlots::Copied {
+            tris,
+            indices: vi,
+            prims,
+        } => fill_with(
+            nodes,
+            blocks,
+            indices,
+            base,
+            |s| (tris[s as usize], vi[s as usize], prims[s as usize]),
+            |_, _| {},
+        ),
+        // Slots are looked up in the mesh at random: the vertex indices of the leaves two
+        // nodes ahead and the vertices of the next node's are asked for first.
+        TriSlots::Mesh { .. } => {
+            let ask = |n: Option<&WideNode<K>>, f: &dyn Fn(u32)| {
+                for k in 0..K {
+                    if let Some(Child::Leaf { first, count }) = n.map(|n| n.child(k)) {
+                        (first..first + count).for_each(f);
+                    }
+                }
+            };
+            ask(nodes.first(), &|s| m.prefetch_indices(s));
+            ask(nodes.get(1), &|s| m.prefetch_indices(s));
+            ask(nodes.first(), &|s| m.prefetch_corners(s));
+            fill_with(
+                nodes,
+                blocks,
+                indices,
+                base,
+                |s| {
+                    let (t, vi) = m.corners(s);
+                    (t, vi, m.prim(s))
+                },
+                |nodes, i| {
+                    ask(nodes.get(i + 2), &|s| m.prefetch_indices(s));
+                    ask(nodes.get(i + 1), &|s| m.prefetch_corners(s));
+                },
+            );
         }
-    };
-    let lookup = matches!(m, TriSlots::Mesh { .. });
-    if lookup {
-        ask(nodes.first(), &|s| m.prefetch_indices(s));
-        ask(nodes.get(1), &|s| m.prefetch_indices(s));
-        ask(nodes.first(), &|s| m.prefetch_corners(s));
     }
+}
+
+/// [`fill_run`] with each slot's corners, vertex indices and triangle index from `slot`, and
+/// `ahead(nodes, i)` called before node `i` is filled.
+fn fill_with<const K: usize>(
+    nodes: &mut [WideNode<K>],
+    blocks: &mut [TriBlock],
+    indices: &mut [[[u32; 3]; 4]],
+    base: u32,
+    slot: impl Fn(u32) -> ([Vec3; 3], [u32; 3], u32),
+    ahead: impl Fn(&[WideNode<K>], usize),
+) {
+    let mut next = 0usize;
     for i in 0..nodes.len() {
-        if lookup {
-            ask(nodes.get(i + 2), &|s| m.prefetch_indices(s));
-            ask(nodes.get(i + 1), &|s| m.prefetch_corners(s));
-        }
+        ahead(nodes, i);
         let n = &mut nodes[i];
         for k in 0..K {
             let Child::Leaf { first, count } = n.child(k) else {
@@ -101,10 +139,10 @@ fn fill_run<const K: usize>(
             for s in (first..first + count).step_by(4) {
                 let mut b = TriBlock::EMPTY;
                 let mut idx = [[UNUSED; 3]; 4];
-                for (l, slot) in (s..(first + count).min(s + 4)).enumerate() {
-                    let (t, vi) = m.corners(slot);
+                for (l, at) in (s..(first + count).min(s + 4)).enumerate() {
+                    let (t, vi, prim) = slot(at);
                     b.set(l, &t);
-                    b.prims[l] = m.prim(slot);
+                    b.prims[l] = prim;
                     idx[l] = vi;
                 }
                 blocks[next] = b;
