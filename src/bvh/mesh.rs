@@ -63,11 +63,9 @@ impl MeshBvh {
     /// The tree over the triangles alone, with no leaf-ordered copy of them (for a wide tree
     /// that copies them into its own blocks).
     pub(super) fn tree_only(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Bvh {
-        let mesh = Indexed { positions, indices };
         let mut bvh = Bvh::empty(params.max_leaf_size);
-        bvh.rebuild_split::<super::build::clip::ClipAware<'_>>(
-            mesh.len(),
-            |refs, base| super::build::refs_from_corners(refs, base, |i| mesh.triangle_corners(i)),
+        Indexed { positions, indices }.build_tree::<super::build::clip::ClipAware<'_>>(
+            &mut bvh,
             None,
             params,
             &mut BuildWorkspace::one_shot(),
@@ -103,14 +101,7 @@ impl MeshBvh {
         ws: &mut BuildWorkspace,
     ) {
         let mesh = Indexed { positions, indices };
-        // The triangles are bounded where the builder makes its references.
-        self.bvh.rebuild_split(
-            mesh.len(),
-            |refs, base| super::build::refs_from_corners(refs, base, |i| mesh.triangle_corners(i)),
-            splitter,
-            params,
-            ws,
-        );
+        mesh.build_tree(&mut self.bvh, splitter, params, ws);
         // Vertex indices and triangles in leaf order, in one pass (every entry is written, so
         // old contents are kept: only growth initialises memory, and new storage comes zeroed
         // from the system rather than filled, so that a fresh build touches its pages once,
@@ -281,6 +272,24 @@ pub(super) struct Indexed<'a> {
 impl Indexed<'_> {
     pub(super) fn len(&self) -> usize {
         self.indices.len()
+    }
+
+    /// Rebuilds `bvh` over these triangles (with `splitter` when given), each bounded where
+    /// the builder makes its reference.
+    fn build_tree<S: super::build::Splitter>(
+        &self,
+        bvh: &mut Bvh,
+        splitter: Option<&S>,
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) {
+        bvh.rebuild_split(
+            self.len(),
+            |refs, base| super::build::refs_from_corners(refs, base, |i| self.triangle_corners(i)),
+            splitter,
+            params,
+            ws,
+        );
     }
 
     #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]

@@ -79,6 +79,17 @@ pub fn reserve_huge<T>(v: &mut Vec<T>, additional: usize, headroom: usize) {
     *v = fresh;
 }
 
+/// `len` zeroed items in fresh storage of `capacity` (at least `len`), with the huge-page hint
+/// ([`advise_huge_vec`]): for storage whose every item the caller overwrites, the system's
+/// zeroed pages, backed when a thread first writes them (by every thread that writes a part,
+/// not by one that fills it all first).
+pub fn zeroed_huge<T: bytemuck::Zeroable + Clone>(len: usize, capacity: usize) -> Vec<T> {
+    let mut v = bytemuck::zeroed_vec(capacity.max(len));
+    advise_huge_vec(&mut v);
+    v.truncate(len);
+    v
+}
+
 /// Asks for huge pages over `v`'s whole buffer (a hint, as for [`reserve_huge`]), for a buffer
 /// the allocator has just mapped and nothing has touched yet, such as a large `vec![0; n]`.
 pub fn advise_huge_vec<T>(v: &mut Vec<T>) {

@@ -450,10 +450,7 @@ impl Bvh {
             if self.nodes.capacity() == 0 {
                 // A cold build: fresh zeroed pages, as huge pages where they are large
                 // (faulted by the threads that write them), with the headroom of `compact`.
-                let cap = node_room(count, 2 * n - 1);
-                self.nodes = bytemuck::zeroed_vec(cap);
-                crate::simd::advise_huge_vec(&mut self.nodes);
-                self.nodes.truncate(count);
+                self.nodes = crate::simd::zeroed_huge(count, node_room(count, 2 * n - 1));
             } else {
                 if count > self.nodes.capacity() {
                     self.nodes.clear();

@@ -104,10 +104,7 @@ fn fill_run<const K: usize>(
                 blocks,
                 indices,
                 base,
-                |s| {
-                    let (t, vi) = m.corners(s);
-                    (t, vi, m.prim(s))
-                },
+                |s| m.slot(s),
                 |nodes, i| {
                     ask(nodes.get(i + 2), &|s| m.prefetch_indices(s));
                     ask(nodes.get(i + 1), &|s| m.prefetch_corners(s));

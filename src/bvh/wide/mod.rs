@@ -218,16 +218,6 @@ fn headroom<T>(v: &mut Vec<T>, before: usize) {
     }
 }
 
-/// `len` zeroed items, every one of which the caller overwrites, in fresh storage with a
-/// quarter of headroom (see [`headroom`]) and the huge-page hint: zeroed pages the system backs
-/// when a thread first writes them.
-fn fresh_huge<T: bytemuck::Zeroable + Clone>(len: usize) -> Vec<T> {
-    let mut v = bytemuck::zeroed_vec(len + len / 4);
-    crate::simd::advise_huge_vec(&mut v);
-    v.truncate(len);
-    v
-}
-
 /// The triangle index of an unused block lane.
 pub const NO_PRIM: u32 = u32::MAX;
 /// The vertex indices of an unused block lane.
@@ -251,24 +241,28 @@ enum TriSlots<'a> {
 }
 
 impl TriSlots<'_> {
-    /// Slot `s`'s corners and vertex indices.
+    /// Slot `s`'s corners, vertex indices and triangle index.
     #[inline(always)]
-    fn corners(&self, s: u32) -> ([Vec3; 3], [u32; 3]) {
+    fn slot(&self, s: u32) -> ([Vec3; 3], [u32; 3], u32) {
         let s = s as usize;
         match *self {
-            TriSlots::Copied { tris, indices, .. } => (tris[s], indices[s]),
+            TriSlots::Copied {
+                tris,
+                indices,
+                prims,
+            } => (tris[s], indices[s], prims[s]),
             TriSlots::Mesh {
                 positions,
                 indices,
                 prims,
             } => {
                 let idx = indices[prims[s] as usize];
-                (idx.map(|v| positions[v as usize]), idx)
+                (idx.map(|v| positions[v as usize]), idx, prims[s])
             }
         }
     }
 
-    /// Asks for what [`TriSlots::corners`] of slot `s` reads first: its vertex indices in the
+    /// Asks for what [`TriSlots::slot`] of slot `s` reads first: its vertex indices in the
     /// mesh (the copies are read in order and need no hint).
     #[inline(always)]
     fn prefetch_indices(&self, s: u32) {
@@ -294,14 +288,6 @@ impl TriSlots<'_> {
                     crate::simd::prefetch(p);
                 }
             }
-        }
-    }
-
-    /// The triangle index in slot `s`.
-    #[inline(always)]
-    fn prim(&self, s: u32) -> u32 {
-        match *self {
-            TriSlots::Copied { prims, .. } | TriSlots::Mesh { prims, .. } => prims[s as usize],
         }
     }
 }
@@ -485,8 +471,9 @@ impl<const K: usize> WideBvh<K> {
         if self.blocks.capacity() < need {
             // New storage comes zeroed from the system and untouched: the fill's threads fault
             // its pages in parallel instead of one thread writing all of it first.
-            self.blocks = fresh_huge(need);
-            self.block_indices = fresh_huge(need);
+            // A quarter of headroom, as `headroom` leaves.
+            self.blocks = crate::simd::zeroed_huge(need, need + need / 4);
+            self.block_indices = crate::simd::zeroed_huge(need, need + need / 4);
         } else {
             self.blocks.resize(need, TriBlock::EMPTY);
             self.block_indices.resize(need, [[UNUSED; 3]; 4]);
@@ -938,7 +925,7 @@ impl<'a> Collapse<'a> {
             Item::Node(i) => self.binary(i).bounds().half_area(),
             Item::Range(first, count) => (first..first + count)
                 .fold(Aabb::EMPTY, |b, s| {
-                    b.union(Aabb::of_triangle(&self.tris.corners(s).0))
+                    b.union(Aabb::of_triangle(&self.tris.slot(s).0))
                 })
                 .half_area(),
         }
@@ -1129,6 +1116,13 @@ mod tests {
                     let what = format!("{name}, leaves of {leaf}, {threads} threads");
                     let run = || {
                         let binary = MeshBvh::build(mesh, &params);
+                        if name == "pile" && leaf == 40 {
+                            // Pieces of leaves are collapsed too.
+                            assert!(
+                                binary.bvh().nodes().iter().any(|n| n.count > MAX_WIDE_LEAF),
+                                "{what}: no binary leaf over {MAX_WIDE_LEAF} triangles"
+                            );
+                        }
                         assert_same(
                             &MeshBvh8::build(mesh, &params),
                             &MeshBvh8::from_mesh_bvh(&binary),
