@@ -99,6 +99,12 @@ pub fn advise_huge_vec<T>(v: &mut Vec<T>) {
     );
 }
 
+/// Asks for huge pages over `s` (a hint, as for [`reserve_huge`]), for part of a buffer the
+/// allocator has just mapped and nothing has touched yet.
+pub fn advise_huge_slice<T>(s: &mut [T]) {
+    advise_huge(s.as_mut_ptr().cast::<u8>(), std::mem::size_of_val(s));
+}
+
 /// Asks for huge pages over the whole pages inside `len` bytes from `p` (an allocation of
 /// ours, nothing of it written yet).
 fn advise_huge(p: *mut u8, len: usize) {

@@ -31,7 +31,7 @@ const SMALL: usize = 6;
 const _: () = assert!(SMALL >= 3 && SMALL <= 8);
 
 /// The binned builder's settings.
-struct Ctx {
+struct Ctx<'s> {
     bins: usize,
     all_axes: bool,
     traversal_cost: f32,
@@ -44,6 +44,18 @@ struct Ctx {
     /// Each node split into two tasks: the slot of its children's pair and their descendant
     /// counts (for [`super::compact_split`]).
     splits: Mutex<Vec<[u32; 3]>>,
+    /// Each pool thread's region of node slots, by thread index: the subtrees a thread builds
+    /// alone go there, one after another, when it has room (see [`Ctx::subtree`]).
+    regions: Vec<Mutex<Region<'s>>>,
+}
+
+/// A run of node slots that one thread fills from its start, subtree after subtree.
+struct Region<'s> {
+    nodes: &'s mut [Node],
+    /// The global slot index of `nodes[0]`.
+    base: u32,
+    /// Slots written so far.
+    used: usize,
 }
 
 /// Builds the tree over `refs` (reordered into leaf order on return); writes the descendants of
@@ -52,14 +64,35 @@ struct Ctx {
 /// a build on one thread runs no task and packs every subtree). `splits` receives, sorted,
 /// the nodes split into two tasks: the slot of the children's pair and the two children's
 /// descendant counts; every other subtree is packed in its slots.
-/// `rb` bounds `refs`.
+/// `rb` bounds `refs`. `regions` (global slot index `regions_base` on) is split among the pool's
+/// threads for the subtrees each builds alone ([`regions_len`] of them is enough).
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
     rb: RangeBounds,
     desc: &mut [Node],
+    regions: (&mut [Node], usize),
     splits: &mut Vec<[u32; 3]>,
 ) -> (Node, usize, bool) {
+    let threads = rayon::current_num_threads();
+    let (spare, spare_base) = regions;
+    let per_thread = spare.len() / threads.max(1);
+    let regions = if per_thread == 0 {
+        Vec::new()
+    } else {
+        spare
+            .chunks_mut(per_thread)
+            .take(threads)
+            .enumerate()
+            .map(|(t, nodes)| {
+                Mutex::new(Region {
+                    nodes,
+                    base: (spare_base + t * per_thread) as u32,
+                    used: 0,
+                })
+            })
+            .collect()
+    };
     splits.clear();
     // A node split into tasks holds at least `parallel_threshold` references; room for as
     // many as a tree whose nodes of that size are all split in two, kept for later builds.
@@ -72,7 +105,8 @@ pub(crate) fn build(
         intersection_cost: p.intersection_cost,
         max_leaf_size: p.max_leaf_size.max(1) as usize,
         parallel_threshold: p.parallel_threshold.max(1),
-        threads: rayon::current_num_threads(),
+        threads,
+        regions,
     };
     let info = Info {
         bounds: rb.bounds,
@@ -392,7 +426,7 @@ struct Split {
     right: Info,
 }
 
-impl Ctx {
+impl Ctx<'_> {
     /// Bins for a node of `n` primitives: at most one per four primitives (and at least 4, or
     /// `n` if fewer): a small node's candidates cost more to price than they gain.
     #[inline]
@@ -475,13 +509,13 @@ impl Ctx {
             };
             let rbins = split.right.map.map(|_| stack.pair(level).1[1]);
             let (l, r) = rayon::join(
-                || self.node(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
+                || self.subtree(lrefs, split.left, left, depth + 1, stack, level + 1, 0),
                 || {
                     let mut rs = Stack::take();
                     if let Some(b) = rbins {
                         rs.pair(0).0[0] = b;
                     }
-                    self.node(rrefs, split.right, right, depth + 1, &mut rs, 0, 0)
+                    self.subtree(rrefs, split.right, right, depth + 1, &mut rs, 0, 0)
                 },
             );
             self.splits
@@ -507,6 +541,44 @@ impl Ctx {
         pair[0] = l.0;
         pair[1] = r.0;
         (Node::interior(bounds, out.desc_base), 2 + l.1 + r.1)
+    }
+
+    /// [`Ctx::node`] for a child of a node split into two tasks. A subtree below
+    /// `parallel_threshold`, which one task builds alone, goes into the calling thread's region
+    /// when that has room, right after the region's last subtree, instead of into the start of
+    /// its own reserved slots: a parallel build then writes its nodes densely, in few pages
+    /// (huge ones where the system gives them), where its reserved slots would leave a gap
+    /// after every such subtree.
+    #[allow(clippy::too_many_arguments)]
+    fn subtree(
+        &self,
+        refs: &mut [PrimRef],
+        info: Info,
+        out: Slots<'_>,
+        depth: u32,
+        stack: &mut Stack,
+        level: usize,
+        side: usize,
+    ) -> (Node, u32) {
+        let n = refs.len();
+        if n < self.parallel_threshold
+            && let Some(region) = rayon::current_thread_index().and_then(|t| self.regions.get(t))
+            // Only this thread takes its region, and never while it builds in it (a subtree
+            // below the threshold runs no parallel step).
+            && let Ok(mut region) = region.try_lock()
+            && region.nodes.len() - region.used >= 2 * n - 2
+        {
+            let at = region.used;
+            let into = Slots {
+                prim_offset: out.prim_offset,
+                desc_base: region.base + at as u32,
+                desc: &mut region.nodes[at..at + 2 * n - 2],
+            };
+            let built = self.node(refs, info, into, depth, stack, level, side);
+            region.used += built.1 as usize;
+            return built;
+        }
+        self.node(refs, info, out, depth, stack, level, side)
     }
 
     /// Finds the cheapest split of the node's bins (binning first if the node was not binned
@@ -1087,3 +1159,20 @@ const NO_MAP: BinMap = BinMap {
     last: Vec3A::ZERO,
     k: 1,
 };
+
+/// Slots for the threads' regions of a parallel build over `n` primitives (0 when it makes no
+/// task): one and a half times the most nodes a tree can have, split evenly, so that each
+/// thread has room for half as much again as an even share of the most; a subtree that does not
+/// fit goes into its reserved slots.
+pub(crate) fn regions_len(n: usize, p: &BuildParams, threads: usize) -> usize {
+    if threads <= 1 || n < 2 * p.parallel_threshold.max(1) {
+        return 0;
+    }
+    let most = 2 * n - 1;
+    let len = threads * (most * 3 / (2 * threads)).max(2 * p.parallel_threshold);
+    // Slot indices are `u32`.
+    if most + len > u32::MAX as usize {
+        return 0;
+    }
+    len
+}

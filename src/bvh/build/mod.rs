@@ -409,26 +409,42 @@ impl Bvh {
             fill(refs, 0)
         };
         let slots = &mut ws.slots;
-        if grow_zeroed(slots, 2 * n - 1)
-            && splitter.is_none()
-            && matches!(params.method, Method::Binned)
-            && rayon::current_num_threads() == 1
-        {
-            // A binned build on one thread writes its nodes in order from the first slot:
+        let binned = splitter.is_none() && matches!(params.method, Method::Binned);
+        let threads = rayon::current_num_threads();
+        let spare = if binned {
+            binned::regions_len(n, params, threads)
+        } else {
+            0
+        };
+        let total = 2 * n - 1 + spare;
+        if grow_zeroed(slots, total) && binned {
+            // A binned build on one thread writes its nodes in order from the first slot, and
+            // a parallel one nearly all of them into its threads' regions, each from its start:
             // on huge pages that takes a fault per 2 MiB of them instead of per 4 KiB, and the
-            // rest is never touched. A parallel build spreads its subtrees over the whole
-            // reservation, where huge pages would back and zero the gaps too
-            // (`docs/build_speed.md`).
-            crate::simd::advise_huge_vec(slots);
+            // rest is never touched (the reserved slots of a parallel build, which hold only
+            // its few task splits, are left on small pages).
+            if threads == 1 {
+                crate::simd::advise_huge_vec(slots);
+            } else {
+                crate::simd::advise_huge_slice(&mut slots[2 * n - 1..total]);
+            }
         }
-        let (root, desc) = slots[..2 * n - 1].split_at_mut(1);
+        let (root, desc) = slots[..total].split_at_mut(1);
+        let (desc, spare_slots) = desc.split_at_mut(2 * n - 2);
         let (count, packed);
         // The binned build's task splits, by which its slots compact in parallel.
         let mut split_slots = false;
         (root[0], count, packed) = match (splitter, params.method) {
             (Some(s), _) => (build_range(s, params, refs, rb, desc), None, false),
             (None, Method::Binned) => {
-                let (root, count, packed) = binned::build(params, refs, rb, desc, &mut ws.splits);
+                let (root, count, packed) = binned::build(
+                    params,
+                    refs,
+                    rb,
+                    desc,
+                    (spare_slots, 2 * n - 1),
+                    &mut ws.splits,
+                );
                 split_slots = true;
                 (root, Some(count), packed)
             }
@@ -460,7 +476,7 @@ impl Bvh {
                 self.nodes
                     .resize(count, <Node as bytemuck::Zeroable>::zeroed());
             }
-            compact_split(&slots[..2 * n - 1], &ws.splits, &mut self.nodes);
+            compact_split(&slots[..total], &ws.splits, &mut self.nodes);
         } else if ws.one_shot && self.nodes.capacity() == 0 {
             // A cold build: no copy into fresh pages.
             let mut slots = std::mem::take(&mut ws.slots);
@@ -829,29 +845,43 @@ mod tests {
             };
             let b = boxes(n);
             pool.install(|| {
-                let mut refs: Vec<PrimRef> = b
+                let refs: Vec<PrimRef> = b
                     .iter()
                     .enumerate()
                     .map(|(i, b)| PrimRef::from_corners(b.min.into(), b.max.into(), i as u32))
                     .collect();
                 let rb = RangeBounds::of(&refs, threshold);
-                let mut slots = vec![<Node as bytemuck::Zeroable>::zeroed(); 2 * n - 1];
-                let mut splits = Vec::new();
-                let (root, desc) = slots.split_at_mut(1);
-                let (count, packed);
-                (root[0], count, packed) = binned::build(&p, &mut refs, rb, desc, &mut splits);
-                assert!(!packed || splits.is_empty());
-                let mut serial = Vec::new();
-                compact(&slots, Some(count), &mut serial);
-                let mut parallel = vec![<Node as bytemuck::Zeroable>::zeroed(); count];
-                compact_split(&slots, &splits, &mut parallel);
-                assert_eq!(serial.len(), count, "{n}");
-                for (i, (a, b)) in serial.iter().zip(&parallel).enumerate() {
-                    assert_eq!(a, b, "{n} boxes, threshold {threshold}: node {i}");
+                // The threads' regions as the build sizes them, one eighth of that (some
+                // subtrees then go into their reserved slots), and none.
+                let full = binned::regions_len(n, &p, 2);
+                let mut trees = Vec::new();
+                for spare in [full, full / 8, 0] {
+                    let mut refs = refs.clone();
+                    let mut slots = vec![<Node as bytemuck::Zeroable>::zeroed(); 2 * n - 1 + spare];
+                    let mut splits = Vec::new();
+                    let (root, desc) = slots.split_at_mut(1);
+                    let (desc, regions) = desc.split_at_mut(2 * n - 2);
+                    let (count, packed);
+                    (root[0], count, packed) =
+                        binned::build(&p, &mut refs, rb, desc, (regions, 2 * n - 1), &mut splits);
+                    assert!(!packed || splits.is_empty());
+                    let mut serial = Vec::new();
+                    compact(&slots, Some(count), &mut serial);
+                    let mut parallel = vec![<Node as bytemuck::Zeroable>::zeroed(); count];
+                    compact_split(&slots, &splits, &mut parallel);
+                    assert_eq!(serial.len(), count, "{n}");
+                    for (i, (a, b)) in serial.iter().zip(&parallel).enumerate() {
+                        assert_eq!(a, b, "{n} boxes, threshold {threshold}: node {i}");
+                    }
+                    if n >= 5_000 {
+                        // Subtrees went into the regions when there were any.
+                        let in_regions = slots[2 * n - 1..].iter().filter(|s| s.max[0] != 0.0);
+                        assert_eq!(in_regions.count() > 0, spare > 0, "{n}, regions of {spare}");
+                        assert!(splits.len() > 4, "{n}: {} task splits", splits.len());
+                    }
+                    trees.push(serial);
                 }
-                if n >= 5_000 {
-                    assert!(splits.len() > 4, "{n}: {} task splits", splits.len());
-                }
+                assert!(trees.windows(2).all(|w| w[0] == w[1]), "{n}");
             });
         }
     }
