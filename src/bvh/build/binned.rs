@@ -64,8 +64,9 @@ struct Region<'s> {
 /// a build on one thread runs no task and packs every subtree). `splits` receives, sorted,
 /// the nodes split into two tasks: the slot of the children's pair and the two children's
 /// descendant counts; every other subtree is packed in its slots.
-/// `rb` bounds `refs`. `regions` (global slot index `regions_base` on) is split among the pool's
-/// threads for the subtrees each builds alone ([`regions_len`] of them is enough).
+/// `rb` bounds `refs`. `regions`, a run of slots and the global slot index of its first, is
+/// split among the pool's threads for the subtrees each builds alone ([`regions_len`] slots
+/// are enough).
 pub(crate) fn build(
     p: &BuildParams,
     refs: &mut [PrimRef],
