@@ -44,10 +44,16 @@ struct Ctx<'s> {
     /// Each node split into two tasks: the slot of its children's pair and their descendant
     /// counts (for [`super::compact_split`]).
     splits: Mutex<Vec<[u32; 3]>>,
-    /// Each pool thread's region of node slots, by thread index: the subtrees a thread builds
-    /// alone go there, one after another, when it has room (see [`Ctx::subtree`]).
-    regions: Vec<Mutex<Region<'s>>>,
+    /// Each pool thread's region of node slots, by thread index (the first [`MAX_REGIONS`]
+    /// threads; in a fixed array, so that a build allocates nothing for them): the subtrees a
+    /// thread builds alone go there, one after another, when it has room (see
+    /// [`Ctx::subtree`]).
+    regions: [Option<Mutex<Region<'s>>>; MAX_REGIONS],
 }
+
+/// The most threads that get a region of their own; the others build into their subtrees'
+/// reserved slots.
+const MAX_REGIONS: usize = 64;
 
 /// A run of node slots that one thread fills from its start, subtree after subtree.
 struct Region<'s> {
@@ -77,23 +83,16 @@ pub(crate) fn build(
 ) -> (Node, usize, bool) {
     let threads = rayon::current_num_threads();
     let (spare, spare_base) = regions;
-    let per_thread = spare.len() / threads.max(1);
-    let regions = if per_thread == 0 {
-        Vec::new()
-    } else {
-        spare
-            .chunks_mut(per_thread)
-            .take(threads)
-            .enumerate()
-            .map(|(t, nodes)| {
-                Mutex::new(Region {
-                    nodes,
-                    base: (spare_base + t * per_thread) as u32,
-                    used: 0,
-                })
-            })
-            .collect()
-    };
+    let per_thread = spare.len() / threads.clamp(1, MAX_REGIONS);
+    let mut chunks = spare.chunks_mut(per_thread.max(1)).enumerate();
+    let regions = std::array::from_fn(|_| {
+        let (t, nodes) = chunks.next().filter(|_| per_thread > 0)?;
+        Some(Mutex::new(Region {
+            nodes,
+            base: (spare_base + t * per_thread) as u32,
+            used: 0,
+        }))
+    });
     splits.clear();
     // A node split into tasks holds at least `parallel_threshold` references; room for as
     // many as a tree whose nodes of that size are all split in two, kept for later builds.
@@ -563,7 +562,8 @@ impl Ctx<'_> {
     ) -> (Node, u32) {
         let n = refs.len();
         if n < self.parallel_threshold
-            && let Some(region) = rayon::current_thread_index().and_then(|t| self.regions.get(t))
+            && let Some(region) =
+                rayon::current_thread_index().and_then(|t| self.regions.get(t)?.as_ref())
             // Only this thread takes its region, and never while it builds in it (a subtree
             // below the threshold runs no parallel step).
             && let Ok(mut region) = region.try_lock()
@@ -1162,7 +1162,8 @@ const NO_MAP: BinMap = BinMap {
 };
 
 /// Slots for the threads' regions of a parallel build over `n` primitives (0 when it makes no
-/// task): one and a half times the most nodes a tree can have, split evenly, so that each
+/// task): one and a half times the most nodes a tree can have, split evenly among the threads
+/// (at most [`MAX_REGIONS`] of them), so that each
 /// thread has room for half as much again as an even share of the most; a subtree that does not
 /// fit goes into its reserved slots.
 pub(crate) fn regions_len(n: usize, p: &BuildParams, threads: usize) -> usize {
@@ -1170,6 +1171,7 @@ pub(crate) fn regions_len(n: usize, p: &BuildParams, threads: usize) -> usize {
         return 0;
     }
     let most = 2 * n - 1;
+    let threads = threads.min(MAX_REGIONS);
     let len = threads * (most * 3 / (2 * threads)).max(2 * p.parallel_threshold);
     // Slot indices are `u32`.
     if most + len > u32::MAX as usize {
