@@ -8,10 +8,12 @@
 //!   trees, each tree against its own closest hit), with the work per ray behind the ratio.
 //! - the engine's closest point on one instance of a 100k-triangle sphere placed by the
 //!   identity, by a turn and an even scale, and by an uneven one, with the wide traversal (the
-//!   8-wide tree searched in the mesh's space) against the binary one.
+//!   8-wide tree searched in the mesh's space) against the binary one;
+//! - the engine's box and sphere overlaps on the same sphere, in place and turned and scaled,
+//!   the wide traversal against the binary one.
 //!
 //! `cargo bench --bench queries [-- visibility | all_hits_engine | all_hits_mesh |
-//! closest_point_placed]` (figures in `docs/library.md`).
+//! closest_point_placed | overlap_placed]` (figures in `docs/library.md`).
 
 #[path = "common/timing.rs"]
 mod timing;
@@ -336,6 +338,107 @@ fn closest_point_placed() {
     }
 }
 
+/// The engine's box and sphere overlaps on one instance of a 100k-triangle sphere, placed as
+/// in [`closest_point_placed`] (evenly and unevenly scaled), with the wide traversal (the 8-wide tree) against the binary
+/// one: boxes and spheres about 1% of the diagonal across, centred near the surface.
+fn overlap_placed() {
+    const QUERIES: usize = 50_000;
+    let mesh = shapes::bumpy_sphere(100_000);
+    let placements = [
+        ("identity", Affine3A::IDENTITY),
+        (
+            "turned, scaled 0.5",
+            Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5),
+                Quat::from_rotation_y(0.7),
+                Vec3::new(3.0, -1.0, 2.0),
+            ),
+        ),
+        (
+            "turned, scaled (2, 0.6, 1)",
+            Affine3A::from_scale_rotation_translation(
+                Vec3::new(2.0, 0.6, 1.0),
+                Quat::from_rotation_x(0.4) * Quat::from_rotation_z(1.1),
+                Vec3::new(-2.0, 0.5, 1.0),
+            ),
+        ),
+    ];
+    println!(
+        "\noverlap, engine, one instance of a {}-triangle sphere, {QUERIES} boxes and {QUERIES} spheres 1% of the diagonal across near the surface, 1 thread",
+        mesh.indices.len()
+    );
+    println!(
+        "{:<28} {:<7} {:>12} {:>13} {:>14} {:>10}",
+        "placement", "query", "wide CPU ms", "binary CPU ms", "binary / wide", "found"
+    );
+    for (name, x) in placements {
+        let engine = |traversal| {
+            let mut e = Engine::new(EngineConfig {
+                traversal,
+                ..EngineConfig::default()
+            });
+            let m = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+            e.add_instance(m, x);
+            e.update();
+            e
+        };
+        let (wide, binary) = (engine(Traversal::Wide), engine(Traversal::Binary));
+        let diag = wide.bounds().extent().length();
+        let mut rng = Rng(11);
+        let centres: Vec<Vec3> = (0..QUERIES)
+            .map(|_| {
+                let t = mesh.indices
+                    [(rng.f() * mesh.indices.len() as f32) as usize % mesh.indices.len()];
+                let [a, b, c] = t.map(|v| x.transform_point3(mesh.positions[v as usize]));
+                let off = Vec3::new(rng.f(), rng.f(), rng.f()) * 2.0 - Vec3::ONE;
+                (a + b + c) / 3.0 + off * (0.01 * diag)
+            })
+            .collect();
+        let half = Vec3::splat(0.005 * diag);
+        let boxes = |e: &Engine| -> usize {
+            let mut out = Vec::new();
+            centres
+                .iter()
+                .map(|&c| {
+                    e.overlap_box(dynbvh::geom::Aabb::new(c - half, c + half), &mut out);
+                    out.len()
+                })
+                .sum()
+        };
+        let spheres = |e: &Engine| -> usize {
+            let mut out = Vec::new();
+            centres
+                .iter()
+                .map(|&c| {
+                    e.overlap_sphere(c, 0.005 * diag, &mut out);
+                    out.len()
+                })
+                .sum()
+        };
+        for (query, run) in [
+            ("box", &boxes as &dyn Fn(&Engine) -> usize),
+            ("sphere", &spheres),
+        ] {
+            let (mut fw, mut fb) = (0, 0);
+            let t = interleaved(
+                REPEATS,
+                &mut [&mut || fw = run(&wide), &mut || fb = run(&binary)],
+            );
+            assert_eq!(
+                black_box(fw),
+                black_box(fb),
+                "{name} {query}: the traversals agree"
+            );
+            println!(
+                "{name:<28} {query:<7} {:>12.2} {:>13.2} {:>14.2} {fw:>10}",
+                t[0].cpu_ms,
+                t[1].cpu_ms,
+                t[1].cpu_ms / t[0].cpu_ms
+            );
+        }
+    }
+}
+
 /// Prints the rates of `t` over `traced` rays and the counts of one pass.
 fn report(title: &str, traced: &[Ray], t: &[timing::Timed], counts: &[usize]) {
     println!("\n{title}, 1 thread, {PASSES} passes a repeat");
@@ -383,6 +486,9 @@ fn main() {
         }
         if wanted("closest_point_placed") {
             closest_point_placed();
+        }
+        if wanted("overlap_placed") {
+            overlap_placed();
         }
     });
 }

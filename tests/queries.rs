@@ -131,11 +131,13 @@ fn check_mesh_queries(mesh: &TriMesh, bvh: &MeshBvh, probe: &mut Probe, what: &s
     }
 }
 
-/// The wide tree's closest point, all hits and hit counts against brute force.
+/// The wide tree's closest point, box and sphere overlaps, all hits and hit counts against
+/// brute force.
 fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: &str) {
     let bounds = Aabb::from_points(&mesh.positions);
     let diag = bounds.extent().length();
     let mut hits = Vec::new();
+    let mut got = Vec::new();
     for k in 0..40 {
         let p = if k % 2 == 0 {
             probe.point(&bounds, 1.5)
@@ -159,6 +161,21 @@ fn check_wide_queries(mesh: &TriMesh, wide: &MeshBvh8, probe: &mut Probe, what: 
                 );
             }
         }
+        // Boxes from a speck to most of the mesh, and spheres from none to all of it.
+        let q = probe.boxed(&bounds, [0.001, 0.15, 0.6][k % 3]);
+        wide.overlap_box(q, &mut got);
+        assert_eq!(
+            got,
+            brute_force_overlap_box(mesh, q),
+            "{what}: wide box {q:?}"
+        );
+        let r = [0.0, 0.1, 1.0][k % 3] * diag * probe.f();
+        wide.overlap_sphere(p, r, &mut got);
+        assert_eq!(
+            got,
+            brute_force_overlap_sphere(mesh, p, r),
+            "{what}: wide sphere {p} {r}"
+        );
         let ray = probe.ray(&bounds);
         let want = brute_force_all_hits(mesh, &ray);
         wide.all_hits(&ray, usize::MAX, &mut hits);
@@ -576,7 +593,7 @@ fn closest_point_from_a_sphere_centre() {
 }
 
 /// The engine's queries with one instance placed by the identity and others scaled (evenly,
-/// unevenly, tiny and far), sheared, mirrored, turned and moved, under both traversals (the wide one
+/// unevenly, tiny, far and flattened), sheared, mirrored, turned and moved, under both traversals (the wide one
 /// searches placed meshes in their own space, the binary one carries its boxes into the
 /// world), against brute force over their world triangles.
 #[test]
@@ -647,5 +664,28 @@ fn engine_queries_on_placed_and_identity_instances() {
         }
         far.update();
         check_engine_queries(&far, &mut Probe(9), &format!("far spheres, {traversal}"));
+        // Flattened to a near-singular map (its smallest singular value 1e-5 of its largest),
+        // which the wide tree cannot search in the mesh's space: its boxes go into the world.
+        let mut flat = Engine::new(EngineConfig {
+            traversal,
+            ..EngineConfig::default()
+        });
+        let m = flat.add_mesh(sphere.positions.clone(), sphere.indices.clone());
+        flat.add_instance(m, Affine3A::IDENTITY);
+        let flattened = flat.add_instance(
+            m,
+            Affine3A::from_scale_rotation_translation(
+                Vec3::new(1.5, 1e-5, 0.8),
+                dynbvh::glam::Quat::from_rotation_z(0.5),
+                Vec3::new(0.4, 1.2, -0.3),
+            ),
+        );
+        flat.set_instance_mask(flattened, 2);
+        flat.update();
+        check_engine_queries(
+            &flat,
+            &mut Probe(13),
+            &format!("flattened sphere, {traversal}"),
+        );
     }
 }

@@ -57,6 +57,41 @@ impl<const K: usize> WideBvh<K> {
         self.closest_point_pending(p, bound, PENDING, place)
     }
 
+    /// [`WideBvh::closest_point_placed`] for a map that [`Placed`] does not take (not finite,
+    /// or near singular): each lane's box is carried into the world
+    /// ([`Aabb::transformed`], conservative) and its world distance bounds the triangles'; the
+    /// lanes are taken depth first in lane order (such maps are rare, this search is not
+    /// tuned).
+    pub(crate) fn closest_point_transformed(
+        &self,
+        p: Vec3,
+        bound: f32,
+        m: &Affine3A,
+    ) -> Option<(Vec3, f32, u32)> {
+        if bound.is_nan() || bound <= 0.0 || !p.is_finite() {
+            return None;
+        }
+        let best = std::cell::Cell::new(bound);
+        let mut found = None;
+        self.for_each_lane_in(
+            |node| {
+                super::overlap::placed_lanes(node, |b| {
+                    crate::geom::box_distance_squared(p, b.transformed(m)) < best.get()
+                })
+            },
+            |tri, prim| {
+                let [a, b, c] = tri.map(|v| m.transform_point3(v));
+                let q = closest_point_on_triangle(p, a, b, c);
+                let d2 = q.distance_squared(p);
+                if d2 < best.get() {
+                    best.set(d2);
+                    found = Some((q, d2, prim));
+                }
+            },
+        );
+        found
+    }
+
     /// [`WideBvh::closest_point_below`] keeping at most `limit` subtrees pending, the mesh
     /// where `frame` puts it.
     fn closest_point_pending<F: Frame>(
@@ -308,12 +343,10 @@ impl Placed {
     }
 }
 
-impl Frame for Placed {
-    fn lanes(&self, p: Vec3, root: &Aabb) -> Option<DistanceLanes> {
-        let q = self.inverse.transform_point3(p.as_dvec3()).as_vec3();
-        if !q.is_finite() {
-            return None;
-        }
+impl Placed {
+    /// The margin (in mesh units) that covers the rounding of the placed vertices of a mesh
+    /// inside `root` and of world-space arithmetic on coordinates up to `near` in magnitude.
+    fn margin(&self, root: &Aabb, near: f32) -> f64 {
         let eps = f64::from(f32::EPSILON);
         let reach = f64::from(root.min.abs().max(root.max.abs()).max_element());
         // Each placed coordinate is rounded at most 4 times; the world-space closest point
@@ -321,8 +354,59 @@ impl Frame for Placed {
         // in-place walk allows); twice each, in world units, then in mesh units over σ.
         let vertex = (self.rows * reach + self.shift) * (4.0 * eps);
         let world = self.rows.max_element() * reach + self.shift.max_element();
-        let world = f64::from(p.abs().max_element()) + world;
-        let margin = 2.0 * (vertex.length() + 8.0 * eps * world) / self.sigma;
+        let world = f64::from(near) + world;
+        2.0 * (vertex.length() + 8.0 * eps * world) / self.sigma
+    }
+
+    /// For the sphere overlap: the mesh-space lanes of the centre `p` and the reach under
+    /// which a lane's box distance keeps it (every lane holding a placed triangle within
+    /// `r2`, inclusive, stays).
+    pub(super) fn sphere_lanes(
+        &self,
+        p: Vec3,
+        r2: f32,
+        root: &Aabb,
+    ) -> Option<(DistanceLanes, f32)> {
+        Some((self.lanes(p, root)?, self.reach(r2).next_up()))
+    }
+
+    /// For the box overlap: a mesh-space box holding every point of a triangle of the mesh
+    /// (inside `root`) whose placed triangle touches `world` (the preimage's box, widened by
+    /// the margin of the placed vertices' rounding); `None` when `world` is not finite.
+    pub(super) fn mesh_box(&self, world: &Aabb, root: &Aabb) -> Option<Aabb> {
+        if !world.is_finite() {
+            return None;
+        }
+        let (lo, hi) = (world.min.as_dvec3(), world.max.as_dvec3());
+        let (mut min, mut max) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for k in 0..8 {
+            let c = DVec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            let q = self.inverse.transform_point3(c);
+            min = min.min(q);
+            max = max.max(q);
+        }
+        let near = world.min.abs().max(world.max.abs()).max_element();
+        let margin = DVec3::splat(self.margin(root, near));
+        let (min, max) = ((min - margin).as_vec3(), (max + margin).as_vec3());
+        let (min, max) = (
+            Vec3::from(min.to_array().map(f32::next_down)),
+            Vec3::from(max.to_array().map(f32::next_up)),
+        );
+        (min.is_finite() && max.is_finite()).then(|| Aabb::new(min, max))
+    }
+}
+
+impl Frame for Placed {
+    fn lanes(&self, p: Vec3, root: &Aabb) -> Option<DistanceLanes> {
+        let q = self.inverse.transform_point3(p.as_dvec3()).as_vec3();
+        if !q.is_finite() {
+            return None;
+        }
+        let margin = self.margin(root, p.abs().max_element());
         Some(DistanceLanes::new(q, root, margin as f32))
     }
     #[inline(always)]

@@ -273,6 +273,38 @@ pub(super) fn box_distance_lanes<const K: usize>(
     }
 }
 
+/// The mask of the `K` boxes `bounds` (rows min x, y, z, max x, y, z) that share a point with
+/// `query`, faces included: lane by lane [`boxes_touch`](crate::bvh::boxes_touch) (a NaN on
+/// either side touches nothing; an empty lane touches nothing).
+#[inline(always)]
+pub(super) fn box_touch_lanes<const K: usize>(bounds: &[[f32; K]; 6], query: &Aabb) -> u32 {
+    let (lo, hi) = (query.min.to_array(), query.max.to_array());
+    if K == 8 {
+        let row = |i: usize| -> f32x8 {
+            let a: &[f32; 8] = bounds[i].as_slice().try_into().expect("K == 8");
+            f32x8::from(*a)
+        };
+        let axis = |a: usize| {
+            row(a).simd_le(f32x8::splat(hi[a])) & row(a + 3).simd_ge(f32x8::splat(lo[a]))
+        };
+        (axis(0) & axis(1) & axis(2)).to_bitmask()
+    } else if K == 4 {
+        let row = |i: usize| -> f32x4 {
+            let a: &[f32; 4] = bounds[i].as_slice().try_into().expect("K == 4");
+            f32x4::from(*a)
+        };
+        let axis = |a: usize| {
+            row(a).simd_le(f32x4::splat(hi[a])) & row(a + 3).simd_ge(f32x4::splat(lo[a]))
+        };
+        (axis(0) & axis(1) & axis(2)).to_bitmask()
+    } else {
+        (0..K).fold(0, |mask, i| {
+            let touch = (0..3).all(|a| bounds[a][i] <= hi[a] && bounds[a + 3][i] >= lo[a]);
+            mask | u32::from(touch) << i
+        })
+    }
+}
+
 /// The union of a node's `K` child boxes (empty lanes hold the empty box).
 #[inline(always)]
 pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
@@ -620,6 +652,59 @@ mod tests {
 
     /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
     /// aimed at box corners, edges and faces (where rounding decides), at every scale.
+    /// The lanes' box test is the scalar `boxes_touch` lane by lane, on 4 and 8 lanes and the
+    /// generic loop: boxes that overlap, touch at a face or corner (coordinates on a coarse
+    /// grid, so faces meet exactly), miss, are empty, infinite or NaN.
+    #[test]
+    fn box_touch_lanes_is_the_scalar_test_lane_by_lane() {
+        fn check<const K: usize>(s: &mut u64) {
+            let coord = |s: &mut u64| match (next(s) * 16.0) as u32 {
+                0 => f32::NAN,
+                1 => f32::INFINITY,
+                2 => f32::NEG_INFINITY,
+                _ => (next(s) * 8.0).floor(),
+            };
+            let boxed = |s: &mut u64| {
+                let (a, b) = (
+                    Vec3::new(coord(s), coord(s), coord(s)),
+                    Vec3::new(coord(s), coord(s), coord(s)),
+                );
+                // Mostly ordered corners, sometimes inverted (empty).
+                if next(s) < 0.8 {
+                    Aabb::new(a.min(b), a.max(b))
+                } else {
+                    Aabb::new(a, b)
+                }
+            };
+            let mut touched = 0;
+            for _ in 0..2000 {
+                let query = boxed(s);
+                let lanes: Vec<Aabb> = (0..K).map(|_| boxed(s)).collect();
+                let mut bounds = [[0f32; K]; 6];
+                for (k, b) in lanes.iter().enumerate() {
+                    for a in 0..3 {
+                        bounds[a][k] = b.min[a];
+                        bounds[a + 3][k] = b.max[a];
+                    }
+                }
+                let want = lanes.iter().enumerate().fold(0, |m, (k, b)| {
+                    m | u32::from(crate::bvh::boxes_touch(b, &query)) << k
+                });
+                assert_eq!(
+                    box_touch_lanes(&bounds, &query),
+                    want,
+                    "{lanes:?} {query:?}"
+                );
+                touched += want.count_ones();
+            }
+            assert!(touched > 100, "too few boxes touch: {touched}");
+        }
+        let mut s = 0x51a3_07c2_9e44_b16du64;
+        check::<8>(&mut s);
+        check::<4>(&mut s);
+        check::<2>(&mut s);
+    }
+
     #[test]
     fn fma_slab_accepts_what_the_plain_test_accepts() {
         let mut s = 0x9e37_79b9_7f4a_7c15u64;

@@ -22,6 +22,7 @@ mod closest_point;
 mod fill;
 pub(crate) use closest_point::Placed;
 mod lanes;
+mod overlap;
 mod packet;
 mod refit;
 mod sah;

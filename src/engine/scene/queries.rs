@@ -1,14 +1,15 @@
 //! Proximity, overlap and multi-hit queries through the two-level scene. The top-level tree
 //! prunes instances by their world boxes. Inside an instance, with [`super::Traversal::Wide`],
-//! all hits and hit counts walk the mesh's 8-wide tree (they carry the ray into instance space,
-//! as the ray queries do, so `t` keeps its meaning), and so does the closest point (in the
-//! mesh's space, its box distances scaled to bound world ones: [`crate::bvh::wide`]'s
-//! `Placed`). Otherwise the mesh's binary tree (kept in every [`super::Traversal`], refitted or
-//! rebuilt by every update) is walked with its node boxes
-//! carried into world space ([`crate::geom::Aabb::transformed`], conservative) and its
-//! triangles' vertices transformed as `transform_point3` rounds them, so distances and
-//! overlaps are world-space ones even under scaled instances. Removed and hidden instances are
-//! skipped.
+//! every query walks the mesh's 8-wide tree: all hits and hit counts carry the ray into
+//! instance space, as the ray queries do, so `t` keeps its meaning; the closest point and the
+//! box and sphere overlaps search the mesh in its own space, box distances and the query
+//! box's preimage widened to bound world ones ([`crate::bvh::wide`]'s `Placed`), or, under a
+//! near-singular placement, with each box carried into the world. With the binary traversal
+//! the mesh's binary tree (kept in every [`super::Traversal`], refitted or rebuilt by every
+//! update) is walked, its node boxes carried into world space
+//! ([`crate::geom::Aabb::transformed`], conservative). The triangles' vertices are transformed
+//! as `transform_point3` rounds them, so distances and overlaps are world-space ones even under
+//! scaled instances. Removed and hidden instances are skipped.
 
 use super::{Engine, InstanceEntry, InstanceId, MeshId, SceneHit, local_ray};
 use crate::bvh::wide::Placed;
@@ -63,7 +64,7 @@ impl Engine {
                     (None, Some(w)) => w.closest_point_below(p, best)?,
                     (Some(m), Some(w)) => match Placed::new(m) {
                         Some(placed) => w.closest_point_placed(p, best, &placed)?,
-                        None => bvh.closest_point_placed(p, best, place)?,
+                        None => w.closest_point_transformed(p, best, m)?,
                     },
                     (place, None) => bvh.closest_point_placed(p, best, place)?,
                 };
@@ -89,9 +90,11 @@ impl Engine {
             |n| crate::bvh::boxes_touch(&n.bounds(), &query),
             |slot| {
                 if let Some((k, inst, bvh)) = self.slot_instance(slot) {
-                    bvh.overlap_box_placed(query, placement(inst), |t| {
-                        out.push((InstanceId(k), t));
-                    });
+                    let found = |t| out.push((InstanceId(k), t));
+                    match &self.meshes[inst.mesh as usize].wide {
+                        Some(w) => w.overlap_box_placed(query, placement(inst), found),
+                        None => bvh.overlap_box_placed(query, placement(inst), found),
+                    }
                 }
             },
         );
@@ -110,9 +113,12 @@ impl Engine {
             |n| box_distance_squared(centre, n.bounds()) <= r2,
             |slot| {
                 if let Some((k, inst, bvh)) = self.slot_instance(slot) {
-                    bvh.overlap_sphere_placed(centre, radius, placement(inst), |t| {
-                        out.push((InstanceId(k), t));
-                    });
+                    let found = |t| out.push((InstanceId(k), t));
+                    let place = placement(inst);
+                    match &self.meshes[inst.mesh as usize].wide {
+                        Some(w) => w.overlap_sphere_placed(centre, radius, place, found),
+                        None => bvh.overlap_sphere_placed(centre, radius, place, found),
+                    }
                 }
             },
         );

@@ -1,0 +1,214 @@
+//! Overlap queries on the wide tree: the triangles a box or a sphere touches, as the binary
+//! tree answers them (`crate::bvh::overlap`), with a node's `K` child boxes tested in one SIMD
+//! pass. A subtree is entered when its box meets the query (exactly for boxes; for spheres
+//! through box distances lowered by their rounding, as [`box_distance_lanes`] makes them), and
+//! every triangle of a leaf reached is tested exactly ([`triangle_overlaps_box`], or its
+//! closest point to the centre), so the answers are brute force's. A mesh placed by an affine
+//! map is searched in its own space, as the closest point is ([`Placed`]): a box query
+//! through the box of its preimage, widened by the rounding of the placed vertices; a sphere
+//! through mesh-space box distances scaled by the map's smallest singular value.
+
+use super::lanes::{DistanceLanes, box_distance_lanes, box_touch_lanes};
+use super::traverse::{BIG_STACK, SMALL_STACK};
+use super::{LEAF_BIT, NO_PRIM, Placed, WideBvh, WideNode, leaf_range};
+use crate::bvh::boxes_touch;
+use crate::geom::{Aabb, box_distance_squared, closest_point_on_triangle, triangle_overlaps_box};
+use crate::simd::Stack;
+use glam::{Affine3A, Vec3};
+
+impl<const K: usize> WideBvh<K> {
+    /// The triangles (indices in the mesh's input order) that share a point with `query`,
+    /// faces and edges included, into `out` (cleared first), ascending. Exactly
+    /// [`brute_force_overlap_box`](crate::bvh::brute_force_overlap_box).
+    pub fn overlap_box(&self, query: Aabb, out: &mut Vec<u32>) {
+        out.clear();
+        self.overlap_box_placed(query, None, |p| out.push(p));
+        out.sort_unstable();
+    }
+
+    /// The triangles within `radius` of `centre` (their closest point at most `radius` away),
+    /// into `out` (cleared first), ascending. Exactly
+    /// [`brute_force_overlap_sphere`](crate::bvh::brute_force_overlap_sphere).
+    pub fn overlap_sphere(&self, centre: Vec3, radius: f32, out: &mut Vec<u32>) {
+        out.clear();
+        self.overlap_sphere_placed(centre, radius, None, |p| out.push(p));
+        out.sort_unstable();
+    }
+
+    /// [`WideBvh::overlap_box`] of the mesh placed by `place`, each triangle found given to
+    /// `found` (in tree order).
+    pub(crate) fn overlap_box_placed(
+        &self,
+        query: Aabb,
+        place: Option<&Affine3A>,
+        mut found: impl FnMut(u32),
+    ) {
+        match place {
+            None => self.for_each_lane_in(
+                |node| box_touch_lanes(&node.bounds, &query),
+                |[a, b, c], prim| {
+                    if triangle_overlaps_box(a, b, c, query) {
+                        found(prim);
+                    }
+                },
+            ),
+            Some(m) => {
+                let placed = |[a, b, c]: [Vec3; 3], prim| {
+                    let [a, b, c] = [a, b, c].map(|v| m.transform_point3(v));
+                    if triangle_overlaps_box(a, b, c, query) {
+                        found(prim);
+                    }
+                };
+                // In mesh space, through the box of the query's preimage where the map allows
+                // (see `Placed`); else each lane's box carried into the world.
+                match Placed::new(m).and_then(|pl| pl.mesh_box(&query, &self.bounds())) {
+                    Some(mesh_box) => self
+                        .for_each_lane_in(|node| box_touch_lanes(&node.bounds, &mesh_box), placed),
+                    None => self.for_each_lane_in(
+                        |node| placed_lanes(node, |b| boxes_touch(&b.transformed(m), &query)),
+                        placed,
+                    ),
+                }
+            }
+        }
+    }
+
+    /// [`WideBvh::overlap_sphere`] of the mesh placed by `place`, each triangle found given to
+    /// `found` (in tree order).
+    pub(crate) fn overlap_sphere_placed(
+        &self,
+        centre: Vec3,
+        radius: f32,
+        place: Option<&Affine3A>,
+        mut found: impl FnMut(u32),
+    ) {
+        if radius.is_nan() || radius < 0.0 {
+            return;
+        }
+        let r2 = radius * radius;
+        let within = |[a, b, c]: [Vec3; 3]| {
+            closest_point_on_triangle(centre, a, b, c).distance_squared(centre) <= r2
+        };
+        match place {
+            None => {
+                // Every lane's box lies inside the root's, so one rounding margin serves all;
+                // `d2 <= r2` is `d2 < r2.next_up()` for the squared distances, never NaN here.
+                let lanes = DistanceLanes::new(centre, &self.bounds(), 0.0);
+                let reach = r2.next_up();
+                let mut dist = [0f32; K];
+                self.for_each_lane_in(
+                    |node| box_distance_lanes(&node.bounds, &lanes, reach, &mut dist),
+                    |tri, prim| {
+                        if within(tri) {
+                            found(prim);
+                        }
+                    },
+                );
+            }
+            Some(m) => {
+                let placed = |tri: [Vec3; 3], prim| {
+                    if within(tri.map(|v| m.transform_point3(v))) {
+                        found(prim);
+                    }
+                };
+                // In mesh space, box distances bounding world ones (see `Placed`) where the
+                // map allows; else each lane's box carried into the world.
+                match Placed::new(m).and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())) {
+                    Some((lanes, reach)) => {
+                        let mut dist = [0f32; K];
+                        self.for_each_lane_in(
+                            |node| box_distance_lanes(&node.bounds, &lanes, reach, &mut dist),
+                            placed,
+                        );
+                    }
+                    None => self.for_each_lane_in(
+                        |node| {
+                            placed_lanes(node, |b| {
+                                box_distance_squared(centre, b.transformed(m)) <= r2
+                            })
+                        },
+                        placed,
+                    ),
+                }
+            }
+        }
+    }
+
+    /// Calls `visit(triangle, prim)` for every triangle of every leaf reached through the
+    /// lanes that `enter(node)` returns set (a bit per lane; the root node is always entered).
+    pub(super) fn for_each_lane_in(
+        &self,
+        enter: impl FnMut(&WideNode<K>) -> u32,
+        visit: impl FnMut([Vec3; 3], u32),
+    ) {
+        if self.stack_need < SMALL_STACK {
+            self.lanes_walk::<SMALL_STACK>(enter, visit);
+        } else {
+            self.lanes_walk::<BIG_STACK>(enter, visit);
+        }
+    }
+
+    /// [`WideBvh::for_each_lane_in`] on a stack of `N` entries.
+    #[inline(always)]
+    fn lanes_walk<const N: usize>(
+        &self,
+        mut enter: impl FnMut(&WideNode<K>) -> u32,
+        mut visit: impl FnMut([Vec3; 3], u32),
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = Stack::<u32, N>::default();
+        let mut cur = 0u32;
+        loop {
+            if cur & LEAF_BIT != 0 {
+                let (first, count) = leaf_range(cur);
+                let first = first as usize;
+                for block in &self.blocks[first..first + count as usize] {
+                    for (l, &prim) in block.prims.iter().enumerate() {
+                        if prim != NO_PRIM {
+                            visit(block.get(l), prim);
+                        }
+                    }
+                }
+            } else {
+                let node = &self.nodes[cur as usize];
+                let mut mask = enter(node) & node.occupied();
+                if mask != 0 {
+                    // The first lane now, the others later.
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let j = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack.push(node.child[j]);
+                    }
+                    cur = node.child[k];
+                    continue;
+                }
+            }
+            match stack.pop() {
+                Some(c) => cur = c,
+                None => return,
+            }
+        }
+    }
+}
+
+/// The mask of `node`'s occupied lanes whose box `keep` accepts (a scalar test a lane, for a
+/// mesh placed by a map: each box is moved into the world first).
+pub(super) fn placed_lanes<const K: usize>(node: &WideNode<K>, keep: impl Fn(Aabb) -> bool) -> u32 {
+    let mut mask = 0;
+    let mut occupied = node.occupied();
+    while occupied != 0 {
+        let k = occupied.trailing_zeros() as usize;
+        occupied &= occupied - 1;
+        let b = &node.bounds;
+        let lane = Aabb::new(
+            Vec3::new(b[0][k], b[1][k], b[2][k]),
+            Vec3::new(b[3][k], b[4][k], b[5][k]),
+        );
+        mask |= u32::from(keep(lane)) << k;
+    }
+    mask
+}
