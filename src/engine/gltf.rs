@@ -9,6 +9,9 @@
 //! - other static or rigid instances (skinned but unanimated, or morphed by fixed weights) get
 //!   a mesh of their own, built once.
 //!
+//! Meshes of static and rigid instances are added as static ([`Engine::add_static_mesh`]):
+//! with the wide traversal they keep only the 8-wide tree.
+//!
 //! # Quick start
 //!
 //! Load a file, build an engine at the animation's start, then pose it at any time (a frame
@@ -312,12 +315,16 @@ impl FrameSource for GltfSource<'_> {
             let positions = self.poser.positions(i);
             let indices = self.poser.indices(i);
             let rest = &scene.meshes[inst.mesh].positions;
-            let mesh = if class != InstanceClass::Deforming && positions.as_ptr() == rest.as_ptr() {
+            // Only deforming meshes are refitted or rebuilt; the others keep no more than
+            // their queries need.
+            let mesh = if class == InstanceClass::Deforming {
+                engine.add_mesh(positions.to_vec(), indices.to_vec())
+            } else if positions.as_ptr() == rest.as_ptr() {
                 *shared
                     .entry(inst.mesh)
-                    .or_insert_with(|| engine.add_mesh(positions.to_vec(), indices.to_vec()))
+                    .or_insert_with(|| engine.add_static_mesh(positions.to_vec(), indices.to_vec()))
             } else {
-                engine.add_mesh(positions.to_vec(), indices.to_vec())
+                engine.add_static_mesh(positions.to_vec(), indices.to_vec())
             };
             let id = engine.add_instance(mesh, Affine3A::from_mat4(self.poser.transform(i)));
             self.plan.push(match class {

@@ -338,6 +338,19 @@ struct MeshEntry {
     clip: clip::ClipAhead,
     /// Poses its last (re)build was made for (0: a plain build of one pose).
     build_poses: usize,
+    /// Added as never deforming ([`Engine::add_static_mesh`]): built once, no spare trees,
+    /// estimate or cut, and with the wide traversal no binary tree (`bvh` is empty).
+    fixed: bool,
+}
+
+impl MeshEntry {
+    /// The box of its triangles, from whichever tree it keeps.
+    fn bounds(&self) -> Aabb {
+        match &self.wide {
+            Some(w) if self.fixed => w.bounds(),
+            _ => self.bvh.bvh().bounds(),
+        }
+    }
 }
 
 /// A rebuild on probation: the tree it replaced is refitted alongside until the new tree has
@@ -534,31 +547,32 @@ impl Engine {
     /// that the frame loop still allocates nothing.
     pub fn set_policy(&mut self, policy: Policy) {
         self.config.policy = policy;
+        // Static meshes never update: they need none of what the policy keeps.
         if MeshEntry::wants_cut(policy) {
-            for m in &mut self.meshes {
+            for m in self.meshes.iter_mut().filter(|m| !m.fixed) {
                 m.cut.reset(&m.bvh, &mut self.restructure.partial);
                 m.bvh.reserve_any_shape();
             }
         }
         if policy.uses_rungs() {
-            for m in &self.meshes {
+            for m in self.meshes.iter().filter(|m| !m.fixed) {
                 self.restructure.warm_up(&m.bvh, &self.config.build);
             }
         }
         if self.keeps_spare() {
-            for m in &mut self.meshes {
+            for m in self.meshes.iter_mut().filter(|m| !m.fixed) {
                 m.prev.reserve_like(&m.bvh);
             }
         }
         if self.trials() {
-            for m in &mut self.meshes {
+            for m in self.meshes.iter_mut().filter(|m| !m.fixed) {
                 if m.prev_wide.is_none() && !m.removed {
                     m.prev_wide = m.wide.as_ref().map(spare_wide);
                 }
             }
         }
         if policy == Policy::Async {
-            for m in &self.meshes {
+            for m in self.meshes.iter().filter(|m| !m.fixed) {
                 self.background.reserve(
                     m.positions.len(),
                     m.indices.len(),
@@ -575,18 +589,42 @@ impl Engine {
     /// # Panics
     /// When a vertex index is out of range.
     pub fn add_mesh(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshId {
-        let entry = self.new_mesh_entry(positions, indices);
+        let entry = self.new_mesh_entry(positions, indices, false);
         self.meshes.push(entry);
         self.mesh_samples.push(MeshSample::default());
         self.unsampled_meshes = true;
         MeshId(self.meshes.len() as u32 - 1)
     }
 
-    /// A mesh's entry with its trees built and its policy state seeded.
+    /// Adds a mesh whose vertices never move (its instances may: a static or rigid object)
+    /// and builds its tree now, keeping no more than its queries need: no spare trees,
+    /// degradation estimate or partial-rebuild cut, and with [`Traversal::Wide`] only the
+    /// 8-wide tree (the binary tree it is collapsed from is dropped; [`Engine::mesh_bvh`] is
+    /// then empty). The same tree as [`Engine::add_mesh`]'s, so every query answers alike.
+    /// Writing its positions later ([`Engine::positions_mut`]) makes it an ordinary mesh,
+    /// its trees built again from its current positions then (allocating).
     ///
     /// # Panics
     /// When a vertex index is out of range.
-    fn new_mesh_entry(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshEntry {
+    pub fn add_static_mesh(&mut self, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> MeshId {
+        let entry = self.new_mesh_entry(positions, indices, true);
+        self.meshes.push(entry);
+        self.mesh_samples.push(MeshSample::default());
+        self.unsampled_meshes = true;
+        MeshId(self.meshes.len() as u32 - 1)
+    }
+
+    /// A mesh's entry with its trees built and its policy state seeded (`fixed`: a static
+    /// mesh's, see [`Engine::add_static_mesh`]).
+    ///
+    /// # Panics
+    /// When a vertex index is out of range.
+    fn new_mesh_entry(
+        &mut self,
+        positions: Vec<Vec3>,
+        indices: Vec<[u32; 3]>,
+        fixed: bool,
+    ) -> MeshEntry {
         let n = positions.len();
         assert!(
             indices.iter().flatten().all(|&i| (i as usize) < n),
@@ -608,33 +646,43 @@ impl Engine {
         let wide =
             (self.config.traversal == Traversal::Wide).then(|| MeshBvh8::from_mesh_bvh(&bvh));
         let ms = ms_since(t);
-        let mut fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
-        let t = Instant::now();
-        let estimate = fresh.estimate(&positions, &indices);
         let timing = self.config.timing;
         let prices = self.config.prices;
-        let estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len(), &prices);
         let mut state = PolicyState::default();
-        state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len(), &prices));
-        // The spare a probed rebuild goes into, reserved now so that the frame loop never
-        // allocates it (address space only until the first probed rebuild writes it).
         let mut prev = MeshBvh::default();
-        if self.keeps_spare() {
-            prev.reserve_like(&bvh);
-        }
-        let prev_wide = wide.as_ref().filter(|_| self.trials()).map(spare_wide);
         let mut cut = PartialCut::default();
-        if MeshEntry::wants_cut(self.config.policy) {
-            cut.reset(&bvh, &mut self.restructure.partial);
-            bvh.reserve_any_shape();
+        let mut prev_wide = None;
+        let (mut fresh, mut estimate, mut estimate_ms) = (FreshSah::default(), sah, 0.0);
+        if fixed {
+            // Nothing ever decides for it, and with the wide traversal every query walks the
+            // wide tree.
+            if wide.is_some() {
+                bvh = MeshBvh::default();
+            }
+        } else {
+            fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
+            let t = Instant::now();
+            estimate = fresh.estimate(&positions, &indices);
+            estimate_ms = timing.estimate_ms(ms_since(t), fresh.sample_len(), &prices);
+            // The spare a probed rebuild goes into, reserved now so that the frame loop never
+            // allocates it (address space only until the first probed rebuild writes it).
+            if self.keeps_spare() {
+                prev.reserve_like(&bvh);
+            }
+            prev_wide = wide.as_ref().filter(|_| self.trials()).map(spare_wide);
+            if MeshEntry::wants_cut(self.config.policy) {
+                cut.reset(&bvh, &mut self.restructure.partial);
+                bvh.reserve_any_shape();
+            }
+            if self.config.policy.uses_rungs() {
+                self.restructure.warm_up(&bvh, &self.config.build);
+            }
+            if self.config.policy == Policy::Async {
+                self.background
+                    .reserve(positions.len(), indices.len(), &bvh, wide.as_ref());
+            }
         }
-        if self.config.policy.uses_rungs() {
-            self.restructure.warm_up(&bvh, &self.config.build);
-        }
-        if self.config.policy == Policy::Async {
-            self.background
-                .reserve(positions.len(), indices.len(), &bvh, wide.as_ref());
-        }
+        state.rebuilt(sah, estimate, timing.build_ms(ms, indices.len(), &prices));
         MeshEntry {
             positions,
             indices,
@@ -667,6 +715,7 @@ impl Engine {
             any_shape: false,
             clip: clip::ClipAhead::default(),
             build_poses: 0,
+            fixed,
         }
     }
 
@@ -726,8 +775,19 @@ impl Engine {
     }
 
     /// The vertex positions of `mesh`, to write in place; its tree follows at the next update.
+    /// A static mesh ([`Engine::add_static_mesh`]) becomes an ordinary one here, its trees
+    /// built again from its current positions (allocating).
     pub fn positions_mut(&mut self, mesh: MeshId) -> &mut [Vec3] {
-        let m = &mut self.meshes[mesh.0 as usize];
+        let i = mesh.0 as usize;
+        if self.meshes[i].fixed && !self.meshes[i].removed {
+            let positions = std::mem::take(&mut self.meshes[i].positions);
+            let indices = std::mem::take(&mut self.meshes[i].indices);
+            self.meshes[i] = self.new_mesh_entry(positions, indices, false);
+            for inst in self.instances.iter_mut().filter(|inst| inst.mesh == mesh.0) {
+                inst.dirty = true;
+            }
+        }
+        let m = &mut self.meshes[i];
         m.dirty = !m.removed;
         &mut m.positions
     }
@@ -928,7 +988,7 @@ impl Engine {
             inst.dirty = false;
             if let Some(p) = inst.tlas_prim {
                 self.tlas_boxes[p as usize] = if inst.visible {
-                    transform_box(&inst.transform, m.bvh.bvh().bounds())
+                    transform_box(&inst.transform, m.bounds())
                 } else {
                     let o = inst.transform.translation.into();
                     Aabb::new(o, o)
@@ -1064,7 +1124,8 @@ impl Engine {
         }
     }
 
-    /// The tree of `mesh`.
+    /// The binary tree of `mesh` (empty for a static mesh under [`Traversal::Wide`], which
+    /// keeps only [`Engine::mesh_bvh8`]).
     #[must_use]
     pub fn mesh_bvh(&self, mesh: MeshId) -> &MeshBvh {
         &self.meshes[mesh.0 as usize].bvh

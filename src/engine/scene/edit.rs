@@ -12,7 +12,8 @@ use glam::Vec3;
 impl Engine {
     /// Replaces `mesh`'s vertices and triangles (any counts) and builds its trees now; every
     /// instance placing it shows the new mesh from the next update on. The mesh's policy state
-    /// starts afresh, as for a new mesh.
+    /// starts afresh, as for a new mesh; a static mesh ([`Engine::add_static_mesh`]) stays
+    /// static.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] when `mesh` is not a live mesh of this engine or a vertex
@@ -36,7 +37,8 @@ impl Engine {
             )));
         }
         self.background.cancel(mesh);
-        let entry = self.new_mesh_entry(positions, indices);
+        let fixed = self.meshes[mesh.0 as usize].fixed;
+        let entry = self.new_mesh_entry(positions, indices, fixed);
         self.meshes[mesh.0 as usize] = entry;
         for inst in &mut self.instances {
             if inst.mesh == mesh.0 {
