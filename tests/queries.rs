@@ -271,6 +271,57 @@ fn mesh_queries_match_brute_force_at_extreme_scales() {
     }
 }
 
+/// A sphere of infinite radius takes every triangle whose squared distance is at most
+/// infinity, overflowed ones too (a mesh 1e20 across), on both trees as by brute force; an
+/// infinite box takes every triangle.
+#[test]
+fn unbounded_overlaps_match_brute_force() {
+    let sphere = dynbvh::geom::shapes::bumpy_sphere(3000);
+    let mesh = TriMesh::new(
+        sphere.positions.iter().map(|p| *p * 1e20).collect(),
+        sphere.indices.clone(),
+    );
+    let bvh = MeshBvh::build(&mesh, &BuildParams::BINNED);
+    let wide = MeshBvh8::from_mesh_bvh(&bvh);
+    let mut got = Vec::new();
+    for centre in [Vec3::ZERO, Vec3::new(3e20, -1e20, 0.5)] {
+        let want = brute_force_overlap_sphere(&mesh, centre, f32::INFINITY);
+        // Squared distances past f32::MAX: the case a finite reach would miss.
+        let overflowed = mesh.indices.iter().any(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            closest_point_on_triangle(centre, a, b, c).distance_squared(centre) == f32::INFINITY
+        });
+        assert!(
+            overflowed && !want.is_empty(),
+            "{centre}: the case is not made"
+        );
+        bvh.overlap_sphere(centre, f32::INFINITY, &mut got);
+        assert!(
+            got == want,
+            "binary, {centre}: {} of {}",
+            got.len(),
+            want.len()
+        );
+        wide.overlap_sphere(centre, f32::INFINITY, &mut got);
+        assert!(
+            got == want,
+            "wide, {centre}: {} of {}",
+            got.len(),
+            want.len()
+        );
+    }
+    let everything = Aabb::new(Vec3::NEG_INFINITY, Vec3::INFINITY);
+    let all: Vec<u32> = (0..mesh.len() as u32).collect();
+    assert!(
+        brute_force_overlap_box(&mesh, everything) == all,
+        "brute force box"
+    );
+    bvh.overlap_box(everything, &mut got);
+    assert!(got == all, "binary box: {}", got.len());
+    wide.overlap_box(everything, &mut got);
+    assert!(got == all, "wide box: {}", got.len());
+}
+
 /// Every live instance's world triangles as the engine holds them: `(instance, triangle,
 /// corners)`.
 fn world_triangles(e: &Engine) -> Vec<(InstanceId, u32, [Vec3; 3])> {

@@ -783,6 +783,8 @@ impl Engine {
             let positions = std::mem::take(&mut self.meshes[i].positions);
             let indices = std::mem::take(&mut self.meshes[i].indices);
             self.meshes[i] = self.new_mesh_entry(positions, indices, false);
+            // Its fresh tree's work on the next sample is its reference, as a new mesh's.
+            self.unsampled_meshes = true;
             for inst in self.instances.iter_mut().filter(|inst| inst.mesh == mesh.0) {
                 inst.dirty = true;
             }

@@ -89,6 +89,20 @@ impl<const K: usize> WideBvh<K> {
         let within = |[a, b, c]: [Vec3; 3]| {
             closest_point_on_triangle(centre, a, b, c).distance_squared(centre) <= r2
         };
+        if r2 == f32::INFINITY {
+            // Every squared distance is at most infinity, an overflowed one too: every
+            // triangle is tested.
+            let placed = place.map_or(Affine3A::IDENTITY, |m| *m);
+            self.for_each_lane_in(
+                |_| u32::MAX,
+                |tri, prim| {
+                    if within(tri.map(|v| placed.transform_point3(v))) {
+                        found(prim);
+                    }
+                },
+            );
+            return;
+        }
         match place {
             None => {
                 // Every lane's box lies inside the root's, so one rounding margin serves all;
