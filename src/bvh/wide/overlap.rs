@@ -131,7 +131,14 @@ impl<const K: usize> WideBvh<K> {
                     Some((lanes, reach)) => {
                         let mut dist = [0f32; K];
                         self.for_each_lane_in(
-                            |node| box_distance_lanes(&node.bounds, &lanes, reach, &mut dist),
+                            |node| {
+                                // A reach that overflowed prunes nothing (an overflowed box
+                                // distance may still hold a triangle within the radius).
+                                if reach == f32::INFINITY {
+                                    return u32::MAX;
+                                }
+                                box_distance_lanes(&node.bounds, &lanes, reach, &mut dist)
+                            },
                             placed,
                         );
                     }
