@@ -24,7 +24,7 @@ use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::{
     Engine, EngineConfig, FrameSource, InstanceId, QueryFilter, SceneHit, Traversal,
 };
-use dynbvh::geom::{Ray, shapes};
+use dynbvh::geom::{Ray, TriMesh, shapes};
 use dynbvh::glam::{Affine3A, Quat, Vec3};
 use dynbvh::report::rays::camera_rays;
 use std::hint::black_box;
@@ -255,10 +255,10 @@ fn all_hits_mesh() {
     );
 }
 
-fn closest_point_placed() {
-    const QUERIES: usize = 100_000;
-    let mesh = shapes::bumpy_sphere(100_000);
-    let placements = [
+/// The placements of the placed-query benches: in place, turned and scaled evenly, and
+/// unevenly.
+fn placements() -> [(&'static str, Affine3A); 3] {
+    [
         ("identity", Affine3A::IDENTITY),
         (
             "turned, scaled 0.5",
@@ -276,7 +276,24 @@ fn closest_point_placed() {
                 Vec3::new(-2.0, 0.5, 1.0),
             ),
         ),
-    ];
+    ]
+}
+
+/// An engine with one instance of `mesh` placed by `x`, walked with `traversal`.
+fn placed_engine(mesh: &TriMesh, x: Affine3A, traversal: Traversal) -> Engine {
+    let mut e = Engine::new(EngineConfig {
+        traversal,
+        ..EngineConfig::default()
+    });
+    let m = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
+    e.add_instance(m, x);
+    e.update();
+    e
+}
+
+fn closest_point_placed() {
+    const QUERIES: usize = 100_000;
+    let mesh = shapes::bumpy_sphere(100_000);
     println!(
         "\nclosest point, engine, one instance of a {}-triangle sphere, {QUERIES} points within 1% of the diagonal of the surface, 1 thread",
         mesh.indices.len()
@@ -285,18 +302,11 @@ fn closest_point_placed() {
         "{:<28} {:>12} {:>12} {:>14}",
         "placement", "wide CPU ms", "binary CPU ms", "binary / wide"
     );
-    for (name, x) in placements {
-        let engine = |traversal| {
-            let mut e = Engine::new(EngineConfig {
-                traversal,
-                ..EngineConfig::default()
-            });
-            let m = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
-            e.add_instance(m, x);
-            e.update();
-            e
-        };
-        let (wide, binary) = (engine(Traversal::Wide), engine(Traversal::Binary));
+    for (name, x) in placements() {
+        let (wide, binary) = (
+            placed_engine(&mesh, x, Traversal::Wide),
+            placed_engine(&mesh, x, Traversal::Binary),
+        );
         let diag = wide.bounds().extent().length();
         let mut rng = Rng(7);
         let points: Vec<Vec3> = (0..QUERIES)
@@ -344,25 +354,6 @@ fn closest_point_placed() {
 fn overlap_placed() {
     const QUERIES: usize = 50_000;
     let mesh = shapes::bumpy_sphere(100_000);
-    let placements = [
-        ("identity", Affine3A::IDENTITY),
-        (
-            "turned, scaled 0.5",
-            Affine3A::from_scale_rotation_translation(
-                Vec3::splat(0.5),
-                Quat::from_rotation_y(0.7),
-                Vec3::new(3.0, -1.0, 2.0),
-            ),
-        ),
-        (
-            "turned, scaled (2, 0.6, 1)",
-            Affine3A::from_scale_rotation_translation(
-                Vec3::new(2.0, 0.6, 1.0),
-                Quat::from_rotation_x(0.4) * Quat::from_rotation_z(1.1),
-                Vec3::new(-2.0, 0.5, 1.0),
-            ),
-        ),
-    ];
     println!(
         "\noverlap, engine, one instance of a {}-triangle sphere, {QUERIES} boxes and {QUERIES} spheres 1% of the diagonal across near the surface, 1 thread",
         mesh.indices.len()
@@ -371,18 +362,11 @@ fn overlap_placed() {
         "{:<28} {:<7} {:>12} {:>13} {:>14} {:>10}",
         "placement", "query", "wide CPU ms", "binary CPU ms", "binary / wide", "found"
     );
-    for (name, x) in placements {
-        let engine = |traversal| {
-            let mut e = Engine::new(EngineConfig {
-                traversal,
-                ..EngineConfig::default()
-            });
-            let m = e.add_mesh(mesh.positions.clone(), mesh.indices.clone());
-            e.add_instance(m, x);
-            e.update();
-            e
-        };
-        let (wide, binary) = (engine(Traversal::Wide), engine(Traversal::Binary));
+    for (name, x) in placements() {
+        let (wide, binary) = (
+            placed_engine(&mesh, x, Traversal::Wide),
+            placed_engine(&mesh, x, Traversal::Binary),
+        );
         let diag = wide.bounds().extent().length();
         let mut rng = Rng(11);
         let centres: Vec<Vec3> = (0..QUERIES)
