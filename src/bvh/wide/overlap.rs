@@ -43,33 +43,28 @@ impl<const K: usize> WideBvh<K> {
         place: Option<&Affine3A>,
         mut found: impl FnMut(u32),
     ) {
-        match place {
-            None => self.for_each_lane_in(
-                |node| box_touch_lanes(&node.bounds, &query),
-                |[a, b, c], prim| {
-                    if triangle_overlaps_box(a, b, c, query) {
-                        found(prim);
-                    }
-                },
-            ),
-            Some(m) => {
-                let placed = |[a, b, c]: [Vec3; 3], prim| {
-                    let [a, b, c] = [a, b, c].map(|v| m.transform_point3(v));
-                    if triangle_overlaps_box(a, b, c, query) {
-                        found(prim);
-                    }
-                };
-                // In mesh space, through the box of the query's preimage where the map allows
-                // (see `Placed`); else each lane's box carried into the world.
-                match Placed::new(m).and_then(|pl| pl.mesh_box(&query, &self.bounds())) {
-                    Some(mesh_box) => self
-                        .for_each_lane_in(|node| box_touch_lanes(&node.bounds, &mesh_box), placed),
-                    None => self.for_each_lane_in(
-                        |node| placed_lanes(node, |b| boxes_touch(&b.transformed(m), &query)),
-                        placed,
-                    ),
-                }
+        let visit = |tri: [Vec3; 3], prim| {
+            let [a, b, c] = place.map_or(tri, |m| tri.map(|v| m.transform_point3(v)));
+            if triangle_overlaps_box(a, b, c, query) {
+                found(prim);
             }
+        };
+        // The box lanes are tested against in mesh space: the query itself in place, else the
+        // box of its preimage where the map allows (see `Placed`).
+        let mesh_box = match place {
+            None => Some(query),
+            Some(m) => Placed::new(m).and_then(|pl| pl.mesh_box(&query, &self.bounds())),
+        };
+        match (mesh_box, place) {
+            (Some(mesh_box), _) => {
+                self.for_each_lane_in(|node| box_touch_lanes(&node.bounds, &mesh_box), visit);
+            }
+            // Each lane's box carried into the world instead.
+            (None, Some(m)) => self.for_each_lane_in(
+                |node| placed_lanes(node, |b| boxes_touch(&b.transformed(m), &query)),
+                visit,
+            ),
+            (None, None) => {}
         }
     }
 
@@ -86,72 +81,49 @@ impl<const K: usize> WideBvh<K> {
             return;
         }
         let r2 = radius * radius;
-        let within = |[a, b, c]: [Vec3; 3]| {
-            closest_point_on_triangle(centre, a, b, c).distance_squared(centre) <= r2
+        let visit = |tri: [Vec3; 3], prim| {
+            let [a, b, c] = place.map_or(tri, |m| tri.map(|v| m.transform_point3(v)));
+            if closest_point_on_triangle(centre, a, b, c).distance_squared(centre) <= r2 {
+                found(prim);
+            }
         };
-        if r2 == f32::INFINITY {
-            // Every squared distance is at most infinity, an overflowed one too: every
-            // triangle is tested.
-            let placed = place.map_or(Affine3A::IDENTITY, |m| *m);
-            self.for_each_lane_in(
-                |_| u32::MAX,
-                |tri, prim| {
-                    if within(tri.map(|v| placed.transform_point3(v))) {
-                        found(prim);
-                    }
-                },
-            );
-            return;
-        }
-        match place {
-            None => {
-                // Every lane's box lies inside the root's, so one rounding margin serves all;
-                // `d2 <= r2` is `d2 < r2.next_up()` for the squared distances, never NaN here.
-                let lanes = DistanceLanes::new(centre, &self.bounds(), 0.0);
-                let reach = r2.next_up();
+        // Mesh-space box distances and the reach a lane's must stay under to hold a triangle
+        // within `r2` (inclusive). In place every lane's box lies inside the root's, so one
+        // rounding margin serves all, and `d2 <= r2` is `d2 < r2.next_up()`; placed, the
+        // distances bound world ones where the map allows (see `Placed`).
+        let lanes = match place {
+            None => Some((
+                DistanceLanes::new(centre, &self.bounds(), 0.0),
+                r2.next_up(),
+            )),
+            Some(m) => Placed::new(m).and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())),
+        };
+        match (lanes, place) {
+            (Some((lanes, reach)), _) => {
                 let mut dist = [0f32; K];
                 self.for_each_lane_in(
-                    |node| box_distance_lanes(&node.bounds, &lanes, reach, &mut dist),
-                    |tri, prim| {
-                        if within(tri) {
-                            found(prim);
+                    |node| {
+                        // An infinite reach (an infinite radius, or one that overflowed) prunes
+                        // nothing: an overflowed box distance may still hold a triangle within
+                        // it, and every squared distance is at most infinity.
+                        if reach == f32::INFINITY {
+                            return u32::MAX;
                         }
+                        box_distance_lanes(&node.bounds, &lanes, reach, &mut dist)
                     },
+                    visit,
                 );
             }
-            Some(m) => {
-                let placed = |tri: [Vec3; 3], prim| {
-                    if within(tri.map(|v| m.transform_point3(v))) {
-                        found(prim);
-                    }
-                };
-                // In mesh space, box distances bounding world ones (see `Placed`) where the
-                // map allows; else each lane's box carried into the world.
-                match Placed::new(m).and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())) {
-                    Some((lanes, reach)) => {
-                        let mut dist = [0f32; K];
-                        self.for_each_lane_in(
-                            |node| {
-                                // A reach that overflowed prunes nothing (an overflowed box
-                                // distance may still hold a triangle within the radius).
-                                if reach == f32::INFINITY {
-                                    return u32::MAX;
-                                }
-                                box_distance_lanes(&node.bounds, &lanes, reach, &mut dist)
-                            },
-                            placed,
-                        );
-                    }
-                    None => self.for_each_lane_in(
-                        |node| {
-                            placed_lanes(node, |b| {
-                                box_distance_squared(centre, b.transformed(m)) <= r2
-                            })
-                        },
-                        placed,
-                    ),
-                }
-            }
+            // Each lane's box carried into the world instead.
+            (None, Some(m)) => self.for_each_lane_in(
+                |node| {
+                    placed_lanes(node, |b| {
+                        box_distance_squared(centre, b.transformed(m)) <= r2
+                    })
+                },
+                visit,
+            ),
+            (None, None) => {}
         }
     }
 
