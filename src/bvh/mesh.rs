@@ -61,15 +61,16 @@ impl MeshBvh {
     }
 
     /// The tree over the triangles alone, with no leaf-ordered copy of them (for a wide tree
-    /// that copies them into its own blocks).
-    pub(super) fn tree_only(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Bvh {
+    /// that copies them into its own blocks), built in `ws`.
+    pub(crate) fn tree_only(
+        positions: &[Vec3],
+        indices: &[[u32; 3]],
+        params: &BuildParams,
+        ws: &mut BuildWorkspace,
+    ) -> Bvh {
         let mut bvh = Bvh::empty(params.max_leaf_size);
-        Indexed { positions, indices }.build_tree::<super::build::clip::ClipAware<'_>>(
-            &mut bvh,
-            None,
-            params,
-            &mut BuildWorkspace::one_shot(),
-        );
+        Indexed { positions, indices }
+            .build_tree::<super::build::clip::ClipAware<'_>>(&mut bvh, None, params, ws);
         bvh
     }
 

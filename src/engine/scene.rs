@@ -599,8 +599,10 @@ impl Engine {
     /// Adds a mesh whose vertices never move (its instances may: a static or rigid object)
     /// and builds its tree now, keeping no more than its queries need: no spare trees,
     /// degradation estimate or partial-rebuild cut, and with [`Traversal::Wide`] only the
-    /// 8-wide tree (the binary tree it is collapsed from is dropped; [`Engine::mesh_bvh`] is
-    /// then empty). The same tree as [`Engine::add_mesh`]'s, so every query answers alike.
+    /// 8-wide tree, built straight from the mesh ([`MeshBvh8::build_indexed`]: no copy of the
+    /// triangles beside the binary tree it is collapsed from, which is dropped, and no growth
+    /// of the workspace the engine keeps for rebuilds; [`Engine::mesh_bvh`] is then empty).
+    /// The same tree as [`Engine::add_mesh`]'s, so every query answers alike.
     /// Writing its positions later ([`Engine::positions_mut`]) makes it an ordinary mesh,
     /// its trees built again from its current positions then (allocating).
     ///
@@ -635,16 +637,30 @@ impl Engine {
             self.threads_ready = true;
         }
         let t = Instant::now();
+        let wide_walk = self.config.traversal == Traversal::Wide;
         let mut bvh = MeshBvh::default();
-        bvh.rebuild_indexed(
-            &positions,
-            &indices,
-            &self.config.build,
-            &mut self.workspace,
-        );
-        let sah = tree_sah(bvh.bvh());
-        let wide =
-            (self.config.traversal == Traversal::Wide).then(|| MeshBvh8::from_mesh_bvh(&bvh));
+        let (sah, wide) = if fixed && wide_walk {
+            // Only the wide tree is kept: built straight from the mesh, without the binary
+            // tree's copy of the triangles, and in the engine's workspace only where that
+            // holds it already (it is sized for the meshes the engine rebuilds, and kept).
+            let build = &self.config.build;
+            let tree = if self.workspace.holds(indices.len(), build) {
+                MeshBvh::tree_only(&positions, &indices, build, &mut self.workspace)
+            } else {
+                MeshBvh::tree_only(&positions, &indices, build, &mut BuildWorkspace::one_shot())
+            };
+            let wide = MeshBvh8::from_tree_indexed(&tree, &positions, &indices);
+            (tree_sah(&tree), Some(wide))
+        } else {
+            bvh.rebuild_indexed(
+                &positions,
+                &indices,
+                &self.config.build,
+                &mut self.workspace,
+            );
+            let sah = tree_sah(bvh.bvh());
+            (sah, wide_walk.then(|| MeshBvh8::from_mesh_bvh(&bvh)))
+        };
         let ms = ms_since(t);
         let timing = self.config.timing;
         let prices = self.config.prices;
@@ -653,13 +669,7 @@ impl Engine {
         let mut cut = PartialCut::default();
         let mut prev_wide = None;
         let (mut fresh, mut estimate, mut estimate_ms) = (FreshSah::default(), sah, 0.0);
-        if fixed {
-            // Nothing ever decides for it, and with the wide traversal every query walks the
-            // wide tree.
-            if wide.is_some() {
-                bvh = MeshBvh::default();
-            }
-        } else {
+        if !fixed {
             fresh = FreshSah::new(indices.len(), self.config.build.max_leaf_size);
             let t = Instant::now();
             estimate = fresh.estimate(&positions, &indices);
@@ -1629,4 +1639,37 @@ fn ratio(sah: f32, base: f32) -> f32 {
 
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::shapes::bumpy_sphere;
+    use crate::report::rays::random_rays;
+
+    /// A static mesh is built in the engine's build workspace only where that already holds
+    /// it, so the workspace (kept for rebuilds) stays sized for the meshes that deform; either
+    /// way its 8-wide tree is the one `MeshBvh8::build` makes.
+    #[test]
+    fn a_static_mesh_does_not_grow_the_rebuild_workspace() {
+        let (big, small) = (bumpy_sphere(20_000), bumpy_sphere(2_000));
+        let mut e = Engine::new(EngineConfig::default());
+        let a = e.add_static_mesh(big.positions.clone(), big.indices.clone());
+        assert_eq!(e.workspace.memory_bytes(), 0, "grown by a static mesh");
+        e.add_mesh(small.positions.clone(), small.indices.clone());
+        let held = e.workspace.memory_bytes();
+        assert!(held > 0, "an ordinary mesh builds in the workspace");
+        let b = e.add_static_mesh(small.positions.clone(), small.indices.clone());
+        let c = e.add_static_mesh(big.positions.clone(), big.indices.clone());
+        assert_eq!(e.workspace.memory_bytes(), held, "grown by a static mesh");
+        for (id, mesh) in [(a, &big), (b, &small), (c, &big)] {
+            let kept = e.mesh_bvh8(id).expect("the wide tree");
+            let fresh = MeshBvh8::build(mesh, &e.config.build);
+            assert_eq!(kept.nodes().len(), fresh.nodes().len());
+            for r in random_rays(&mesh.bounds(), 500, 7) {
+                let hit = |w: &MeshBvh8| w.closest_hit(&r).map(|h| (h.t, h.prim));
+                assert_eq!(hit(kept), hit(&fresh), "{id:?}: {r:?}");
+            }
+        }
+    }
 }

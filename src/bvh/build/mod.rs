@@ -323,6 +323,17 @@ impl BuildWorkspace {
 }
 
 impl BuildWorkspace {
+    /// Whether a build of `n` primitives with `params` fits in the storage held, so that it
+    /// grows nothing.
+    pub(crate) fn holds(&self, n: usize, params: &BuildParams) -> bool {
+        let spare = if matches!(params.method, Method::Binned) {
+            binned::regions_len(n, params, rayon::current_num_threads())
+        } else {
+            0
+        };
+        self.refs.capacity() >= n && self.slots.capacity() >= (2 * n).saturating_sub(1) + spare
+    }
+
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {

@@ -31,7 +31,7 @@ mod traverse;
 pub use lanes::TriBlock;
 pub use sah::WideCost;
 
-use super::{BuildParams, Bvh, MAX_DEPTH, MeshBvh, Node};
+use super::{BuildParams, BuildWorkspace, Bvh, MAX_DEPTH, MeshBvh, Node};
 use crate::geom::{Aabb, TriMesh};
 use glam::Vec3;
 
@@ -322,10 +322,17 @@ impl<const K: usize> WideBvh<K> {
     /// As [`WideBvh::build`].
     #[must_use]
     pub fn build_indexed(positions: &[Vec3], indices: &[[u32; 3]], params: &BuildParams) -> Self {
-        let bvh = MeshBvh::tree_only(positions, indices, params);
+        // The build's workspace is dropped before the collapse.
+        let bvh = MeshBvh::tree_only(positions, indices, params, &mut BuildWorkspace::one_shot());
+        Self::from_tree_indexed(&bvh, positions, indices)
+    }
+
+    /// The collapse of `bvh`, a binary tree over the triangles `indices` of `positions` (as
+    /// [`MeshBvh::tree_only`] builds it), reading the triangles from them.
+    pub(crate) fn from_tree_indexed(bvh: &Bvh, positions: &[Vec3], indices: &[[u32; 3]]) -> Self {
         let mut w = Self::default();
         w.collapse_tree(
-            &bvh,
+            bvh,
             TriSlots::Mesh {
                 positions,
                 indices,
