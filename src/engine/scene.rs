@@ -612,7 +612,7 @@ impl Engine {
         let entry = self.new_mesh_entry(positions, indices, true);
         self.meshes.push(entry);
         self.mesh_samples.push(MeshSample::default());
-        self.unsampled_meshes = true;
+        // No ray sample is owed to it: nothing measures its degradation.
         MeshId(self.meshes.len() as u32 - 1)
     }
 
