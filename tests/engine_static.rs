@@ -7,7 +7,7 @@
 use dynbvh::anim::Scene;
 use dynbvh::engine::gltf::{FrameTimes, GltfSource};
 use dynbvh::engine::source::FrameSource;
-use dynbvh::engine::{Engine, EngineConfig, InstanceId, MeshId, Traversal};
+use dynbvh::engine::{Engine, EngineConfig, InstanceId, MeshId, Query, Traversal};
 use dynbvh::geom::{Aabb, Ray, shapes};
 use dynbvh::glam::{Affine3A, Quat, Vec3};
 use dynbvh::report::rays::{camera_rays, random_rays};
@@ -144,4 +144,23 @@ fn a_gltf_scene_adds_its_unmoving_meshes_as_static() {
     // do not.
     assert_eq!(with, 1, "instances whose mesh keeps a binary tree");
     assert!(without >= 7, "static and rigid instances: {without}");
+}
+
+/// A scene of static meshes takes no ray sample (nothing measures their degradation); the
+/// same mesh added as an ordinary one is sampled on the frame after it is added.
+#[test]
+fn static_meshes_owe_no_ray_sample() {
+    let mesh = shapes::bumpy_sphere(5_000);
+    for fixed in [true, false] {
+        let (mut e, _) = engine(Traversal::Wide, fixed, &mesh);
+        let rays = camera_rays(&e.bounds(), 64, 64);
+        e.sample_rays(&rays, Query::Closest);
+        let sampled = e.sampled_work().nodes;
+        if fixed {
+            assert_eq!(sampled, 0, "a static scene sampled");
+            assert!(e.sampled_entries().is_empty());
+        } else {
+            assert!(sampled > 0, "a new ordinary mesh not sampled");
+        }
+    }
 }
