@@ -298,7 +298,15 @@ pub(crate) struct Placed {
     rows: DVec3,
     shift: DVec3,
     sigma: f64,
+    /// The largest singular value over the smallest is above [`UNEVEN`].
+    uneven: bool,
 }
+
+/// Above this ratio of the map's singular values a placed query also tests each lane's box
+/// carried into the world ([`super::lanes::PlacedLanes`]): the preimage's box and the
+/// smallest singular value then leave much of a lane's search loose, where under a rotation
+/// and an even scale (ratio 1) the world test costs more than it prunes (`docs/library.md`).
+const UNEVEN: f64 = 1.5;
 
 impl Placed {
     /// `None` when the map is not finite or so near singular (`σ` below 1e-4 of the largest
@@ -339,11 +347,18 @@ impl Placed {
             ),
             shift: d.translation.abs(),
             sigma: low.sqrt(),
+            uneven: high > UNEVEN * UNEVEN * low,
         })
     }
 }
 
 impl Placed {
+    /// The lanes that carry boxes into the world, where the map scales unevenly (see
+    /// [`UNEVEN`]).
+    pub(super) fn world_lanes(&self) -> Option<super::lanes::PlacedLanes> {
+        self.uneven.then(|| super::lanes::PlacedLanes::new(&self.m))
+    }
+
     /// The margin (in mesh units) that covers the rounding of the placed vertices of a mesh
     /// inside `root` and of world-space arithmetic on coordinates up to `near` in magnitude.
     fn margin(&self, root: &Aabb, near: f32) -> f64 {

@@ -305,6 +305,77 @@ pub(super) fn box_touch_lanes<const K: usize>(bounds: &[[f32; K]; 6], query: &Aa
     }
 }
 
+/// A placed mesh's map for carrying its lanes' boxes into the world: the image of a box with
+/// centre `c` and half extent `h` under `x ↦ A x + t` lies in the box of centre `A c + t` and
+/// half extent `|A| h` (Arvo, "Transforming axis-aligned bounding boxes", Graphics Gems 1990):
+/// a sphere's distance to it bounds the placed triangles' where the map's smallest singular
+/// value bounds them loosely.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PlacedLanes {
+    /// `A` by rows, `|A|`, and `t`.
+    a: [[f32; 3]; 3],
+    abs: [[f32; 3]; 3],
+    t: [f32; 3],
+}
+
+/// Relative slack of a lane's world box: `2^-18` (64 ulps) of the magnitudes it comes from,
+/// several times the rounding of its centre, its extent and the placed vertices (about 10
+/// ulps of the same magnitudes together).
+const PLACED_SLACK: f32 = 1.0 / 262_144.0;
+
+impl PlacedLanes {
+    pub(super) fn new(m: &glam::Affine3A) -> Self {
+        let rows = m.matrix3.transpose();
+        let row = |i: usize| Vec3::from(rows.col(i)).to_array();
+        let a = [row(0), row(1), row(2)];
+        Self {
+            a,
+            abs: a.map(|r| r.map(f32::abs)),
+            t: Vec3::from(m.translation).to_array(),
+        }
+    }
+
+    /// The mask of the lanes whose placed triangles may have a point within `r2` (squared,
+    /// inclusive) of `p` as the triangles' closest points compute it: `p`'s distance to each
+    /// lane's world box is within `r2`, with `2^-16` of it to spare, once the box is widened
+    /// to hold every placed vertex (as `Affine3A::transform_point3` rounds it) of a triangle
+    /// inside the lane's mesh-space box and by the rounding of those closest points (8 ulps
+    /// of the coordinates involved, twice). An axis whose arithmetic overflows (or an empty
+    /// lane's) keeps the lane.
+    #[inline(always)]
+    pub(super) fn near<const K: usize>(&self, bounds: &[[f32; K]; 6], p: Vec3, r2: f32) -> u32 {
+        let p = p.to_array();
+        let mut c = [[0f32; K]; 3];
+        let mut h = [[0f32; K]; 3];
+        for j in 0..3 {
+            for k in 0..K {
+                c[j][k] = (bounds[j][k] + bounds[j + 3][k]) * 0.5;
+                h[j][k] = (bounds[j + 3][k] - bounds[j][k]) * 0.5;
+            }
+        }
+        let mut d2 = [0f32; K];
+        for i in 0..3 {
+            let (a, abs, t) = (self.a[i], self.abs[i], self.t[i]);
+            for k in 0..K {
+                let centre = t + a[0] * c[0][k] + a[1] * c[1][k] + a[2] * c[2][k];
+                let half = abs[0] * h[0][k] + abs[1] * h[1][k] + abs[2] * h[2][k];
+                let size = t.abs()
+                    + abs[0] * c[0][k].abs()
+                    + abs[1] * c[1][k].abs()
+                    + abs[2] * c[2][k].abs();
+                let reach = half + PLACED_SLACK * (size + half) + f32::MIN_POSITIVE;
+                let reach = reach + (p[i].abs() + centre.abs() + reach) * (16.0 * f32::EPSILON);
+                let gap = ((centre - p[i]).abs() - reach).max(0.0);
+                if gap.is_finite() && reach.is_finite() {
+                    d2[k] += gap * gap;
+                }
+            }
+        }
+        let reach = r2 * (1.0 + 1.0 / 65_536.0) + f32::MIN_POSITIVE;
+        (0..K).fold(0, |mask, k| mask | u32::from(!(d2[k] > reach)) << k)
+    }
+}
+
 /// The union of a node's `K` child boxes (empty lanes hold the empty box).
 #[inline(always)]
 pub(super) fn union_lanes<const K: usize>(bounds: &[[f32; K]; 6]) -> Aabb {
@@ -655,6 +726,67 @@ mod tests {
     /// The lanes' box test is the scalar `boxes_touch` lane by lane, on 4 and 8 lanes and the
     /// generic loop: boxes that overlap, touch at a face or corner (coordinates on a coarse
     /// grid, so faces meet exactly), miss, are empty, infinite or NaN.
+    /// A lane whose placed triangle has its computed closest point within a sphere is kept by
+    /// the world-space lane test, with the centre on a triangle's very corner or beside it and
+    /// the radius that very distance, under maps that turn, shear, mirror and scale unevenly,
+    /// at scales from 1e-20 to 1e20; and the test does prune.
+    #[test]
+    fn placed_lanes_keep_every_lane_whose_placed_triangle_is_near() {
+        use crate::geom::closest_point_on_triangle;
+        const K: usize = 8;
+        let mut s = 0x7f4a_7c15_9e37_79b9u64;
+        let mut pruned = 0;
+        for round in 0..3000 {
+            let scale = [1e-20f32, 1e-3, 1.0, 1e3, 1e20][round % 5];
+            let r = |s: &mut u64| next(s) * 2.0 - 1.0;
+            let col = |s: &mut u64| Vec3::new(r(s), r(s), r(s)) * 2.0;
+            let m = glam::Affine3A::from_cols(
+                col(&mut s).into(),
+                col(&mut s).into(),
+                col(&mut s).into(),
+                (col(&mut s) * scale * 4.0).into(),
+            );
+            let tris: Vec<[Vec3; 3]> = (0..K)
+                .map(|_| {
+                    let c = col(&mut s) * scale;
+                    let size = scale * next(&mut s).powi(3);
+                    [(); 3].map(|()| c + col(&mut s) * size)
+                })
+                .collect();
+            let mut bounds = [[0f32; K]; 6];
+            for (k, t) in tris.iter().enumerate() {
+                let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+                for a in 0..3 {
+                    bounds[a][k] = lo[a];
+                    bounds[a + 3][k] = hi[a];
+                }
+            }
+            let lanes = PlacedLanes::new(&m);
+            let placed: Vec<[Vec3; 3]> = tris
+                .iter()
+                .map(|t| t.map(|v| m.transform_point3(v)))
+                .collect();
+            // The query at one placed triangle's corner, or a point beside it.
+            let k = (next(&mut s) * K as f32) as usize % K;
+            let corner = placed[k][(next(&mut s) * 3.0) as usize % 3];
+            let p = if round % 2 == 0 {
+                corner
+            } else {
+                corner + col(&mut s) * scale * 0.1
+            };
+            let r2 = closest_point_on_triangle(p, placed[k][0], placed[k][1], placed[k][2])
+                .distance_squared(p);
+            let near = lanes.near(&bounds, p, r2);
+            for (l, t) in placed.iter().enumerate() {
+                if closest_point_on_triangle(p, t[0], t[1], t[2]).distance_squared(p) <= r2 {
+                    assert!(near & 1 << l != 0, "round {round}: lane {l} dropped");
+                }
+            }
+            pruned += (!near & 0xff).count_ones();
+        }
+        assert!(pruned > 5_000, "the lane test prunes little: {pruned}");
+    }
+
     #[test]
     fn box_touch_lanes_is_the_scalar_test_lane_by_lane() {
         fn check<const K: usize>(s: &mut u64) {

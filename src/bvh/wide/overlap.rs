@@ -6,7 +6,9 @@
 //! closest point to the centre), so the answers are brute force's. A mesh placed by an affine
 //! map is searched in its own space, as the closest point is ([`Placed`]): a box query
 //! through the box of its preimage, widened by the rounding of the placed vertices; a sphere
-//! through mesh-space box distances scaled by the map's smallest singular value.
+//! through mesh-space box distances scaled by the map's smallest singular value, and under a
+//! map that scales unevenly, where that bound is loose, also through each lane's box carried
+//! into the world ([`super::lanes::PlacedLanes`]).
 
 use super::lanes::{DistanceLanes, box_distance_lanes, box_touch_lanes};
 use super::traverse::{BIG_STACK, SMALL_STACK};
@@ -91,16 +93,22 @@ impl<const K: usize> WideBvh<K> {
         // within `r2` (inclusive). In place every lane's box lies inside the root's, so one
         // rounding margin serves all, and `d2 <= r2` is `d2 < r2.next_up()`; placed, the
         // distances bound world ones where the map allows (see `Placed`).
-        let lanes = match place {
-            None => Some((
+        let placed = place.and_then(Placed::new);
+        let lanes = match (place, &placed) {
+            (None, _) => Some((
                 DistanceLanes::new(centre, &self.bounds(), 0.0),
                 r2.next_up(),
             )),
-            Some(m) => Placed::new(m).and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())),
+            (Some(_), pl) => pl
+                .as_ref()
+                .and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())),
         };
         match (lanes, place) {
             (Some((lanes, reach)), _) => {
                 let mut dist = [0f32; K];
+                // Under an uneven map each lane's box is also carried into the world and
+                // measured there.
+                let world = placed.as_ref().and_then(Placed::world_lanes);
                 self.for_each_lane_in(
                     |node| {
                         // An infinite reach (an infinite radius, or one that overflowed) prunes
@@ -109,7 +117,11 @@ impl<const K: usize> WideBvh<K> {
                         if reach == f32::INFINITY {
                             return u32::MAX;
                         }
-                        box_distance_lanes(&node.bounds, &lanes, reach, &mut dist)
+                        let mask = box_distance_lanes(&node.bounds, &lanes, reach, &mut dist);
+                        match &world {
+                            Some(w) if mask != 0 => mask & w.near(&node.bounds, centre, r2),
+                            _ => mask,
+                        }
                     },
                     visit,
                 );
