@@ -341,7 +341,7 @@ impl PlacedLanes {
     /// to hold every placed vertex (as `Affine3A::transform_point3` rounds it) of a triangle
     /// inside the lane's mesh-space box and by the rounding of those closest points (8 ulps
     /// of the coordinates involved, twice). An axis whose arithmetic overflows (or an empty
-    /// lane's) keeps the lane.
+    /// lane's) adds nothing to the distance.
     #[inline(always)]
     pub(super) fn near<const K: usize>(&self, bounds: &[[f32; K]; 6], p: Vec3, r2: f32) -> u32 {
         let p = p.to_array();
@@ -354,7 +354,7 @@ impl PlacedLanes {
             }
         }
         let mut d2 = [0f32; K];
-        for i in 0..3 {
+        for (i, &pi) in p.iter().enumerate() {
             let (a, abs, t) = (self.a[i], self.abs[i], self.t[i]);
             for k in 0..K {
                 let centre = t + a[0] * c[0][k] + a[1] * c[1][k] + a[2] * c[2][k];
@@ -364,15 +364,18 @@ impl PlacedLanes {
                     + abs[1] * c[1][k].abs()
                     + abs[2] * c[2][k].abs();
                 let reach = half + PLACED_SLACK * (size + half) + f32::MIN_POSITIVE;
-                let reach = reach + (p[i].abs() + centre.abs() + reach) * (16.0 * f32::EPSILON);
-                let gap = ((centre - p[i]).abs() - reach).max(0.0);
+                let reach = reach + (pi.abs() + centre.abs() + reach) * (16.0 * f32::EPSILON);
+                let gap = ((centre - pi).abs() - reach).max(0.0);
                 if gap.is_finite() && reach.is_finite() {
                     d2[k] += gap * gap;
                 }
             }
         }
         let reach = r2 * (1.0 + 1.0 / 65_536.0) + f32::MIN_POSITIVE;
-        (0..K).fold(0, |mask, k| mask | u32::from(!(d2[k] > reach)) << k)
+        // A sum that overflowed keeps the lane: its true value may still be within `r2`.
+        (0..K).fold(0, |mask, k| {
+            mask | u32::from(d2[k] <= reach || d2[k] == f32::INFINITY) << k
+        })
     }
 }
 
