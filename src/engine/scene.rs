@@ -339,7 +339,8 @@ struct MeshEntry {
     /// Poses its last (re)build was made for (0: a plain build of one pose).
     build_poses: usize,
     /// Added as never deforming ([`Engine::add_static_mesh`]): built once, no spare trees,
-    /// estimate or cut, and with the wide traversal no binary tree (`bvh` is empty).
+    /// estimate, cut or ray sample, and with the wide traversal no binary tree (`bvh` is
+    /// empty).
     fixed: bool,
 }
 
@@ -598,7 +599,7 @@ impl Engine {
 
     /// Adds a mesh whose vertices never move (its instances may: a static or rigid object)
     /// and builds its tree now, keeping no more than its queries need: no spare trees,
-    /// degradation estimate or partial-rebuild cut, and with [`Traversal::Wide`] only the
+    /// degradation estimate, partial-rebuild cut or ray sample, and with [`Traversal::Wide`] only the
     /// 8-wide tree, built straight from the mesh ([`MeshBvh8::build_indexed`]: no copy of the
     /// triangles beside the binary tree it is collapsed from, which is dropped, and no growth
     /// of the workspace the engine keeps for rebuilds; [`Engine::mesh_bvh`] is then empty).
