@@ -599,10 +599,11 @@ impl Engine {
 
     /// Adds a mesh whose vertices never move (its instances may: a static or rigid object)
     /// and builds its tree now, keeping no more than its queries need: no spare trees,
-    /// degradation estimate, partial-rebuild cut or ray sample, and with [`Traversal::Wide`] only the
-    /// 8-wide tree, built straight from the mesh ([`MeshBvh8::build_indexed`]: no copy of the
-    /// triangles beside the binary tree it is collapsed from, which is dropped, and no growth
-    /// of the workspace the engine keeps for rebuilds; [`Engine::mesh_bvh`] is then empty).
+    /// degradation estimate, partial-rebuild cut or ray sample, and with [`Traversal::Wide`]
+    /// only the 8-wide tree, built straight from the mesh ([`MeshBvh8::build_indexed`]: no
+    /// copy of the triangles beside the binary tree it is collapsed from, which is dropped,
+    /// and no growth of the workspace the engine keeps for rebuilds; [`Engine::mesh_bvh`] is
+    /// then empty).
     /// The same tree as [`Engine::add_mesh`]'s, so every query answers alike.
     /// Writing its positions later ([`Engine::positions_mut`]) makes it an ordinary mesh,
     /// its trees built again from its current positions then (allocating).

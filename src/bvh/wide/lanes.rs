@@ -724,11 +724,6 @@ mod tests {
         assert!(blocks > 30_000 && hits > 5_000, "{blocks} {hits}");
     }
 
-    /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
-    /// aimed at box corners, edges and faces (where rounding decides), at every scale.
-    /// The lanes' box test is the scalar `boxes_touch` lane by lane, on 4 and 8 lanes and the
-    /// generic loop: boxes that overlap, touch at a face or corner (coordinates on a coarse
-    /// grid, so faces meet exactly), miss, are empty, infinite or NaN.
     /// A lane whose placed triangle has its computed closest point within a sphere is kept by
     /// the world-space lane test, with the centre on a triangle's very corner or beside it and
     /// the radius that very distance, under maps that turn, shear, mirror and scale unevenly,
@@ -790,6 +785,9 @@ mod tests {
         assert!(pruned > 5_000, "the lane test prunes little: {pruned}");
     }
 
+    /// The lanes' box test is the scalar `boxes_touch` lane by lane, on 4 and 8 lanes and the
+    /// generic loop: boxes that overlap, touch at a face or corner (coordinates on a coarse
+    /// grid, so faces meet exactly), miss, are empty, infinite or NaN.
     #[test]
     fn box_touch_lanes_is_the_scalar_test_lane_by_lane() {
         fn check<const K: usize>(s: &mut u64) {
@@ -840,6 +838,8 @@ mod tests {
         check::<2>(&mut s);
     }
 
+    /// `slab_fma` accepts every box the plain test accepts, for rays from far and near origins
+    /// aimed at box corners, edges and faces (where rounding decides), at every scale.
     #[test]
     fn fma_slab_accepts_what_the_plain_test_accepts() {
         let mut s = 0x9e37_79b9_7f4a_7c15u64;
