@@ -99,9 +99,8 @@ impl<const K: usize> WideBvh<K> {
                 DistanceLanes::new(centre, &self.bounds(), 0.0),
                 r2.next_up(),
             )),
-            (Some(_), pl) => pl
-                .as_ref()
-                .and_then(|pl| pl.sphere_lanes(centre, r2, &self.bounds())),
+            (Some(_), Some(pl)) => pl.sphere_lanes(centre, r2, &self.bounds()),
+            (Some(_), None) => None,
         };
         match (lanes, place) {
             (Some((lanes, reach)), _) => {
