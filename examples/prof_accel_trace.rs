@@ -5,7 +5,7 @@
 //! MESH and RAYS as `common/input.rs` reads them (`.tri`, `.obj` or glTF; `.rays`,
 //! `camera:SIDE` or `random:N`); NAME as `build-bench --methods` takes it (kdtree, bih,
 //! grid, octree); PASSES default 12; `BIH_LEAF=n` builds the BIH with leaves of at most `n`
-//! triangles; `ONLY=hits` or `ONLY=misses` keeps the rays that hit (miss) the mesh. Run with
+//! triangles, `BIH_SAH=n` with the SAH in its nodes of at least 1/n of them (0: nowhere); `ONLY=hits` or `ONLY=misses` keeps the rays that hit (miss) the mesh. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the median and every pass of the structure's
 //! time ÷ the BVH's (CPU), i.e. how many times slower the structure is.
 use dynbvh::accel::{Accel, AccelKind, Bih, BihParams};
@@ -35,13 +35,19 @@ fn main() {
             .collect(),
         _ => rays,
     };
-    let s: Box<dyn Accel> = match std::env::var("BIH_LEAF") {
-        Ok(n) if kind == AccelKind::Bih => Box::new(Bih::build(
-            &mesh,
-            &BihParams {
-                max_leaf_size: n.parse().unwrap(),
-            },
-        )),
+    let bih_env = |k: &str| std::env::var(k).ok().map(|v| v.parse::<usize>().unwrap());
+    let s: Box<dyn Accel> = match (bih_env("BIH_LEAF"), bih_env("BIH_SAH")) {
+        (None, None) => kind.build(&mesh),
+        (leaf, sah) if kind == AccelKind::Bih => {
+            let d = BihParams::default();
+            Box::new(Bih::build(
+                &mesh,
+                &BihParams {
+                    max_leaf_size: leaf.unwrap_or(d.max_leaf_size),
+                    sah_share: sah.unwrap_or(d.sah_share),
+                },
+            ))
+        }
         _ => kind.build(&mesh),
     };
     let mut slower = Vec::new();

@@ -55,7 +55,16 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             )));
         }
     }
-    v.push(Box::new(Bih::build(mesh, &BihParams { max_leaf_size: 1 })));
+    // Leaves of one triangle; the SAH in every node of 256 triangles or more, and nowhere.
+    for sah_share in [usize::MAX, 0] {
+        v.push(Box::new(Bih::build(
+            mesh,
+            &BihParams {
+                max_leaf_size: 1,
+                sah_share,
+            },
+        )));
+    }
     for density in [0.05, 8.0] {
         v.push(Box::new(Grid::build(
             mesh,
