@@ -381,30 +381,18 @@ impl Builder {
 
 /// Moves the items whose box centre lies below `mid` on `axis` to the front (in their order,
 /// the others after them in reverse order), through `tmp` (as long as `items`), without a
-/// branch on an item's side; returns how many, and the boxes of the two sides (NaN coordinates
-/// left out), gathered in the same pass.
+/// branch on an item's side; returns how many, and the boxes of the two sides (NaN
+/// coordinates left out).
 fn partition(items: &mut [Item], tmp: &mut [Item], axis: usize, mid: f32) -> (usize, [Aabb; 2]) {
-    use glam::Vec3A;
     let (mut l, mut r) = (0, items.len());
-    let inf = Vec3A::INFINITY;
-    let (mut lo, mut hi) = ([inf; 2], [-inf; 2]);
     for it in items.iter() {
         let left = (it.bounds.min[axis] + it.bounds.max[axis]) * 0.5 < mid;
         r -= usize::from(!left);
         tmp[if left { l } else { r }] = *it;
         l += usize::from(left);
-        // A lane replaces the bound only where it compares below (above) it: never a NaN.
-        let side = usize::from(!left);
-        let (bmin, bmax) = (Vec3A::from(it.bounds.min), Vec3A::from(it.bounds.max));
-        lo[side] = Vec3A::select(bmin.cmplt(lo[side]), bmin, lo[side]);
-        hi[side] = Vec3A::select(bmax.cmpgt(hi[side]), bmax, hi[side]);
     }
     items.copy_from_slice(tmp);
-    let side = |s: usize| Aabb {
-        min: lo[s].into(),
-        max: hi[s].into(),
-    };
-    (l, [side(0), side(1)])
+    (l, side_boxes(items, l))
 }
 
 /// The boxes of `items` split after the first `below`.
