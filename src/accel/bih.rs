@@ -284,28 +284,13 @@ impl Builder {
                 }
                 continue;
             }
-            let (mut left_seen, mut right_seen) = (seen, seen);
-            left_seen.max[axis] = left_seen.max[axis].min(planes[0]);
-            right_seen.min[axis] = right_seen.min[axis].max(planes[1]);
-            let first = self.nodes.len();
-            self.nodes.push(BihNode::leaf(0, 0));
-            self.nodes.push(BihNode::leaf(0, 0));
-            self.nodes[index] = BihNode::interior(axis, planes, first);
-            self.node(
-                first,
-                (begin, split),
-                (left_cand, level),
-                left_seen,
-                lbox,
-                depth + 1,
-            );
-            self.node(
-                first + 1,
-                (split, end),
-                (right_cand, level),
-                right_seen,
-                rbox,
-                depth + 1,
+            self.split(
+                index,
+                (begin, split, end),
+                (axis, [lbox, rbox]),
+                [(left_cand, level), (right_cand, level)],
+                seen,
+                depth,
             );
             return;
         }
@@ -314,6 +299,30 @@ impl Builder {
 }
 
 impl Builder {
+    /// Makes node `index` (known to traversal by `seen`) an interior node on `axis` over the
+    /// items `begin..split` and `split..end`, whose boxes are `boxes`, its planes their bounds,
+    /// and builds the two children from their candidate boxes and levels `cands`.
+    fn split(
+        &mut self,
+        index: usize,
+        (begin, split, end): (usize, usize, usize),
+        (axis, [lbox, rbox]): (usize, [Aabb; 2]),
+        [left, right]: [(Aabb, usize); 2],
+        seen: Aabb,
+        depth: usize,
+    ) {
+        let planes = [lbox.max[axis], rbox.min[axis]];
+        let (mut left_seen, mut right_seen) = (seen, seen);
+        left_seen.max[axis] = left_seen.max[axis].min(planes[0]);
+        right_seen.min[axis] = right_seen.min[axis].max(planes[1]);
+        let first = self.nodes.len();
+        self.nodes.push(BihNode::leaf(0, 0));
+        self.nodes.push(BihNode::leaf(0, 0));
+        self.nodes[index] = BihNode::interior(axis, planes, first);
+        self.node(first, (begin, split), left, left_seen, lbox, depth + 1);
+        self.node(first + 1, (split, end), right, right_seen, rbox, depth + 1);
+    }
+
     /// Splits node `index` (over `items[begin..end]`, known to traversal by `seen`) on the
     /// plane of least SAH, and builds its children; false (the node untouched, its items
     /// reordered) when no plane parts the triangles' centres.
@@ -337,18 +346,16 @@ impl Builder {
         if below == 0 || below == n {
             return false;
         }
+        let cands = [(lbox, UNSORTED), (rbox, UNSORTED)];
         let split = begin + below;
-        let planes = [lbox.max[axis], rbox.min[axis]];
-        let (mut left_seen, mut right_seen) = (seen, seen);
-        left_seen.max[axis] = left_seen.max[axis].min(planes[0]);
-        right_seen.min[axis] = right_seen.min[axis].max(planes[1]);
-        let first = self.nodes.len();
-        self.nodes.push(BihNode::leaf(0, 0));
-        self.nodes.push(BihNode::leaf(0, 0));
-        self.nodes[index] = BihNode::interior(axis, planes, first);
-        let (l, r) = ((lbox, UNSORTED), (rbox, UNSORTED));
-        self.node(first, (begin, split), l, left_seen, lbox, depth + 1);
-        self.node(first + 1, (split, end), r, right_seen, rbox, depth + 1);
+        self.split(
+            index,
+            (begin, split, end),
+            (axis, [lbox, rbox]),
+            cands,
+            seen,
+            depth,
+        );
         true
     }
 
@@ -984,6 +991,23 @@ mod tests {
         }
     }
 
+    /// `n` small boxes at pseudo-random centres in [-10, 10]³ (from `seed`); from three on,
+    /// the second has a NaN lower y and the last a NaN upper x.
+    fn scattered(n: usize, mut seed: u64) -> Vec<Item> {
+        let mut next = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
+        };
+        let mut items: Vec<Item> = (0..n)
+            .map(|i| item(Vec3::new(next(), next(), next()), i as u32))
+            .collect();
+        if n > 2 {
+            items[1].bounds.min.y = f32::NAN;
+            items[n - 1].bounds.max.x = f32::NAN;
+        }
+        items
+    }
+
     #[test]
     fn halvings_follow_the_longest_side() {
         // 8 x 2 x 4: x, x, z, x (now 1 x 2 x 2: y before z), y, z, x, y, z, ...
@@ -1072,20 +1096,9 @@ mod tests {
 
     #[test]
     fn a_partition_parts_by_the_centre_and_bounds_each_side() {
-        let mut seed = 0x2545_f491_u64;
-        let mut next = move || {
-            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
-        };
         for n in [0usize, 1, 2, 7, 100] {
-            let mut items: Vec<Item> = (0..n)
-                .map(|i| item(Vec3::new(next(), next(), next()), i as u32))
-                .collect();
-            if n > 2 {
-                // A NaN before others on its side must not hide their coordinates.
-                items[1].bounds.min.y = f32::NAN;
-                items[n - 1].bounds.max.x = f32::NAN;
-            }
+            // A NaN before others on its side must not hide their coordinates.
+            let items = scattered(n, 0x2545_f491);
             for (axis, mid) in [(0, 0.0), (1, -3.0), (2, 100.0)] {
                 let below_mid = |it: &Item| (it.bounds.min[axis] + it.bounds.max[axis]) * 0.5 < mid;
                 let mut parted = items.clone();
@@ -1190,19 +1203,8 @@ mod tests {
 
     #[test]
     fn a_box_of_items_is_their_union_with_nan_left_out() {
-        let mut seed = 0x9e37_79b9_u64;
-        let mut next = move || {
-            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 20.0 - 10.0
-        };
         for n in [0usize, 1, 3, 4, 5, 8, 13, 100] {
-            let mut items: Vec<Item> = (0..n)
-                .map(|i| item(Vec3::new(next(), next(), next()), i as u32))
-                .collect();
-            if n > 2 {
-                items[1].bounds.min.y = f32::NAN;
-                items[n - 1].bounds.max.x = f32::NAN;
-            }
+            let items = scattered(n, 0x9e37_79b9);
             // `f32::min` and `f32::max` leave a NaN out, as the box must.
             let mut expected = Aabb::EMPTY;
             for it in &items {
