@@ -37,14 +37,14 @@ pub struct BihParams {
     /// Most triangles in a leaf (a leaf may hold more at the depth limit or when no candidate
     /// plane separates its triangles' centres).
     pub max_leaf_size: usize,
-    /// Nodes holding at least this share of the triangles (`1 / sah_share`, and at least
-    /// [`SAH_MIN_TRIANGLES`]) are split on the plane of least SAH; the others by the global
-    /// heuristic. 0: the global heuristic everywhere.
+    /// Nodes holding at least this share of the triangles (`1 / sah_share`, and at least 256)
+    /// are split on the plane of least SAH; the others by the global heuristic. 0: the global
+    /// heuristic everywhere.
     pub sah_share: usize,
 }
 
 /// The fewest triangles a node split by the SAH holds (see [`BihParams::sah_share`]).
-pub const SAH_MIN_TRIANGLES: usize = 256;
+const SAH_MIN_TRIANGLES: usize = 256;
 
 /// Leaves of up to 8 triangles: a leaf tests only the triangles whose boxes the ray meets in
 /// it, so fuller leaves cost little and save interior steps. The top five levels or so (nodes
