@@ -4,13 +4,13 @@
 //! The top levels (nodes of many triangles) split on the plane of least SAH, binned over a
 //! sample of the box centres (Wald, "On fast Construction of SAH-based Bounding Volume
 //! Hierarchies", 2007), with the triangles' boxes standing for the children's. Below them each
-//! subtree splits its candidate box (first its triangles' box, not their bounds later) in the
-//! middle of its longest side, sorting triangles by their box centre (for the first 24 halvings
-//! all at once: one radix sort by each centre's cell in the grid those halvings make, a Morton
-//! code), and halves the candidate box again when one side would be empty (the global
-//! heuristic); where
-//! that empty side leaves a wide gap between the triangles and the box traversal knows, a node
-//! with an empty child cuts the gap off (without it, rays through the gap reach the subtree).
+//! subtree is built by the global heuristic: starting from the box of its triangles, a
+//! candidate box (not the triangles' bounds) is split in the middle of its longest side,
+//! sorting triangles by their box centre (for the first 24 halvings all at once: one radix sort
+//! by each centre's cell in the grid those halvings make, a Morton code), and halved again when
+//! one side would be empty; where that empty side leaves a wide gap between the triangles and
+//! the box traversal knows, a node with an empty child cuts the gap off (without it, rays
+//! through the gap reach the subtree).
 //! Before each split the same is done on every axis, from the triangles' box that the parent's
 //! partition gathered for each side, so that rays missing the triangles leave the subtree early.
 //! Traversal clips the ray's interval by both planes; the children may overlap, so both are
@@ -300,8 +300,9 @@ impl Builder {
 
 impl Builder {
     /// Makes node `index` (known to traversal by `seen`) an interior node on `axis` over the
-    /// items `begin..split` and `split..end`, whose boxes are `boxes`, its planes their bounds,
-    /// and builds the two children from their candidate boxes and levels `cands`.
+    /// items `begin..split` and `split..end`, whose boxes are `lbox` and `rbox` (its planes
+    /// their bounds on `axis`), and builds the two children from their candidate boxes and
+    /// levels, `left` and `right`.
     fn split(
         &mut self,
         index: usize,
