@@ -548,15 +548,23 @@ const SAH_GAIN: f32 = 0.05;
 const SAH_BINS: usize = 16;
 
 /// The plane on the axis where the SAH over the triangles' box centres is least, binned over
-/// a sample of about 1,024 of them (enough to place a plane near the top of the tree, where
+/// a sample of about 1,024 of them, one from each run of the items (enough to place a plane near the top of the tree, where
 /// this is used); `None` when the centres do not spread, or when that plane's cost is not
 /// [`SAH_GAIN`] below the middle plane's.
 fn sah_split(items: &[Item]) -> Option<(usize, f32)> {
     use glam::Vec3A;
+    // One item drawn from each run of `stride` (a fixed draw): a plain stride can fall in
+    // step with a mesh's own order (every other triangle a floor's, say) and see one kind.
     let stride = items.len().div_ceil(1024).max(1);
+    let sample = || {
+        items.chunks(stride).enumerate().map(|(b, run)| {
+            let draw = (b as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40;
+            &run[draw as usize % run.len()]
+        })
+    };
     let centre = |it: &Item| Vec3A::from(it.bounds.min + it.bounds.max) * 0.5;
     let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-    for it in items.iter().step_by(stride) {
+    for it in sample() {
         let c = centre(it);
         if c.is_finite() {
             (lo, hi) = (lo.min(c), hi.max(c));
@@ -567,7 +575,7 @@ fn sah_split(items: &[Item]) -> Option<(usize, f32)> {
     let mut count = [[0u32; SAH_BINS]; 3];
     let mut boxes = [[(Vec3A::INFINITY, Vec3A::NEG_INFINITY); SAH_BINS]; 3];
     let scale = Vec3A::splat(SAH_BINS as f32) / ext;
-    for it in items.iter().step_by(stride) {
+    for it in sample() {
         let c = centre(it);
         if !c.is_finite() {
             continue;
