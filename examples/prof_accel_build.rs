@@ -1,8 +1,8 @@
 //! Build time (CPU) of the other structures against the binned BVH's, builds alternating in one
 //! process, medians: `cargo run --release --example prof_accel_build MESH.tri [NAMES] [RUNS]`
 //! (MESH a `.tri`, `.obj` or glTF file, flattened at rest; NAMES comma-separated, default
-//! `grid`; RUNS default 5; `BIH_SAH=n` builds the BIH with the SAH in its nodes of at least
-//! 1/n of the triangles, 0: nowhere). Run with `RAYON_NUM_THREADS=1` to
+//! `grid`; RUNS default 5; `BIH_SAH=n` builds the BIH with the SAH tried at its nodes of at
+//! least 1/n of the triangles, 0: nowhere). Run with `RAYON_NUM_THREADS=1` to
 //! build the BVH on one thread. Prints each structure's builds, the BVH's, and the ratio of
 //! the medians.
 use dynbvh::accel::{AccelKind, Bih, BihParams};

@@ -5,7 +5,8 @@
 //! MESH and RAYS as `common/input.rs` reads them (`.tri`, `.obj` or glTF; `.rays`,
 //! `camera:SIDE` or `random:N`); NAME as `build-bench --methods` takes it (kdtree, bih,
 //! grid, octree); PASSES default 12; `BIH_LEAF=n` builds the BIH with leaves of at most `n`
-//! triangles, `BIH_SAH=n` with the SAH in its nodes of at least 1/n of them (0: nowhere); `ONLY=hits` or `ONLY=misses` keeps the rays that hit (miss) the mesh. Run with
+//! triangles, `BIH_SAH=n` with the SAH tried at its nodes of at least 1/n of them (0:
+//! nowhere); `ONLY=hits` or `ONLY=misses` keeps the rays that hit (miss) the mesh. Run with
 //! `RAYON_NUM_THREADS=1 taskset -c 1`. Prints the median and every pass of the structure's
 //! time ÷ the BVH's (CPU), i.e. how many times slower the structure is.
 use dynbvh::accel::{Accel, AccelKind, Bih, BihParams};

@@ -55,7 +55,7 @@ fn structures(mesh: &TriMesh) -> Vec<Box<dyn Accel>> {
             )));
         }
     }
-    // Leaves of one triangle; the SAH in every node of 256 triangles or more, and nowhere.
+    // Leaves of one triangle; the SAH tried at every node of 256 triangles or more, and nowhere.
     for sah_share in [usize::MAX, 0] {
         v.push(Box::new(Bih::build(
             mesh,

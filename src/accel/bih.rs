@@ -38,8 +38,8 @@ pub struct BihParams {
     /// plane separates its triangles' centres).
     pub max_leaf_size: usize,
     /// Nodes holding at least this share of the triangles (`1 / sah_share`, and at least 256)
-    /// are split on the plane of least SAH; the others by the global heuristic. 0: the global
-    /// heuristic everywhere.
+    /// are split on the plane of least SAH where it costs 5% less than the middle plane; the
+    /// others by the global heuristic. 0: the global heuristic everywhere.
     pub sah_share: usize,
 }
 
@@ -151,7 +151,7 @@ struct Builder {
     codes: Vec<u32>,
     /// The axes of the halvings the codes of the subtree being built record.
     axes: [usize; PRESORTED],
-    /// Room for the sort by codes.
+    /// Room for the sorts by codes and the partitions.
     items_tmp: Vec<Item>,
     codes_tmp: Vec<u32>,
     nodes: Vec<BihNode>,
@@ -548,9 +548,9 @@ const SAH_GAIN: f32 = 0.05;
 const SAH_BINS: usize = 16;
 
 /// The plane on the axis where the SAH over the triangles' box centres is least, binned over
-/// a sample of about 1,024 of them, one from each run of the items (enough to place a plane near the top of the tree, where
-/// this is used); `None` when the centres do not spread, or when that plane's cost is not
-/// [`SAH_GAIN`] below the middle plane's.
+/// a sample of about 1,024 of them, one from each run of the items (enough to place a plane
+/// near the top of the tree, where this is used); `None` when the centres do not spread, or
+/// when that plane's cost is not [`SAH_GAIN`] below the middle plane's.
 fn sah_split(items: &[Item]) -> Option<(usize, f32)> {
     use glam::Vec3A;
     // One item drawn from each run of `stride` (a fixed draw): a plain stride can fall in
