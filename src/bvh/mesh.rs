@@ -204,6 +204,13 @@ impl MeshBvh {
             + std::mem::size_of_val(self.leaf_indices.as_slice())
     }
 
+    /// [`MeshBvh::memory_bytes`] with the room reserved for rebuilds of another shape.
+    #[must_use]
+    pub fn storage_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        self.bvh.storage_bytes() + held(&self.tris) + held(&self.leaf_indices)
+    }
+
     /// The closest hit along `ray` in `[ray.tmin, ray.tmax)`.
     #[must_use]
     #[inline]

@@ -113,6 +113,13 @@ impl Bvh {
         self.nodes.len() * std::mem::size_of::<Node>() + self.prim_indices.len() * 4
     }
 
+    /// Bytes the node and index storage holds, reserved room included.
+    #[must_use]
+    pub fn storage_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.nodes) + held(&self.prim_indices)
+    }
+
     /// Box of the whole tree (empty for the empty tree).
     #[must_use]
     pub fn bounds(&self) -> crate::geom::Aabb {

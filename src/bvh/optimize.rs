@@ -69,6 +69,13 @@ struct Candidate {
 }
 
 impl OptimizeScratch {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        crate::engine::memory::held(&self.picks)
+            + self.heap.capacity() * std::mem::size_of::<Candidate>()
+    }
+
     /// Reserves the search's queue for `budget` (it holds at most two entries per visit).
     pub fn reserve(&mut self, budget: OptimizeBudget) {
         let want = 2 * budget.max_visits as usize + 2;

@@ -64,6 +64,34 @@ pub struct PartialScratch {
 }
 
 impl PartialScratch {
+    /// Bytes held (the per-thread parts locked one at a time).
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        let tasks: usize = self
+            .tasks
+            .iter()
+            .map(|t| {
+                t.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .memory_bytes()
+            })
+            .sum();
+        held(&self.counts)
+            + held(&self.heights)
+            + held(&self.costs)
+            + held(&self.ranked)
+            + held(&self.stack)
+            + held(&self.boxes)
+            + self.top.storage_bytes()
+            + self.build.memory_bytes()
+            + held(&self.work)
+            + held(&self.built)
+            + held(&self.order)
+            + held(&self.emit)
+            + tasks
+    }
+
     /// A task scratch for each thread of the current pool and one for a caller outside it
     /// (allocates only when the pool has more threads than before).
     fn task_per_thread(&mut self) {
@@ -97,6 +125,13 @@ impl Clone for PartialScratch {
 }
 
 impl PartialCut {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.roots) + held(&self.reference) + held(&self.height)
+    }
+
     /// Subtrees in the cut.
     #[must_use]
     pub fn len(&self) -> usize {
@@ -479,6 +514,15 @@ struct TaskScratch {
 }
 
 impl TaskScratch {
+    fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.boxes)
+            + self.sub.storage_bytes()
+            + self.build.memory_bytes()
+            + held(&self.costs)
+            + held(&self.heights)
+    }
+
     /// Grows every buffer to a subtree of `n` primitives, by building one.
     fn grow(&mut self, n: usize, params: &BuildParams) {
         self.boxes.clear();

@@ -44,6 +44,13 @@ pub struct RayOrder {
 }
 
 impl RayOrder {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.pairs) + held(&self.tmp) + held(&self.order)
+    }
+
     /// Batches smaller than this are traced as they come: their walks share little, and the
     /// sort's fixed costs (the digit counts) are not repaid.
     pub const MIN_RAYS: usize = 4096;
@@ -138,6 +145,13 @@ pub struct RayBatch {
 }
 
 impl RayBatch {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        crate::engine::memory::held(&self.parts)
+            + self.parts.iter().map(RayOrder::memory_bytes).sum::<usize>()
+    }
+
     /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; a batch that
     /// [`RayOrder::reordered`] judges incoherent against `scene` is answered part by part, each
     /// part in key order; the others as they come.

@@ -69,6 +69,13 @@ pub struct FreshSah {
 }
 
 impl FreshSah {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        use super::memory::held;
+        held(&self.sample) + held(&self.refs)
+    }
+
     /// The largest subsample.
     pub const MAX_SAMPLE: usize = 4096;
     /// Meshes up to this many triangles are sampled whole, and larger ones by at least this

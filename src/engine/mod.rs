@@ -5,6 +5,7 @@
 
 pub mod estimate;
 pub mod gltf;
+pub mod memory;
 pub mod oracle;
 pub mod policy;
 pub mod prices;
@@ -15,6 +16,7 @@ pub mod source;
 pub mod stats;
 pub mod watch;
 
+pub use memory::EngineMemory;
 pub use policy::{Action, Decision, ParsePolicyError, Policy};
 pub use prices::Prices;
 pub use ray_work::{CostMeasure, Query, SampleEntry, WorkEstimate};

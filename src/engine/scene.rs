@@ -35,6 +35,7 @@ mod batch;
 mod clip;
 mod edit;
 mod filter;
+mod memory;
 mod mesh_update;
 mod packet;
 mod queries;

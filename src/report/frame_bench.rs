@@ -8,8 +8,8 @@ use crate::engine::policy::{LADDER_OPTIMIZE, LADDER_PARTIAL, PolicyState};
 use crate::engine::ray_work::{SAMPLE_MAX, SAMPLE_STRIDE};
 use crate::engine::source::FrameSource;
 use crate::engine::{
-    Action, CostMeasure, Decision, Engine, EngineConfig, MeshId, Policy, Prices, Query, SceneHit,
-    Timing, TlasPolicy, Traversal, WorkerPriority,
+    Action, CostMeasure, Decision, Engine, EngineConfig, EngineMemory, MeshId, Policy, Prices,
+    Query, SceneHit, Timing, TlasPolicy, Traversal, WorkerPriority,
 };
 use crate::geom::{Aabb, Ray};
 use crate::report::all_pairs::{self, SampledFrame};
@@ -332,6 +332,8 @@ pub struct PolicySummary {
     pub p95_ms: f64,
     /// Largest frame time, ms.
     pub max_ms: f64,
+    /// What the policy's engine held after the last frame ([`Engine::memory`]).
+    pub memory: EngineMemory,
 }
 
 /// The top-level tree under one policy (mesh policy: the default).
@@ -510,6 +512,8 @@ struct Run {
     actions: Vec<Vec<Action>>,
     /// Per frame: top-level tree rebuilt, its SAH ratio.
     tlas: Vec<(bool, f32)>,
+    /// What the engine held after the last frame.
+    memory: EngineMemory,
 }
 
 /// Runs every configuration over every frame in lockstep: each frame is posed into every engine
@@ -553,6 +557,7 @@ fn run_lockstep(
             built: vec![vec![0; deforming.len()]; frames + 1],
             actions: vec![vec![Action::None; deforming.len()]; frames + 1],
             tlas: Vec::with_capacity(frames),
+            memory: EngineMemory::default(),
         })
         .collect();
     if let Some(s) = sampled.as_deref_mut() {
@@ -610,6 +615,9 @@ fn run_lockstep(
         if let Some(s) = sampled.as_deref_mut() {
             s.push(judge);
         }
+    }
+    for (e, run) in engines.iter().zip(&mut runs) {
+        run.memory = e.memory();
     }
     runs
 }
@@ -849,6 +857,7 @@ fn summarize(policy: Policy, rows: &[FrameRow], oracle_total: f64) -> PolicySumm
         p50_ms: pct(0.5),
         p95_ms: pct(0.95),
         max_ms: frame_ms.last().copied().unwrap_or(0.0),
+        memory: EngineMemory::default(),
     }
 }
 
@@ -1001,6 +1010,7 @@ pub fn run(src: &mut dyn FrameSource, opts: &Options, mut progress: impl FnMut(&
             continue;
         }
         let mut s = summarize(*p, &r.rows, oracle_total);
+        s.memory = r.memory;
         if modelled.total_ms > 0.0 {
             s.oracle_ratio_modelled = s.modelled_ms / modelled.total_ms;
             // The oracle schedules refits and rebuilds only: a policy with other actions may

@@ -28,6 +28,13 @@ pub struct ClipPoses {
 }
 
 impl ClipPoses {
+    /// Bytes held.
+    #[must_use]
+    pub fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.boxes) + self.boxes.iter().map(held).sum::<usize>() + held(&self.inv_root)
+    }
+
     /// Bounds every triangle in each pose of `poses` (vertex positions for `indices`).
     fn set(&mut self, poses: &[&[Vec3]], indices: &[[u32; 3]]) {
         self.boxes.resize_with(poses.len(), Vec::new);

@@ -536,6 +536,13 @@ impl<const K: usize> WideBvh<K> {
             + std::mem::size_of_val(self.block_indices.as_slice())
     }
 
+    /// [`WideBvh::memory_bytes`] with the room reserved for rebuilds of another shape.
+    #[must_use]
+    pub fn storage_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.nodes) + held(&self.blocks) + held(&self.block_indices)
+    }
+
     /// Depth of the deepest node (the root is at depth 0; 0 for the empty tree).
     #[must_use]
     pub fn depth(&self) -> usize {

@@ -65,9 +65,29 @@ pub(super) struct Background {
     due: u64,
     /// The worker's scheduling class.
     priority: WorkerPriority,
+    /// Bytes of the job's buffers when it was last handed to the worker.
+    job_bytes: usize,
+}
+
+impl Job {
+    /// Bytes held.
+    fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.positions)
+            + held(&self.indices)
+            + self.tree.storage_bytes()
+            + self.wide.as_ref().map_or(0, MeshBvh8::storage_bytes)
+            + self.ws.memory_bytes()
+    }
 }
 
 impl Background {
+    /// Bytes of the build's buffers, kept between builds (while a build runs, as they were
+    /// when it started).
+    pub fn memory_bytes(&self) -> usize {
+        self.idle.as_ref().map_or(self.job_bytes, Job::memory_bytes)
+    }
+
     /// No worker yet; it will run at `priority`.
     pub fn new(priority: WorkerPriority) -> Self {
         let mut b = Self::default();
@@ -132,6 +152,7 @@ impl Background {
             parallel_threshold: usize::MAX,
             ..*params
         });
+        self.job_bytes = job.memory_bytes();
         let mut slot = self
             .shared
             .slot

@@ -22,6 +22,17 @@ pub(super) struct ClipAhead {
     scratch: ClipPoses,
 }
 
+impl ClipAhead {
+    /// Bytes held.
+    pub(super) fn memory_bytes(&self) -> usize {
+        use crate::engine::memory::held;
+        held(&self.frames)
+            + held(&self.poses)
+            + self.poses.iter().map(held).sum::<usize>()
+            + self.scratch.memory_bytes()
+    }
+}
+
 /// The first of `frames` (ascending) after `frame`.
 fn ahead_from(frames: &[u64], frame: u64) -> usize {
     frames.partition_point(|&f| f <= frame)
