@@ -364,6 +364,10 @@ pub struct PolicyState {
     /// The last sampled frame's degradation (ray-work measure): its ratio less 1, times
     /// `estimate_gain`.
     pub frame_degradation: f64,
+    /// How fast the sampled frames' extra trace time grows, ms a frame per frame: the lesser
+    /// of its growth since the last sampled frame and its mean growth since the build (0 when
+    /// it does not grow).
+    pub frame_growth_ms: f64,
     /// Frames `extra_ms` has been counted over (since the last build, or since a rejected
     /// trial or a rung restarted the count).
     pub extra_frames: u32,
@@ -445,6 +449,7 @@ impl Default for PolicyState {
             ],
             frame_extra_ms: 0.0,
             frame_degradation: 0.0,
+            frame_growth_ms: 0.0,
             extra_frames: 0,
             frames_left: None,
             payback: None,
@@ -569,9 +574,9 @@ impl PolicyState {
     }
 
     /// Under a sampled degradation of at least [`FORWARD_DEGRADATION`] (the ray-work measure),
-    /// the frame's extra trace time times the frames the loss has been counted over (the
-    /// tree's age, unless a rejected trial restarted the count): a tree that lost this much within
-    /// that many frames is taken to keep losing at least as much over as many frames again.
+    /// what the tree is taken to lose over as many frames again as the loss has been counted
+    /// over (the tree's age, unless a rejected trial restarted the count): the frame's extra
+    /// trace time each frame, growing as fast as it has been growing (`frame_growth_ms`).
     /// The sum of the past losses, the amortized rule's measure, is as large only while the
     /// degradation holds steady; while it grows, as an explosion's does, the sum lags its
     /// present level and the rule rebuilds late (in the limit the classic rule's factor of two
@@ -579,7 +584,8 @@ impl PolicyState {
     /// times the age would pass for degradation; 0 there.
     fn forward_ms(&self) -> f64 {
         if self.frame_degradation >= FORWARD_DEGRADATION {
-            self.frame_extra_ms * f64::from(self.extra_frames.max(1))
+            let n = f64::from(self.extra_frames.max(1));
+            self.frame_extra_ms * n + self.frame_growth_ms * n * (n + 1.0) * 0.5
         } else {
             0.0
         }
@@ -674,11 +680,17 @@ impl PolicyState {
                 let fresh_ms = self.trace_share_ms / f64::from(self.traced_ratio.max(1e-6));
                 let degradation = f64::from(self.estimate_gain) * f64::from(raw - 1.0);
                 let last = self.frame_extra_ms;
+                let before = self.frame_degradation;
                 self.frame_degradation = degradation;
                 self.frame_extra_ms = fresh_ms * degradation;
                 // The frames traced without a sample since the last one: between the two
                 // sampled frames' extra times.
                 let gap = f64::from(std::mem::take(&mut self.unsampled));
+                // The lesser of the two growths: a noisy sample's jump alone does not make a
+                // tree that has degraded slowly since its build look like an explosion.
+                let recent = (degradation - before) / (gap + 1.0);
+                let mean = degradation / f64::from(self.since_build.max(1));
+                self.frame_growth_ms = fresh_ms * recent.min(mean).max(0.0);
                 let filled = gap * 0.5 * (last + self.frame_extra_ms);
                 self.extra_ms = (self.extra_ms + filled + self.frame_extra_ms).max(0.0);
                 self.extra_frames += gap as u32 + 1;
@@ -805,6 +817,7 @@ impl PolicyState {
         self.extra_ms = 0.0;
         self.extra_frames = 0;
         self.frame_degradation = 0.0;
+        self.frame_growth_ms = 0.0;
         self.rebuild_ms = ms;
         self.traced_ratio = 1.0;
         self.payback = None;
@@ -1003,6 +1016,7 @@ mod tests {
         s.trace_share_ms = 4.0;
         (1..=40).find(|&k| {
             let r = ratio(k);
+            s.since_build += 1;
             s.after_refit_sampled(Policy::Amortized, r, r) == Decision::Rebuild
         })
     }
@@ -1010,8 +1024,9 @@ mod tests {
     #[test]
     fn an_evident_growing_degradation_is_rebuilt_before_its_past_loss_reaches_the_cost() {
         // Ratio 1 + k / 2: 2k ms lost at frame k, k (k + 1) ms in all, which passes 40 ms at
-        // frame 6; frame 5 already loses 10 ms, 50 ms over as many frames again.
-        assert_eq!(sampled_rebuild_at(40.0, |k| 1.0 + 0.5 * k as f32), Some(5));
+        // frame 6; at frame 4 the loss, growing by 2 ms a frame, comes to 10 + 12 + 14 + 16
+        // = 52 ms over as many frames again (held flat, 32 ms: frame 5).
+        assert_eq!(sampled_rebuild_at(40.0, |k| 1.0 + 0.5 * k as f32), Some(4));
         // A steady degradation: the projection is the past sum, the same frame as before
         // (2 ms a frame passes 10 ms at the sixth).
         assert_eq!(sampled_rebuild_at(10.0, |_| 1.5), Some(6));
