@@ -207,7 +207,7 @@ impl MeshBvh {
     /// [`MeshBvh::memory_bytes`] with the room reserved for rebuilds of another shape.
     #[must_use]
     pub fn storage_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         self.bvh.storage_bytes() + held(&self.tris) + held(&self.leaf_indices)
     }
 

@@ -36,6 +36,12 @@ pub use cost::{INTERSECTION_COST, SahCost, TRAVERSAL_COST};
 pub use mesh::{MeshBvh, brute_force_any, brute_force_closest};
 pub use node::Node;
 pub(crate) use overlap::boxes_touch;
+
+/// Bytes a vector's storage holds (its capacity, not its length): what the `storage_bytes` and
+/// scratch `memory_bytes` methods count.
+pub(crate) fn held<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
+}
 pub use overlap::{brute_force_overlap_box, brute_force_overlap_sphere};
 pub use packet::{
     COHERENT_COS, MAX_PACKET, MIN_PACKET, Mask as PacketMask, PacketMode, RayPacket, TILE_H,
@@ -116,7 +122,7 @@ impl Bvh {
     /// Bytes the node and index storage holds, reserved room included.
     #[must_use]
     pub fn storage_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.nodes) + held(&self.prim_indices)
     }
 

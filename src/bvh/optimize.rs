@@ -72,8 +72,7 @@ impl OptimizeScratch {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        crate::engine::memory::held(&self.picks)
-            + self.heap.capacity() * std::mem::size_of::<Candidate>()
+        crate::bvh::held(&self.picks) + self.heap.capacity() * std::mem::size_of::<Candidate>()
     }
 
     /// Reserves the search's queue for `budget` (it holds at most two entries per visit).

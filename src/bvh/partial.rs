@@ -67,7 +67,7 @@ impl PartialScratch {
     /// Bytes held (the per-thread parts locked one at a time).
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         let tasks: usize = self
             .tasks
             .iter()
@@ -128,7 +128,7 @@ impl PartialCut {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.roots) + held(&self.reference) + held(&self.height)
     }
 
@@ -515,7 +515,7 @@ struct TaskScratch {
 
 impl TaskScratch {
     fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.boxes)
             + self.sub.storage_bytes()
             + self.build.memory_bytes()

@@ -47,7 +47,7 @@ impl RayOrder {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.pairs) + held(&self.tmp) + held(&self.order)
     }
 
@@ -148,8 +148,7 @@ impl RayBatch {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        crate::engine::memory::held(&self.parts)
-            + self.parts.iter().map(RayOrder::memory_bytes).sum::<usize>()
+        crate::bvh::held(&self.parts) + self.parts.iter().map(RayOrder::memory_bytes).sum::<usize>()
     }
 
     /// `out[i] = f(&rays[i])` for every ray, on the current rayon pool's threads; a batch that

@@ -72,7 +72,7 @@ impl FreshSah {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        use super::memory::held;
+        use crate::bvh::held;
         held(&self.sample) + held(&self.refs)
     }
 

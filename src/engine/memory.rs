@@ -1,12 +1,12 @@
-//! What an engine holds in memory, by what it is for ([`super::Engine::memory`]): a simulator
-//! sizing its scenes, or checking that a mesh that does not deform keeps no spare tree and no
-//! scratch for rebuilds, reads it here.
+//! What an engine holds in memory, by what it is for ([`super::Engine::memory`]): what a
+//! simulator sizing its scenes reads, or one checking that a mesh that does not deform keeps no
+//! spare tree.
 
 use serde::Serialize;
 
 /// Bytes an engine holds, by what they are for: the storage its buffers have, room reserved
-/// for later rebuilds included (the engine sizes its trees and scratch when a mesh is added, so
-/// that the frame loop allocates nothing).
+/// for later rebuilds included (the engine sizes its trees and scratch in the first frames, so
+/// that the frame loop allocates nothing after them).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct EngineMemory {
     /// Vertex positions and triangle indices of every mesh.
@@ -29,9 +29,4 @@ impl EngineMemory {
     pub fn total(&self) -> usize {
         self.geometry + self.trees + self.spares + self.scratch
     }
-}
-
-/// Bytes a vector's storage holds (its capacity, not its length).
-pub(crate) fn held<T>(v: &Vec<T>) -> usize {
-    v.capacity() * std::mem::size_of::<T>()
 }

@@ -31,7 +31,7 @@ impl ClipPoses {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.boxes) + self.boxes.iter().map(held).sum::<usize>() + held(&self.inv_root)
     }
 

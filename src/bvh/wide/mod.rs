@@ -539,7 +539,7 @@ impl<const K: usize> WideBvh<K> {
     /// [`WideBvh::memory_bytes`] with the room reserved for rebuilds of another shape.
     #[must_use]
     pub fn storage_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.nodes) + held(&self.blocks) + held(&self.block_indices)
     }
 

@@ -72,7 +72,7 @@ pub(super) struct Background {
 impl Job {
     /// Bytes held.
     fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.positions)
             + held(&self.indices)
             + self.tree.storage_bytes()

@@ -25,7 +25,7 @@ pub(super) struct ClipAhead {
 impl ClipAhead {
     /// Bytes held.
     pub(super) fn memory_bytes(&self) -> usize {
-        use crate::engine::memory::held;
+        use crate::bvh::held;
         held(&self.frames)
             + held(&self.poses)
             + self.poses.iter().map(held).sum::<usize>()

@@ -2,7 +2,8 @@
 
 use super::Engine;
 use crate::bvh::MeshBvh8;
-use crate::engine::memory::{EngineMemory, held};
+use crate::bvh::held;
+use crate::engine::memory::EngineMemory;
 use std::sync::PoisonError;
 
 impl Engine {
