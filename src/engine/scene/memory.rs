@@ -9,7 +9,7 @@ use std::sync::PoisonError;
 impl Engine {
     /// The bytes the engine holds, by what they are for ([`EngineMemory`]): its meshes'
     /// geometry, the trees rays walk, the spare trees it keeps beside them and its scratch.
-    /// A mesh added static keeps no spare tree and no rebuild scratch of its own.
+    /// A mesh added static keeps no spare tree.
     #[must_use]
     pub fn memory(&self) -> EngineMemory {
         let wide = |w: &Option<MeshBvh8>| w.as_ref().map_or(0, MeshBvh8::storage_bytes);
