@@ -549,15 +549,18 @@ const SAH_GAIN: f32 = 0.05;
 /// Bins a side for the SAH split: 16 an axis.
 const SAH_BINS: usize = 16;
 
+/// Box centres the SAH split bins: enough to place a plane near the top of the tree, where
+/// the split is used.
+const SAH_SAMPLE: usize = 1024;
+
 /// The plane on the axis where the SAH over the triangles' box centres is least, binned over
-/// a sample of about 1,024 of them, one from each run of the items (enough to place a plane
-/// near the top of the tree, where this is used); `None` when the centres do not spread, or
+/// a sample of about [`SAH_SAMPLE`] of them, one from each run of the items; `None` when the centres do not spread, or
 /// when that plane's cost is not [`SAH_GAIN`] below the middle plane's.
 fn sah_split(items: &[Item]) -> Option<(usize, f32)> {
     use glam::Vec3A;
     // One item drawn from each run of `stride` (a fixed draw): a plain stride can fall in
     // step with a mesh's own order (every other triangle a floor's, say) and see one kind.
-    let stride = items.len().div_ceil(1024).max(1);
+    let stride = items.len().div_ceil(SAH_SAMPLE).max(1);
     let sample = || {
         items.chunks(stride).enumerate().map(|(b, run)| {
             let draw = (b as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40;

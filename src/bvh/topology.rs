@@ -285,18 +285,20 @@ impl RestructureWorkspace {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
+        use crate::bvh::held;
         let t = &self.topo;
-        t.bounds.capacity() * std::mem::size_of::<Aabb>()
-            + t.child.capacity() * 8
-            + t.parent.capacity() * 4
-            + self.nodes.capacity() * std::mem::size_of::<Node>()
-            + t.touched.capacity()
-            + t.height.capacity()
-            + t.areas.capacity() * 4
-            + self.runs.capacity() * 8
-            + self.old_prims.capacity() * 4
-            + self.old_tris.capacity() * 36
-            + self.old_leaf_indices.capacity() * 12
+        held(&t.bounds)
+            + held(&t.child)
+            + held(&t.parent)
+            + held(&t.stack)
+            + held(&t.touched)
+            + held(&t.height)
+            + held(&t.areas)
+            + held(&self.nodes)
+            + held(&self.runs)
+            + held(&self.old_prims)
+            + held(&self.old_tris)
+            + held(&self.old_leaf_indices)
     }
 }
 

@@ -1023,9 +1023,9 @@ mod tests {
 
     #[test]
     fn an_evident_growing_degradation_is_rebuilt_before_its_past_loss_reaches_the_cost() {
-        // Ratio 1 + k / 2: 2k ms lost at frame k, k (k + 1) ms in all, which passes 40 ms at
-        // frame 6; at frame 4 the loss, growing by 2 ms a frame, comes to 10 + 12 + 14 + 16
-        // = 52 ms over as many frames again (held flat, 32 ms: frame 5).
+        // Ratio 1 + k / 2 over a fresh trace of 4: a loss of 2k at frame k, k (k + 1) in all,
+        // past the cost of 40 at frame 6; at frame 4 the loss, growing by 2 a frame, comes to
+        // 10 + 12 + 14 + 16 = 52 over as many frames again (held flat, 32: frame 5).
         assert_eq!(sampled_rebuild_at(40.0, |k| 1.0 + 0.5 * k as f32), Some(4));
         // A steady degradation: the projection is the past sum, the same frame as before
         // (2 ms a frame passes 10 ms at the sixth).

@@ -337,9 +337,8 @@ impl BuildWorkspace {
     /// Bytes held.
     #[must_use]
     pub fn memory_bytes(&self) -> usize {
-        self.refs.capacity() * std::mem::size_of::<PrimRef>()
-            + self.slots.capacity() * std::mem::size_of::<Node>()
-            + self.splits.capacity() * std::mem::size_of::<[u32; 3]>()
+        use crate::bvh::held;
+        held(&self.refs) + held(&self.slots) + held(&self.splits)
     }
 }
 
